@@ -1,0 +1,47 @@
+# The two commands of the README, and their parts.
+#   make run   - the Torobot in the simulated world (default config)
+#   make test  - every test suite: C port, detector, Common Test, PropEr, Dialyzer
+.PHONY: run test deps compile port port-test detector detector-test ct dialyzer bench release clean
+
+WORLD ?= config/worlds/default.world
+
+deps:
+	@scripts/deps
+
+compile: deps port
+	rebar3 compile
+
+port:
+	@if [ -f c_src/pru_port/Makefile ]; then $(MAKE) -s -C c_src/pru_port; fi
+
+port-test: deps
+	@if [ -f c_src/pru_port/Makefile ]; then $(MAKE) -C c_src/pru_port test; fi
+
+detector: deps
+	@if [ -f detector/CMakeLists.txt ]; then \
+	  cmake -S detector -B _build/detector -DCMAKE_BUILD_TYPE=Release >/dev/null && \
+	  cmake --build _build/detector -j2; fi
+
+detector-test: detector
+	@if [ -f detector/CMakeLists.txt ]; then ctest --test-dir _build/detector --output-on-failure; fi
+
+ct: compile
+	rebar3 ct
+
+dialyzer: compile
+	rebar3 dialyzer
+
+test: deps port-test detector-test ct dialyzer
+
+run: compile detector
+	scripts/run $(WORLD)
+
+bench: compile
+	scripts/bench
+
+release: compile
+	rebar3 as prod release
+
+clean:
+	rm -rf _build
+	@if [ -f c_src/pru_port/Makefile ]; then $(MAKE) -C c_src/pru_port clean; fi
