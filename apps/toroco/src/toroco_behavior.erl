@@ -1,0 +1,403 @@
+%% @doc Behaviors: the `toroco_behavior' callback contract, and the gen_statem
+%% that runs a behavior (or a device) module.
+%%
+%% A behavior module declares its ports with `interface/0', starts with
+%% `init/1' and reacts to inputs with `handle_input/4'; it emits by returning the
+%% toroco actions `{send, #{Out => V}}', `{send, #{Out => V}, #{hold => H}}',
+%% `{set, #{Out => V}}', `{unset, [Out]}' and `unset' among its gen_statem
+%% actions (SPEC §4, §5). The user's state is the gen_statem state, so
+%% `state_timeout', `postpone' and the other gen_statem actions work as usual;
+%% the user's data is kept inside this module's data.
+%%
+%% The process is the emitter end of every wire it feeds: it keeps, per output,
+%% the registered names of the consumers (routers or a gate) to send to, and
+%% the output's latch. Consumers subscribe with a handshake (see
+%% `toroco_upstream'), so the subscriber lists change without a central server
+%% on the event path. On start it announces itself to its consumers (`hello':
+%% nothing of the previous incarnation survives) and to its input routers
+%% (which re-deliver each input's latched winner).
+%%
+%% Devices (`toroco_device') run on this same engine with `kind => device'.
+-module(toroco_behavior).
+-behaviour(gen_statem).
+
+-export([start_link/1, child_spec/1]).
+-export([inject/3, info/1, suspend/1, resume/1, interface/3]).
+-export([callback_mode/0, init/1, handle_event/4, terminate/3, code_change/4]).
+-export_type([spec/0, action/0]).
+
+-callback interface() -> #{inputs := [atom()], outputs := [atom()]}.
+-callback init(Params :: map()) ->
+    {ok, State :: term(), Data :: term()} |
+    {ok, State :: term(), Data :: term(), Actions :: [action()] | action()}.
+-callback handle_input(Input :: atom(), Value :: term(), State :: term(), Data :: term()) ->
+    gen_statem:event_handler_result(term()).
+-callback handle_event(gen_statem:event_type(), Content :: term(), State :: term(),
+                       Data :: term()) ->
+    gen_statem:event_handler_result(term()).
+-callback code_change(OldVsn :: term(), State :: term(), Data :: term(), Extra :: term()) ->
+    {ok, NewState :: term(), NewData :: term()}.
+-callback terminate(Reason :: term(), State :: term(), Data :: term()) -> any().
+-optional_callbacks([handle_event/4, code_change/4, terminate/3]).
+
+-type action() :: {send, #{atom() => term()}}
+                | {send, #{atom() => term()}, #{hold => non_neg_integer() | infinity}}
+                | {set, #{atom() => term()}}
+                | {unset, [atom()]}
+                | unset
+                | gen_statem:action().
+-type spec() :: #{kind := behavior | device, name := atom(), module := module(),
+                  layer := non_neg_integer(), args := term()}.
+
+-define(RESET, '$reset').
+-define(MAX_QUEUED, 1000).
+
+-record(e, {name :: atom(),
+            kind :: behavior | device,
+            module :: module(),
+            layer :: non_neg_integer(),
+            args :: term(),
+            user :: term(),
+            %% declared output -> registered names of its consumers
+            outputs = #{} :: #{atom() => [atom()]},
+            latches = #{} :: #{atom() => term()},
+            inputs = [] :: [atom()],
+            suspended = false :: boolean(),
+            queued = [] :: [{gen_statem:event_type(), term()}],
+            user_events = false :: boolean()}).
+
+%%====================================================================
+%% API
+%%====================================================================
+
+-spec start_link(spec()) -> gen_statem:start_ret().
+start_link(Spec = #{name := Name}) ->
+    gen_statem:start_link({local, toroco_names:node(Name)}, ?MODULE, Spec, []).
+
+%% @doc Behaviors are `transient': one that stops with reason `normal' is done.
+-spec child_spec(spec()) -> supervisor:child_spec().
+child_spec(Spec = #{name := Name, kind := Kind}) ->
+    #{id => Name, start => {?MODULE, start_link, [Spec]},
+      restart => case Kind of behavior -> transient; device -> permanent end,
+      shutdown => 2000, type => worker, modules => [?MODULE, maps:get(module, Spec)]}.
+
+%% @doc The declared ports of a behavior (`Kind = behavior') or device module.
+-spec interface(behavior | device, module(), term()) ->
+          {ok, #{inputs := [atom()], outputs := [atom()]}} | {error, term()}.
+interface(Kind, Module, Args) ->
+    try case Kind of
+            behavior -> Module:interface();
+            device -> Module:interface(Args)
+        end of
+        #{inputs := Ins, outputs := Outs} = I when is_list(Ins), is_list(Outs) ->
+            case lists:all(fun is_atom/1, Ins ++ Outs) of
+                true -> {ok, maps:with([inputs, outputs], I)};
+                false -> {error, {bad_interface, {Module, I}}}
+            end;
+        Other -> {error, {bad_interface, {Module, Other}}}
+    catch
+        error:undef -> {error, {bad_module, Module}};
+        Class:Reason -> {error, {bad_interface, {Module, {Class, Reason}}}}
+    end.
+
+%% @doc Makes the process emit `Op' on `Out' as if its callback had.
+-spec inject(atom(), atom(), toroco_router_core:op()) -> ok | {error, term()}.
+inject(Name, Out, Op) ->
+    call(Name, {'$toroco_inject', Out, Op}).
+
+%% @doc Status, latches and (for devices) the device's own counters.
+-spec info(atom()) -> map() | {error, term()}.
+info(Name) ->
+    call(Name, '$toroco_info').
+
+-spec suspend(atom()) -> ok | {error, term()}.
+suspend(Name) -> call(Name, '$toroco_suspend').
+
+-spec resume(atom()) -> ok | {error, term()}.
+resume(Name) -> call(Name, '$toroco_resume').
+
+call(Name, Req) ->
+    try gen_statem:call(toroco_names:node(Name), Req, 5000)
+    catch exit:{noproc, _} -> {error, {not_running, Name}};
+          exit:{timeout, _} -> {error, {timeout, Name}};
+          exit:{Reason, _} -> {error, {Reason, Name}}
+    end.
+
+%%====================================================================
+%% gen_statem
+%%====================================================================
+
+-spec callback_mode() -> gen_statem:callback_mode_result().
+callback_mode() -> handle_event_function.
+
+-spec init(spec()) -> gen_statem:init_result(term()).
+init(#{kind := Kind, name := Name, module := M, layer := Layer, args := Args}) ->
+    process_flag(trap_exit, true),
+    case interface(Kind, M, Args) of
+        {ok, #{inputs := Ins, outputs := Outs}} ->
+            Planned = toroco_wiring:subs_of(Name),
+            Subs = maps:from_list([{O, maps:get(O, Planned, [])} || O <- Outs]),
+            E = #e{name = Name, kind = Kind, module = M, layer = Layer, args = Args,
+                   outputs = Subs, inputs = Ins,
+                   user_events = erlang:function_exported(M, handle_event, 4)},
+            put('$toroco_emitter', Name),
+            put('$toroco_latches', #{}),
+            announce(E),
+            start_user(E);
+        {error, Reason} ->
+            {stop, Reason}
+    end.
+
+%% Announces this incarnation: consumers drop whatever they had of the last
+%% one; input routers re-deliver their latched winners.
+announce(#e{name = Name, outputs = Outs, inputs = Ins, kind = Kind}) ->
+    maps:foreach(fun(Out, Regs) ->
+                         [toroco_upstream:send(R, {'$toroco_hello', emitter, {Name, Out}, self()})
+                          || R <- Regs]
+                 end, Outs),
+    receiver_up(Name, case Kind of behavior -> [?RESET | Ins]; device -> Ins end).
+
+receiver_up(Name, Inputs) ->
+    [toroco_upstream:send(toroco_names:router(Name, I), {'$toroco_rx', I, self()})
+     || I <- Inputs],
+    ok.
+
+start_user(E = #e{kind = Kind, module = M, args = Args, name = Name}) ->
+    try case Kind of
+            behavior -> M:init(Args);
+            device -> M:init(Name, Args)
+        end of
+        {ok, S, UD} ->
+            {ok, S, E#e{user = UD}};
+        {ok, S, UD, Actions} ->
+            {Actions1, E1} = actions(Actions, E#e{user = UD}),
+            {ok, S, E1, Actions1};
+        {error, Reason} ->
+            {stop, Reason};
+        Other ->
+            {stop, {bad_return_from_init, Other}}
+    catch
+        Class:Reason:Stack ->
+            logger:error("toroco: ~p ~p crashed in init: ~p", [Kind, Name, {Class, Reason}]),
+            erlang:raise(Class, Reason, Stack)
+    end.
+
+-spec handle_event(gen_statem:event_type(), term(), term(), #e{}) ->
+          gen_statem:event_handler_result(term()).
+%% The event path: one input delivered by a router.
+handle_event(info, {'$toroco_in', Input, V}, S, E = #e{suspended = false}) ->
+    input(Input, V, S, E);
+handle_event(info, {'$toroco_in', Input, V, Router}, S, E = #e{suspended = false}) ->
+    Result = input(Input, V, S, E),
+    Router ! {'$toroco_ack', Input},
+    Result;
+handle_event(info, {'$toroco_in', _Input, _V}, _S, _E) ->
+    keep_state_and_data;                      % suspended: inputs are dropped
+handle_event(info, {'$toroco_in', Input, _V, Router}, _S, _E) ->
+    Router ! {'$toroco_ack', Input},
+    keep_state_and_data;
+%% Wiring: consumers attach and detach.
+handle_event(info, {'$toroco_sub', {_, Out} = Src, Reg}, _S, E = #e{outputs = Outs}) ->
+    case Outs of
+        #{Out := Regs} ->
+            toroco_upstream:send(Reg, {'$toroco_state', emitter, Src, self(), latch(Out, E)}),
+            {keep_state, E#e{outputs = Outs#{Out := lists:usort([Reg | Regs])}}};
+        #{} ->
+            toroco_upstream:send(Reg, {'$toroco_state', emitter, Src, self(), none}),
+            keep_state_and_data
+    end;
+handle_event(info, {'$toroco_unsub', {_, Out}, Reg}, _S, E = #e{outputs = Outs}) ->
+    case Outs of
+        #{Out := Regs} -> {keep_state, E#e{outputs = Outs#{Out := lists:delete(Reg, Regs)}}};
+        #{} -> keep_state_and_data
+    end;
+handle_event({call, From}, {'$toroco_inject', Out, Op}, _S, E = #e{outputs = Outs, name = N}) ->
+    case Outs of
+        #{Out := _} -> {keep_state, emit(Out, Op, E), [{reply, From, ok}]};
+        #{} -> {keep_state_and_data, [{reply, From, {error, {unknown_output, {N, Out}}}}]}
+    end;
+handle_event({call, From}, '$toroco_info', S, E) ->
+    {keep_state_and_data, [{reply, From, describe(S, E)}]};
+handle_event({call, From}, '$toroco_suspend', _S, E) ->
+    {keep_state, E#e{suspended = true}, [{reply, From, ok}]};
+handle_event({call, From}, '$toroco_resume', _S, E = #e{suspended = false}) ->
+    {keep_state, E, [{reply, From, ok}]};
+handle_event({call, From}, '$toroco_resume', _S, E = #e{name = Name, inputs = Ins, queued = Q}) ->
+    %% Routers forget the last value and re-deliver each input's winner; the
+    %% callbacks held back while suspended run now, in order.
+    receiver_up(Name, Ins),
+    {keep_state, E#e{suspended = false, queued = []},
+     [{reply, From, ok} | [{next_event, T, C} || {T, C} <- lists:reverse(Q)]]};
+%% Everything else belongs to the user module.
+handle_event(Type, Content, _S, E = #e{suspended = true, queued = Q, name = Name}) ->
+    case length(Q) < ?MAX_QUEUED of
+        true -> {keep_state, E#e{queued = [{Type, Content} | Q]}};
+        false ->
+            logger:warning("toroco: suspended ~p dropped ~p event ~p", [Name, Type, Content]),
+            keep_state_and_data
+    end;
+handle_event(Type, Content, S, E = #e{user_events = true, module = M, user = UD}) ->
+    result(M:handle_event(Type, Content, S, UD), E);
+handle_event({call, From}, Request, _S, #e{name = Name}) ->
+    {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
+handle_event(Type, Content, _S, #e{name = Name}) ->
+    logger:warning("toroco: ~p ignored ~p event ~p", [Name, Type, Content]),
+    keep_state_and_data.
+
+-spec terminate(term(), term(), #e{}) -> any().
+terminate(Reason, S, #e{module = M, user = UD}) ->
+    case erlang:function_exported(M, terminate, 3) of
+        true -> M:terminate(Reason, S, UD);
+        false -> ok
+    end.
+
+-spec code_change(term(), term(), #e{}, term()) -> {ok, term(), #e{}}.
+code_change(OldVsn, S, E = #e{module = M, user = UD}, Extra) ->
+    case erlang:function_exported(M, code_change, 4) of
+        true ->
+            {ok, S1, UD1} = M:code_change(OldVsn, S, UD, Extra),
+            {ok, S1, E#e{user = UD1, user_events = erlang:function_exported(M, handle_event, 4)}};
+        false ->
+            {ok, S, E}
+    end.
+
+%%====================================================================
+%% Inputs and results
+%%====================================================================
+
+input(?RESET, _V, _S, E) ->
+    reset(E);
+input(Input, V, S, E = #e{module = M, user = UD}) ->
+    result(M:handle_input(Input, V, S, UD), E).
+
+%% Brooks' reset: the behavior's latches and holds are cleared, then it starts
+%% again from init/1 in the same process.
+reset(E = #e{outputs = Outs}) ->
+    E1 = lists:foldl(fun(Out, Acc) -> emit(Out, unset, Acc) end, E, maps:keys(Outs)),
+    case start_user(E1) of
+        {ok, S, E2} -> {next_state, S, E2, [{state_timeout, cancel}]};
+        {ok, S, E2, Actions} -> {next_state, S, E2, [{state_timeout, cancel} | Actions]};
+        {stop, Reason} -> {stop, Reason, E1}
+    end.
+
+result(R, E0) ->
+    E = take_serviced(E0),
+    case R of
+        {next_state, S, UD} -> {next_state, S, E#e{user = UD}};
+        {next_state, S, UD, A} -> with_actions(next_state, S, A, E#e{user = UD});
+        {keep_state, UD} -> {keep_state, E#e{user = UD}};
+        {keep_state, UD, A} -> with_actions(keep_state, A, E#e{user = UD});
+        keep_state_and_data -> {keep_state, E};
+        {keep_state_and_data, A} -> with_actions(keep_state, A, E);
+        {repeat_state, UD} -> {repeat_state, E#e{user = UD}};
+        {repeat_state, UD, A} -> with_actions(repeat_state, A, E#e{user = UD});
+        repeat_state_and_data -> {repeat_state, E};
+        {repeat_state_and_data, A} -> with_actions(repeat_state, A, E);
+        {stop, Reason} -> {stop, Reason, E};
+        {stop, Reason, UD} -> {stop, Reason, E#e{user = UD}};
+        {stop_and_reply, Reason, Replies} -> {stop_and_reply, Reason, Replies, E};
+        {stop_and_reply, Reason, Replies, UD} -> {stop_and_reply, Reason, Replies, E#e{user = UD}};
+        Other -> {stop, {bad_return_from_callback, Other}, E}
+    end.
+
+with_actions(next_state, S, A, E) ->
+    {A1, E1} = actions(A, E),
+    {next_state, S, E1, A1}.
+
+with_actions(Kind, A, E) ->
+    {A1, E1} = actions(A, E),
+    {Kind, E1, A1}.
+
+%% Toroco actions are carried out here, in order; gen_statem's pass through.
+actions(A, E) when is_list(A) -> actions(A, E, []);
+actions(A, E) -> actions([A], E, []).
+
+actions([], E, Acc) ->
+    {lists:reverse(Acc), E};
+actions([{send, Map} | T], E, Acc) when is_map(Map) ->
+    actions(T, emit_all(Map, default, E), Acc);
+actions([{send, Map, Opts} = A | T], E, Acc) when is_map(Map), is_map(Opts) ->
+    case maps:get(hold, Opts, default) of
+        H when H =:= default; H =:= infinity; is_integer(H), H >= 0 ->
+            actions(T, emit_all(Map, H, E), Acc);
+        H ->
+            logger:error("toroco: ~p emitted ~p with a bad hold ~p; dropped",
+                         [E#e.name, A, H]),
+            actions(T, E, Acc)
+    end;
+actions([{set, Map} | T], E, Acc) when is_map(Map) ->
+    actions(T, maps:fold(fun(Out, V, EAcc) -> emit(Out, {set, V}, EAcc) end, E, Map), Acc);
+actions([{unset, Outs} | T], E, Acc) when is_list(Outs) ->
+    actions(T, lists:foldl(fun(Out, EAcc) -> emit(Out, unset, EAcc) end, E, Outs), Acc);
+actions([unset | T], E = #e{outputs = Outs}, Acc) ->
+    actions(T, lists:foldl(fun(Out, EAcc) -> emit(Out, unset, EAcc) end, E,
+                           maps:keys(Outs)), Acc);
+actions([A | T], E, Acc) when element(1, A) =:= send; element(1, A) =:= set;
+                             element(1, A) =:= unset ->
+    logger:error("toroco: ~p returned a malformed action ~p; dropped", [E#e.name, A]),
+    actions(T, E, Acc);
+actions([A | T], E, Acc) ->
+    actions(T, E, [A | Acc]).
+
+emit_all(Map, Hold, E) ->
+    maps:fold(fun(Out, V, EAcc) -> emit(Out, {send, V, Hold}, EAcc) end, E, Map).
+
+%% One emission on one output: to every consumer, in order; the latch follows.
+emit(Out, Op, E = #e{outputs = Outs, name = Name}) ->
+    case Outs of
+        #{Out := Regs} ->
+            Msg = {'$toroco', {Name, Out}, Op},
+            send_all(Regs, Msg),
+            relatch(Out, Op, E);
+        #{} ->
+            logger:warning("toroco: ~p emitted on undeclared output ~p; dropped", [Name, Out]),
+            E
+    end.
+
+send_all([], _Msg) -> ok;
+send_all([R | Rs], Msg) ->
+    toroco_upstream:send(R, Msg),
+    send_all(Rs, Msg).
+
+relatch(Out, {set, V}, E = #e{latches = L}) ->
+    L1 = L#{Out => V},
+    put('$toroco_latches', L1),
+    E#e{latches = L1};
+relatch(Out, _, E = #e{latches = L}) ->
+    case L of
+        #{Out := _} ->
+            L1 = maps:remove(Out, L),
+            put('$toroco_latches', L1),
+            E#e{latches = L1};
+        #{} -> E
+    end.
+
+latch(Out, #e{latches = L}) ->
+    case L of
+        #{Out := V} -> {value, V};
+        #{} -> none
+    end.
+
+%% Subscriptions answered while a callback waited on the wiring server
+%% (see `toroco_wiring:call/1') are recorded here.
+take_serviced(E = #e{outputs = Outs}) ->
+    case erase('$toroco_serviced') of
+        undefined -> E;
+        Subs ->
+            E#e{outputs = lists:foldl(
+                            fun({sub, Out, Reg}, Acc) when is_map_key(Out, Acc) ->
+                                    Acc#{Out := lists:usort([Reg | maps:get(Out, Acc)])};
+                               ({unsub, Out, Reg}, Acc) when is_map_key(Out, Acc) ->
+                                    Acc#{Out := lists:delete(Reg, maps:get(Out, Acc))};
+                               (_, Acc) -> Acc
+                            end, Outs, lists:reverse(Subs))}
+    end.
+
+describe(S, #e{kind = Kind, module = M, layer = L, latches = Latches, suspended = Susp,
+               user = UD}) ->
+    Base = #{kind => Kind, module => M, layer => L, latches => Latches,
+             status => case Susp of true -> suspended; false -> running end},
+    case Kind =:= device andalso erlang:function_exported(M, info, 2) of
+        true -> Base#{device => M:info(S, UD)};
+        false -> Base
+    end.

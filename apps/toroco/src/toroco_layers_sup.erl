@@ -1,0 +1,24 @@
+%% @doc Supervises one `toroco_layer_sup' per layer. Layers are `temporary':
+%% a layer that exceeds its restart intensity stays out (graceful degradation:
+%% the layers below keep running) and `toroco_wiring' reports it.
+-module(toroco_layers_sup).
+-behaviour(supervisor).
+
+-export([start_link/0, start_layer/1, init/1]).
+
+-spec start_link() -> {ok, pid()} | {error, term()}.
+start_link() ->
+    supervisor:start_link({local, ?MODULE}, ?MODULE, []).
+
+%% @doc Starts the supervisor of layer `L' (a fresh one if `L' was taken out).
+-spec start_layer(non_neg_integer()) -> {ok, pid()} | {error, term()}.
+start_layer(L) ->
+    _ = supervisor:delete_child(?MODULE, {layer, L}),
+    supervisor:start_child(?MODULE, #{id => {layer, L},
+                                      start => {toroco_layer_sup, start_link, [L]},
+                                      restart => temporary, type => supervisor,
+                                      shutdown => infinity, modules => [toroco_layer_sup]}).
+
+-spec init([]) -> {ok, {supervisor:sup_flags(), []}}.
+init([]) ->
+    {ok, {#{strategy => one_for_one, intensity => 0, period => 1}, []}}.

@@ -1,0 +1,190 @@
+%% @doc The router of one wired input: the process shell around
+%% `toroco_router_core'.
+%%
+%% It lives under `toroco_routers_sup', registered as
+%% `toroco_names:router(Receiver, Input)', and reads its configuration from the
+%% wiring table, so a restarted router finds its place again: it re-subscribes
+%% to its sources' upstreams, which hand over their latches, and re-delivers
+%% the winner (emitters are the authority for their latches; timed holds in
+%% flight are lost).
+%%
+%% Messages on the event path: `{'$toroco', Src, Op}' from emitters and
+%% `{'$toroco_gate', Src, Op}' from gates in, `{'$toroco_in', Input, Value}'
+%% (or `{'$toroco_in', Input, Value, Router}' with `buffer => latest', acked by
+%% `{'$toroco_ack', Input}') out to the receiver. The one timer is the
+%% gen_statem timeout `{timeout, hold}', set only when the earliest hold
+%% deadline changes.
+-module(toroco_router).
+-behaviour(gen_statem).
+
+-export([start_link/1, child_spec/1, rewire/1, info/1]).
+-export([callback_mode/0, init/1, handle_event/4, terminate/3]).
+
+-record(r, {key :: {atom(), atom()},
+            reg :: atom(),
+            input :: atom(),
+            core = toroco_router_core:new() :: toroco_router_core:core(),
+            links = toroco_upstream:new_links() :: toroco_upstream:links(),
+            rx :: pid() | undefined,
+            rx_mon :: reference() | undefined,
+            buffer = all :: all | latest,
+            inflight = false :: boolean(),
+            pending = none :: none | {value, term()},
+            timer = infinity :: infinity | integer()}).
+
+%%====================================================================
+%% API
+%%====================================================================
+
+-spec start_link({atom(), atom()}) -> gen_statem:start_ret().
+start_link(Key = {R, I}) ->
+    gen_statem:start_link({local, toroco_names:router(R, I)}, ?MODULE, Key, []).
+
+-spec child_spec({atom(), atom()}) -> supervisor:child_spec().
+child_spec(Key) ->
+    #{id => {router, Key}, start => {?MODULE, start_link, [Key]},
+      restart => permanent, shutdown => 1000, type => worker, modules => [?MODULE]}.
+
+%% @doc Takes the configuration now in the wiring table; returns once the new
+%% sources' latches are in and the winner is delivered.
+-spec rewire({atom(), atom()}) -> ok.
+rewire({R, I}) ->
+    gen_statem:call(toroco_names:router(R, I), rewire, infinity).
+
+%% @doc The inspection view of the input (SPEC §6), or `none' if the router is
+%% not running.
+-spec info({atom(), atom()}) -> map() | none.
+info({R, I}) ->
+    try gen_statem:call(toroco_names:router(R, I), info, 1000)
+    catch exit:_ -> none
+    end.
+
+%%====================================================================
+%% gen_statem
+%%====================================================================
+
+-spec callback_mode() -> gen_statem:callback_mode_result().
+callback_mode() -> handle_event_function.
+
+-spec init({atom(), atom()}) -> gen_statem:init_result(routing) | ignore.
+init(Key = {R, I}) ->
+    process_flag(trap_exit, true),
+    case toroco_wiring:lookup({router, Key}) of
+        {ok, Cfg} ->
+            D0 = #r{key = Key, reg = toroco_names:router(R, I), input = I},
+            D1 = case whereis(toroco_names:node(R)) of
+                     undefined -> D0;
+                     Pid -> attach_receiver(Pid, D0)
+                 end,
+            {D2, Actions} = configure(Cfg, D1),
+            {ok, routing, D2, Actions};
+        error ->
+            ignore
+    end.
+
+-spec handle_event(gen_statem:event_type(), term(), routing, #r{}) ->
+          gen_statem:event_handler_result(routing).
+handle_event(info, {'$toroco', Src, Op}, _, D = #r{links = #{ups := Ups}}) ->
+    case Ups of
+        #{Src := {emitter, _}} -> step({op, Src, Op}, D);
+        #{} -> keep_state_and_data
+    end;
+handle_event(info, {'$toroco_gate', Src, Op}, _, D = #r{links = #{ups := Ups}}) ->
+    case Ups of
+        #{Src := {gate, _}} -> step({op, Src, Op}, D);
+        #{} -> keep_state_and_data
+    end;
+handle_event(info, {'$toroco_ack', _Input}, _, D = #r{pending = {value, V}, rx = Rx})
+  when is_pid(Rx) ->
+    Rx ! {'$toroco_in', D#r.input, V, self()},
+    {keep_state, D#r{pending = none}};
+handle_event(info, {'$toroco_ack', _Input}, _, D) ->
+    {keep_state, D#r{inflight = false}};
+handle_event({timeout, hold}, expire, _, D) ->
+    step(tick, D#r{timer = infinity});
+handle_event(info, {'$toroco_rx', _Input, Pid}, _, D) ->
+    step(receiver_up, attach_receiver(Pid, D));
+handle_event(info, {'$toroco_hello', Tag, Src, Pid}, _, D = #r{links = L}) ->
+    case toroco_upstream:hello(Tag, Src, Pid, L) of
+        {ok, L1} -> step({op, Src, unset}, D#r{links = L1});
+        ignore -> keep_state_and_data
+    end;
+handle_event(info, {'$toroco_state', Tag, Src, Pid, Latch}, _, D = #r{links = L}) ->
+    case toroco_upstream:late_state(Tag, Src, Pid, Latch, L) of
+        {ok, L1} -> step({sync, [{Src, Latch}]}, D#r{links = L1});
+        ignore -> keep_state_and_data
+    end;
+handle_event(info, {'DOWN', Ref, process, _, _}, _, D = #r{rx_mon = Ref}) ->
+    {keep_state, D#r{rx = undefined, rx_mon = undefined, inflight = false, pending = none}};
+handle_event(info, {'DOWN', _, process, Pid, _}, _, D = #r{links = L}) ->
+    %% An emitter's (or gate's) death ends its holds and clears its latches.
+    {Srcs, L1} = toroco_upstream:down(Pid, L),
+    steps([{op, S, unset} || S <- Srcs], D#r{links = L1});
+handle_event({call, From}, rewire, _, D = #r{key = Key}) ->
+    {ok, Cfg} = toroco_wiring:lookup({router, Key}),
+    {D1, Actions} = configure(Cfg, D),
+    {keep_state, D1, [{reply, From, ok} | Actions]};
+handle_event({call, From}, info, _, D = #r{core = C, buffer = B}) ->
+    Info = toroco_router_core:info(C, now_ms()),
+    {keep_state_and_data, [{reply, From, Info#{buffer => B, receiver => D#r.rx}}]};
+handle_event(info, {'$toroco_unsub', _, _}, _, _D) ->
+    keep_state_and_data;
+handle_event(Type, Content, _, #r{reg = Reg}) ->
+    logger:warning("router ~p: unexpected ~p event ~p", [Reg, Type, Content]),
+    keep_state_and_data.
+
+-spec terminate(term(), routing, #r{}) -> ok.
+terminate(_Reason, _, #r{links = L, reg = Reg}) ->
+    toroco_upstream:detach_all(L, Reg).
+
+%%====================================================================
+%% Internals
+%%====================================================================
+
+configure(#{sources := Srcs, upstreams := Ups, buffer := B, idle := Idle},
+          D = #r{links = L, reg = Reg}) ->
+    {L1, Synced, Fresh} = toroco_upstream:rewire(Ups, L, Reg),
+    D1 = D#r{links = L1, buffer = B},
+    timer(run({rewire, Srcs, #{idle => Idle}, Synced, Fresh}, D1)).
+
+step(Event, D) ->
+    steps([Event], D).
+
+steps(Events, D0) ->
+    D = lists:foldl(fun run/2, D0, Events),
+    case timer(D) of
+        {D1, []} -> {keep_state, D1};
+        {D1, Actions} -> {keep_state, D1, Actions}
+    end.
+
+%% Feeds one event to the core and delivers what comes out.
+run(Event, D = #r{core = C}) ->
+    {C1, Out} = toroco_router_core:handle(Event, now_ms(), C),
+    deliver(Out, D#r{core = C1}).
+
+%% Moves the one timer only if the earliest deadline changed.
+timer(D = #r{core = C, timer = T}) ->
+    case toroco_router_core:next_deadline(C) of
+        T -> {D, []};
+        infinity -> {D#r{timer = infinity}, [{{timeout, hold}, cancel}]};
+        Next -> {D#r{timer = Next}, [{{timeout, hold}, Next, expire, [{abs, true}]}]}
+    end.
+
+deliver([], D) ->
+    D;
+deliver(_Values, D = #r{rx = undefined}) ->
+    D;                                          % receiver down: lost, as specified
+deliver(Values, D = #r{buffer = all, rx = Rx, input = I}) ->
+    [Rx ! {'$toroco_in', I, V} || V <- Values],
+    D;
+deliver(Values, D = #r{buffer = latest, inflight = true}) ->
+    D#r{pending = {value, lists:last(Values)}};
+deliver(Values, D = #r{buffer = latest, rx = Rx, input = I}) ->
+    Rx ! {'$toroco_in', I, lists:last(Values), self()},
+    D#r{inflight = true}.
+
+attach_receiver(Pid, D = #r{rx_mon = Old}) ->
+    _ = Old =/= undefined andalso erlang:demonitor(Old, [flush]),
+    D#r{rx = Pid, rx_mon = erlang:monitor(process, Pid), inflight = false, pending = none}.
+
+now_ms() -> erlang:monotonic_time(millisecond).

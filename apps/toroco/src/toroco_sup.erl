@@ -1,0 +1,34 @@
+%% @doc The root of the runtime, drawn as the thesis draws a robot:
+%%
+%% ```
+%% toroco_sup (rest_for_one)
+%% ├── toroco_wiring         the wiring server and its table
+%% ├── toroco_routers_sup    one router per wired input, one gate per inhibited output
+%% ├── toroco_devices_sup    sensors and actuators (layer 0)
+%% └── toroco_layers_sup     one supervisor per layer
+%%     ├── toroco_layer_sup 0    behaviors of layer 0
+%%     ├── toroco_layer_sup 1    behaviors of layer 1 ...
+%% '''
+%%
+%% Children are started in that order and depend on the ones before them.
+-module(toroco_sup).
+-behaviour(supervisor).
+
+-export([start_link/0, init/1]).
+
+-spec start_link() -> {ok, pid()} | {error, term()}.
+start_link() ->
+    supervisor:start_link({local, ?MODULE}, ?MODULE, []).
+
+-spec init([]) -> {ok, {supervisor:sup_flags(), [supervisor:child_spec()]}}.
+init([]) ->
+    %% rest_for_one: everything after the wiring server reads its table, and the
+    %% processes of a wire (routers, gates) must exist before their ends.
+    Flags = #{strategy => rest_for_one, intensity => 3, period => 10},
+    Sup = fun(Mod) -> #{id => Mod, start => {Mod, start_link, []}, type => supervisor,
+                        shutdown => infinity, modules => [Mod]} end,
+    {ok, {Flags, [#{id => toroco_wiring, start => {toroco_wiring, start_link, []},
+                    type => worker, shutdown => 5000, modules => [toroco_wiring]},
+                  Sup(toroco_routers_sup),
+                  Sup(toroco_devices_sup),
+                  Sup(toroco_layers_sup)]}}.

@@ -1,0 +1,374 @@
+%% @doc The wiring server: the one place where the wiring changes.
+%%
+%% It holds the current `toroco_wiring_core:wiring()', validates each request
+%% against it, and applies the resulting plan: it starts, re-wires and stops
+%% routers and gates, starts and stops behaviors (in their layer's supervisor)
+%% and devices, and keeps the wiring table, an ETS table that the processes read
+%% when they (re)start to find their place. It is never on the event path:
+%% events go emitter → (gate) → router → receiver.
+%%
+%% It also watches the layer supervisors: a layer that exceeds its restart
+%% intensity is taken out as a whole, reported with a logger error and listed
+%% in `toroco:inspect()' under `removed_layers'.
+-module(toroco_wiring).
+-behaviour(gen_server).
+
+-export([start_link/0, call/1, lookup/1, subs_of/1, stopping/0]).
+-export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
+
+-define(TABLE, toroco_wiring).
+
+-record(s, {wiring = toroco_wiring_core:new() :: toroco_wiring_core:wiring(),
+            plan = #{routers => #{}, gates => #{}, subs => #{}} :: toroco_wiring_core:plan(),
+            layers = #{} :: #{non_neg_integer() => {pid(), reference()}},
+            removed = [] :: [non_neg_integer()],
+            stopping = false :: boolean()}).
+
+%%====================================================================
+%% API
+%%====================================================================
+
+-spec start_link() -> {ok, pid()} | {error, term()}.
+start_link() ->
+    gen_server:start_link({local, ?MODULE}, ?MODULE, [], []).
+
+%% @doc Sends a request to the wiring server and waits for its answer.
+%%
+%% When the caller is itself a behavior or device (a callback that adds,
+%% removes or re-wires at run time), it goes on answering subscriptions to its
+%% own outputs while it waits, so that wiring it as a source cannot deadlock.
+-spec call(term()) -> term().
+call(Request) ->
+    case get('$toroco_emitter') of
+        undefined -> gen_server:call(?MODULE, Request, infinity);
+        Name -> serviced_call(Name, Request)
+    end.
+
+%% @doc A router's or gate's configuration from the wiring table.
+-spec lookup({router | gate, term()}) -> {ok, map()} | error.
+lookup(Key) ->
+    try ets:lookup(?TABLE, Key) of
+        [{_, Cfg}] -> {ok, Cfg};
+        [] -> error
+    catch error:badarg -> error
+    end.
+
+%% @doc The consumers each output of emitter `Name' is planned to feed.
+-spec subs_of(atom()) -> #{atom() => [atom()]}.
+subs_of(Name) ->
+    try ets:lookup(?TABLE, {subs, Name}) of
+        [{_, Subs}] -> Subs;
+        [] -> #{}
+    catch error:badarg -> #{}
+    end.
+
+%% @doc Called when the application is about to stop: layers going down from
+%% now on are being shut down, not taken out.
+-spec stopping() -> ok.
+stopping() ->
+    gen_server:call(?MODULE, stopping).
+
+%%====================================================================
+%% gen_server
+%%====================================================================
+
+-spec init([]) -> {ok, #s{}}.
+init([]) ->
+    _ = ets:new(?TABLE, [named_table, protected, set, {read_concurrency, true}]),
+    {ok, #s{}}.
+
+-spec handle_call(term(), gen_server:from(), #s{}) -> {reply, term(), #s{}}.
+handle_call({add, Kind, Name, Module, Opts}, _From, S) ->
+    reply(add_node(Kind, Name, Module, Opts, S), S);
+handle_call({remove, Kind, Name}, _From, S) ->
+    reply(remove_node(Kind, Name, S), S);
+handle_call({set_inputs, R, Map}, _From, S = #s{wiring = W}) ->
+    reply(rewire(toroco_wiring_core:set_inputs(W, R, Map), S), S);
+handle_call({set_inhibitors, E, Map}, _From, S = #s{wiring = W}) ->
+    reply(rewire(toroco_wiring_core:set_inhibitors(W, E, Map), S), S);
+handle_call({set_reset, B, Srcs}, _From, S = #s{wiring = W}) ->
+    reply(rewire(toroco_wiring_core:set_reset(W, B, Srcs), S), S);
+handle_call({load, Terms}, _From, S) ->
+    reply(load(Terms, S), S);
+handle_call({node, Name}, _From, S = #s{wiring = W}) ->
+    case toroco_wiring_core:node(W, Name) of
+        {ok, Info} ->
+            {reply, {ok, Info#{inputs_wired => toroco_wiring_core:inputs_of(W, Name),
+                               inhibitors => maps:from_list(
+                                               [{O, toroco_wiring_core:inhibitors_of(W, {Name, O})}
+                                                || O <- maps:get(outputs, Info)]),
+                               gates => gates_of(Name, S)}}, S};
+        Err -> {reply, Err, S}
+    end;
+handle_call(wiring, _From, S = #s{wiring = W, removed = Removed}) ->
+    {reply, {W, Removed}, S};
+handle_call(stopping, _From, S) ->
+    {reply, ok, S#s{stopping = true}};
+handle_call(Request, _From, S) ->
+    {reply, {error, {unknown_request, Request}}, S}.
+
+-spec handle_cast(term(), #s{}) -> {noreply, #s{}}.
+handle_cast(_Msg, S) ->
+    {noreply, S}.
+
+-spec handle_info(term(), #s{}) -> {noreply, #s{}}.
+handle_info({'DOWN', Ref, process, _Pid, Reason}, S = #s{layers = Layers, removed = Removed}) ->
+    case [L || {L, {_, R}} <- maps:to_list(Layers), R =:= Ref] of
+        [L] when S#s.stopping ->
+            {noreply, S#s{layers = maps:remove(L, Layers)}};
+        [L] ->
+            logger:error("toroco: layer ~p exceeded its restart intensity and was taken "
+                         "out (~p); the layers below keep running", [L, Reason]),
+            {noreply, S#s{layers = maps:remove(L, Layers), removed = lists:usort([L | Removed])}};
+        [] ->
+            {noreply, S}
+    end;
+handle_info(_Msg, S) ->
+    {noreply, S}.
+
+reply({ok, S1}, _S) -> {reply, ok, S1};
+reply({error, _} = Err, S) -> {reply, Err, S}.
+
+%%====================================================================
+%% Nodes
+%%====================================================================
+
+add_node(Kind, Name, Module, Opts, S = #s{wiring = W}) ->
+    case node_spec(Kind, Name, Module, Opts) of
+        {ok, Spec = #{layer := L, args := Args}} ->
+            case toroco_behavior:interface(Kind, Module, Args) of
+                {ok, Ports} ->
+                    Info = Ports#{kind => Kind, module => Module, layer => L},
+                    case toroco_wiring_core:add_node(W, Name, Info) of
+                        {ok, W1} -> start_node(Spec, S#s{wiring = W1});
+                        Err -> Err
+                    end;
+                Err -> Err
+            end;
+        Err -> Err
+    end.
+
+node_spec(_Kind, Name, _Module, _Opts) when not is_atom(Name) ->
+    {error, {bad_name, Name}};
+node_spec(_Kind, Name, Module, _Opts) when not is_atom(Module) ->
+    {error, {bad_module, {Name, Module}}};
+node_spec(_Kind, Name, _Module, Opts) when not is_map(Opts) ->
+    {error, {bad_options, {Name, Opts}}};
+node_spec(device, Name, Module, Opts) ->
+    {ok, toroco_device:spec(Name, Module, Opts)};
+node_spec(behavior, Name, Module, Opts) ->
+    case {maps:keys(maps:without([layer, params], Opts)), maps:get(layer, Opts, 0),
+          maps:get(params, Opts, #{})} of
+        {[Bad | _], _, _} -> {error, {bad_option, {Name, Bad}}};
+        {[], L, _} when not is_integer(L); L < 0 -> {error, {bad_layer, {Name, L}}};
+        {[], _, P} when not is_map(P) -> {error, {bad_params, {Name, P}}};
+        {[], L, P} ->
+            {ok, #{kind => behavior, name => Name, module => Module, layer => L, args => P}}
+    end.
+
+start_node(Spec = #{kind := Kind, name := Name, layer := L}, S) ->
+    {Sup, S1} = case Kind of
+                    device -> {toroco_devices_sup, S};
+                    behavior -> layer_sup(L, S)
+                end,
+    case supervisor:start_child(Sup, toroco_behavior:child_spec(Spec)) of
+        {ok, _} -> {ok, S1};
+        {ok, _, _} -> {ok, S1};
+        {error, Reason} -> {error, {start_failed, {Name, Reason}}}
+    end.
+
+layer_sup(L, S = #s{layers = Layers, removed = Removed}) ->
+    case Layers of
+        #{L := {Pid, _}} -> {Pid, S};
+        #{} ->
+            {ok, Pid} = toroco_layers_sup:start_layer(L),
+            {Pid, S#s{layers = Layers#{L => {Pid, erlang:monitor(process, Pid)}},
+                      removed = lists:delete(L, Removed)}}
+    end.
+
+remove_node(Kind, Name, S = #s{wiring = W, layers = Layers}) ->
+    case toroco_wiring_core:node(W, Name) of
+        {ok, #{kind := Kind, layer := L}} ->
+            Sup = case Kind of
+                      device -> toroco_devices_sup;
+                      behavior -> case Layers of
+                                      #{L := {Pid, _}} -> Pid;
+                                      #{} -> none
+                                  end
+                  end,
+            %% The process goes first: its death ends its holds and clears its
+            %% latches at once, so lower layers take over before re-wiring.
+            _ = Sup =/= none andalso supervisor:terminate_child(Sup, Name),
+            _ = Sup =/= none andalso supervisor:delete_child(Sup, Name),
+            rewire(toroco_wiring_core:remove_node(W, Name), S);
+        {ok, #{kind := Other}} ->
+            {error, {case Other of device -> not_a_behavior; behavior -> not_a_device end, Name}};
+        Err -> Err
+    end.
+
+%%====================================================================
+%% Applying plans
+%%====================================================================
+
+rewire({ok, W1}, S = #s{plan = Old}) ->
+    New = toroco_wiring_core:plan(W1),
+    apply_plan(Old, New),
+    {ok, S#s{wiring = W1, plan = New}};
+rewire({error, _} = Err, _S) ->
+    Err.
+
+%% Table first (restarting processes read it), then gates upstream-first, then
+%% routers, then whatever is no longer needed.
+apply_plan(#{routers := OldR, gates := OldG, subs := OldSubs},
+           #{routers := NewR, gates := NewG, subs := NewSubs}) ->
+    [ets:insert(?TABLE, {{subs, E}, Subs}) || {E, Subs} <- maps:to_list(NewSubs)],
+    [ets:delete(?TABLE, {subs, E}) || E <- maps:keys(OldSubs), not maps:is_key(E, NewSubs)],
+    [ets:insert(?TABLE, {{gate, K}, Cfg}) || {K, Cfg} <- maps:to_list(NewG)],
+    [ets:insert(?TABLE, {{router, K}, Cfg}) || {K, Cfg} <- maps:to_list(NewR)],
+    [ensure(gate, K, maps:is_key(K, OldG) andalso maps:get(K, OldG) =/= Cfg)
+     || {K, Cfg} <- gate_order(NewG)],
+    [ensure(router, K, maps:is_key(K, OldR) andalso maps:get(K, OldR) =/= Cfg)
+     || {K, Cfg} <- lists:sort(maps:to_list(NewR))],
+    [stop(router, K) || K <- maps:keys(OldR), not maps:is_key(K, NewR)],
+    [stop(gate, K) || K <- maps:keys(OldG), not maps:is_key(K, NewG)],
+    ok.
+
+%% Starts a consumer that is not running, or re-wires one whose configuration
+%% changed.
+ensure(Kind, Key, Changed) ->
+    Mod = consumer_module(Kind),
+    case supervisor:start_child(toroco_routers_sup, Mod:child_spec(Key)) of
+        {ok, _} -> ok;
+        {error, {already_started, _}} when Changed -> Mod:rewire(Key);
+        {error, {already_started, _}} -> ok;
+        {error, already_present} ->
+            _ = supervisor:restart_child(toroco_routers_sup, {Kind, Key}),
+            ok;
+        {error, Reason} ->
+            logger:error("toroco: could not start ~p ~p: ~p", [Kind, Key, Reason])
+    end.
+
+stop(Kind, Key) ->
+    _ = supervisor:terminate_child(toroco_routers_sup, {Kind, Key}),
+    _ = supervisor:delete_child(toroco_routers_sup, {Kind, Key}),
+    ets:delete(?TABLE, {Kind, Key}).
+
+consumer_module(router) -> toroco_router;
+consumer_module(gate) -> toroco_gate.
+
+%% Gates whose inhibitors come through other gates start after those.
+gate_order(Gates) ->
+    order(lists:sort(maps:to_list(Gates)), [], []).
+
+order([], [], Done) -> lists:reverse(Done);
+order([], Blocked, Done) -> order(lists:reverse(Blocked), [], Done);
+order([{K, Cfg = #{upstreams := Ups}} | Rest], Blocked, Done) ->
+    Needs = [G || {gate, G} <- maps:values(Ups)],
+    DoneRegs = [toroco_names:gate(D) || {D, _} <- Done],
+    Waiting = [G || G <- Needs, not lists:member(G, DoneRegs)],
+    PendingRegs = [toroco_names:gate(P) || {P, _} <- Rest ++ Blocked],
+    case [G || G <- Waiting, lists:member(G, PendingRegs)] of
+        [] -> order(Rest, Blocked, [{K, Cfg} | Done]);
+        _ -> order(Rest, [{K, Cfg} | Blocked], Done)
+    end.
+
+gates_of(Name, #s{plan = #{gates := Gates}}) ->
+    maps:from_list([{M, K} || {K, #{members := Ms}} <- maps:to_list(Gates),
+                              M = {E, _} <- Ms, E =:= Name]).
+
+%%====================================================================
+%% Wiring files
+%%====================================================================
+
+%% The whole file is checked against a copy of the wiring first; only then are
+%% its nodes started and its wiring applied. A node that fails to start undoes
+%% the nodes started before it.
+load(Terms, S = #s{wiring = W}) ->
+    case validate_terms(Terms, W) of
+        {ok, W1} ->
+            Nodes = [T || T <- Terms, element(1, T) =:= behavior orelse element(1, T) =:= device],
+            case start_nodes(Nodes, S, []) of
+                {ok, S1} -> rewire({ok, W1}, S1);
+                Err -> Err
+            end;
+        Err -> Err
+    end.
+
+validate_terms([], W) ->
+    {ok, W};
+validate_terms([T | Ts], W) ->
+    case validate_term(T, W) of
+        {ok, W1} -> validate_terms(Ts, W1);
+        Err -> Err
+    end.
+
+validate_term({Kind, Name, Module, Opts}, W) when Kind =:= behavior; Kind =:= device ->
+    case node_spec(Kind, Name, Module, Opts) of
+        {ok, #{layer := L, args := Args}} ->
+            case toroco_behavior:interface(Kind, Module, Args) of
+                {ok, Ports} ->
+                    toroco_wiring_core:add_node(W, Name, Ports#{kind => Kind, module => Module,
+                                                                layer => L});
+                Err -> Err
+            end;
+        Err -> Err
+    end;
+validate_term({inputs, R, Map}, W) -> toroco_wiring_core:set_inputs(W, R, Map);
+validate_term({inhibitors, E, Map}, W) -> toroco_wiring_core:set_inhibitors(W, E, Map);
+validate_term({reset, B, Srcs}, W) -> toroco_wiring_core:set_reset(W, B, Srcs);
+validate_term(Other, _W) -> {error, {bad_wiring_term, Other}}.
+
+start_nodes([], S, _Started) ->
+    {ok, S};
+start_nodes([{Kind, Name, Module, Opts} | Rest], S, Started) ->
+    {ok, Spec} = node_spec(Kind, Name, Module, Opts),
+    case start_node(Spec, S) of
+        {ok, S1} -> start_nodes(Rest, S1, [{Kind, Name} | Started]);
+        Err ->
+            [undo_start(K, N, S) || {K, N} <- Started],
+            Err
+    end.
+
+undo_start(device, Name, _S) ->
+    _ = supervisor:terminate_child(toroco_devices_sup, Name),
+    supervisor:delete_child(toroco_devices_sup, Name);
+undo_start(behavior, Name, #s{layers = Layers}) ->
+    [begin
+         _ = supervisor:terminate_child(Pid, Name),
+         supervisor:delete_child(Pid, Name)
+     end || {Pid, _} <- maps:values(Layers)].
+
+%%====================================================================
+%% Calls from inside an emitter
+%%====================================================================
+
+serviced_call(Name, Request) ->
+    Mref = erlang:monitor(process, ?MODULE),
+    erlang:send(?MODULE, {'$gen_call', {self(), Mref}, Request}),
+    serviced_wait(Name, Mref, Request).
+
+serviced_wait(Name, Mref, Request) ->
+    receive
+        {Mref, Reply} ->
+            erlang:demonitor(Mref, [flush]),
+            Reply;
+        {'DOWN', Mref, _, _, Reason} ->
+            exit({Reason, {?MODULE, call, [Request]}});
+        {'$toroco_sub', {_, Out} = Src, Reg} ->
+            Latch = case get('$toroco_latches') of
+                        #{Out := V} -> {value, V};
+                        _ -> none
+                    end,
+            toroco_upstream:send(Reg, {'$toroco_state', emitter, Src, self(), Latch}),
+            put('$toroco_serviced', [{sub, Out, Reg} | serviced()]),
+            serviced_wait(Name, Mref, Request);
+        {'$toroco_unsub', {_, Out}, Reg} ->
+            put('$toroco_serviced', [{unsub, Out, Reg} | serviced()]),
+            serviced_wait(Name, Mref, Request)
+    end.
+
+serviced() ->
+    case get('$toroco_serviced') of
+        undefined -> [];
+        L -> L
+    end.

@@ -1,0 +1,381 @@
+%% @doc The wiring as data: validation of every change and the plan of
+%% processes it implies. Pure; `toroco_wiring' is the server that holds one
+%% value of this and applies the plans.
+%%
+%% A wiring knows the nodes (behaviors and devices, with their layer and
+%% declared inputs and outputs), each wired input's sources in priority order,
+%% each inhibited output's inhibitors and each behavior's reset sources. A change
+%% ({@link set_inputs/3}, {@link set_inhibitors/3}, {@link set_reset/3}, {@link
+%% add_node/3}, {@link remove_node/2}) is validated completely and returns
+%% `{ok, Wiring}' or `{error, Reason}' naming the culprit; nothing is half-done.
+%%
+%% {@link plan/1} turns a wiring into the processes that carry it: one router
+%% per wired input, one gate per group of inhibited outputs (a group is two
+%% outputs of one layer that inhibit each other, or a single output), and for
+%% every emitter the consumers each of its outputs must be sent to.
+-module(toroco_wiring_core).
+
+-compile({no_auto_import, [node/2]}).
+-export([new/0, add_node/3, remove_node/2, node/2, nodes/1,
+         set_inputs/3, set_inhibitors/3, set_reset/3,
+         inputs_of/2, inhibitors_of/2, plan/1]).
+-export_type([wiring/0, node_info/0, plan/0, router_config/0, gate_config/0]).
+
+-type name() :: atom().
+-type source() :: {name(), atom()}.
+-type default() :: non_neg_integer() | infinity.
+-type node_info() :: #{kind := behavior | device, module := module(), layer := non_neg_integer(),
+                       inputs := [atom()], outputs := [atom()]}.
+-type input_spec() :: #{sources := [{source(), default()}], buffer := all | latest,
+                        idle := toroco_router_core:latch()}.
+-type wiring() :: #{nodes := #{name() => node_info()},
+                    inputs := #{{name(), atom()} => input_spec()},
+                    inhibitors := #{source() => [{source(), default()}]}}.
+-type upstream() :: {emitter | gate, atom()}.
+-type router_config() :: #{reg := atom(), receiver := name(), input := atom(),
+                           receiver_reg := atom(), sources := [{source(), default()}],
+                           upstreams := #{source() => upstream()},
+                           buffer := all | latest, idle := toroco_router_core:latch()}.
+-type gate_config() :: #{reg := atom(), members := [source()],
+                         entries := #{source() => [{source(), default()}]},
+                         upstreams := #{source() => upstream()},
+                         subs := #{source() => [atom()]}}.
+-type plan() :: #{routers := #{{name(), atom()} => router_config()},
+                  gates := #{source() => gate_config()},
+                  subs := #{name() => #{atom() => [atom()]}}}.
+
+-define(RESET, '$reset').
+
+%%====================================================================
+%% Nodes
+%%====================================================================
+
+-spec new() -> wiring().
+new() -> #{nodes => #{}, inputs => #{}, inhibitors => #{}}.
+
+-spec add_node(wiring(), name(), node_info()) -> {ok, wiring()} | {error, term()}.
+add_node(W = #{nodes := Nodes}, Name, Info) ->
+    case Nodes of
+        #{Name := _} -> {error, {duplicate_name, Name}};
+        #{} -> {ok, W#{nodes := Nodes#{Name => Info}}}
+    end.
+
+%% @doc Forgets a node and strips it from every input and inhibitor list;
+%% inputs and inhibited outputs left without sources are unwired.
+-spec remove_node(wiring(), name()) -> {ok, wiring()} | {error, term()}.
+remove_node(W = #{nodes := Nodes, inputs := Inputs, inhibitors := Inhs}, Name) ->
+    case Nodes of
+        #{Name := _} ->
+            Strip = fun(Srcs) -> [E || E = {{N, _}, _} <- Srcs, N =/= Name] end,
+            Inputs1 = maps:filtermap(
+                        fun({R, _}, _) when R =:= Name -> false;
+                           (_, Spec = #{sources := Srcs}) ->
+                                case Strip(Srcs) of
+                                    [] -> false;
+                                    Srcs1 -> {true, Spec#{sources := Srcs1}}
+                                end
+                        end, Inputs),
+            Inhs1 = maps:filtermap(
+                      fun({E, _}, _) when E =:= Name -> false;
+                         (_, Srcs) ->
+                              case Strip(Srcs) of
+                                  [] -> false;
+                                  Srcs1 -> {true, Srcs1}
+                              end
+                      end, Inhs),
+            {ok, W#{nodes := maps:remove(Name, Nodes), inputs := Inputs1, inhibitors := Inhs1}};
+        #{} ->
+            {error, {unknown_name, Name}}
+    end.
+
+-spec node(wiring(), name()) -> {ok, node_info()} | {error, term()}.
+node(#{nodes := Nodes}, Name) ->
+    case Nodes of
+        #{Name := Info} -> {ok, Info};
+        #{} -> {error, {unknown_name, Name}}
+    end.
+
+-spec nodes(wiring()) -> #{name() => node_info()}.
+nodes(#{nodes := Nodes}) -> Nodes.
+
+%% @doc The wired inputs of a receiver (the reset input included).
+-spec inputs_of(wiring(), name()) -> #{atom() => input_spec()}.
+inputs_of(#{inputs := Inputs}, R) ->
+    maps:from_list([{I, Spec} || {{R1, I}, Spec} <- maps:to_list(Inputs), R1 =:= R]).
+
+-spec inhibitors_of(wiring(), source()) -> [{source(), default()}].
+inhibitors_of(#{inhibitors := Inhs}, Src) -> maps:get(Src, Inhs, []).
+
+%%====================================================================
+%% Changes
+%%====================================================================
+
+%% @doc Replaces the listed inputs of `R'; `[]' unwires an input.
+-spec set_inputs(wiring(), name(), term()) -> {ok, wiring()} | {error, term()}.
+set_inputs(W, R, Map) when is_map(Map) ->
+    maybe_all(W, R, fun(Info) ->
+        fold_ok(fun({Input, Spec}, Acc) ->
+                        case lists:member(Input, maps:get(inputs, Info)) of
+                            true -> wire_input(Acc, R, Input, Spec);
+                            false -> {error, {unknown_input, {R, Input}}}
+                        end
+                end, W, lists:sort(maps:to_list(Map)))
+    end);
+set_inputs(_W, R, Other) ->
+    {error, {bad_inputs, {R, Other}}}.
+
+%% @doc Replaces the inhibitor lists of the listed outputs of `E'.
+-spec set_inhibitors(wiring(), name(), term()) -> {ok, wiring()} | {error, term()}.
+set_inhibitors(W, E, Map) when is_map(Map) ->
+    maybe_all(W, E, fun(Info) ->
+        Changed = fold_ok(
+                    fun({Out, Spec}, Acc = #{inhibitors := Inhs}) ->
+                            case lists:member(Out, maps:get(outputs, Info)) of
+                                false -> {error, {unknown_output, {E, Out}}};
+                                true ->
+                                    case sources({E, Out}, Spec, W) of
+                                        {ok, []} ->
+                                            {ok, Acc#{inhibitors := maps:remove({E, Out}, Inhs)}};
+                                        {ok, Srcs} ->
+                                            case inhibitor_hierarchy(W, {E, Out}, Srcs) of
+                                                ok -> {ok, Acc#{inhibitors := Inhs#{{E, Out} => Srcs}}};
+                                                Err -> Err
+                                            end;
+                                        Err -> Err
+                                    end
+                            end
+                    end, W, lists:sort(maps:to_list(Map))),
+        case Changed of
+            {ok, W1} ->
+                case check_cycles(W1) of
+                    ok -> {ok, W1};
+                    Err -> Err
+                end;
+            Err -> Err
+        end
+    end);
+set_inhibitors(_W, E, Other) ->
+    {error, {bad_inhibitors, {E, Other}}}.
+
+%% @doc Brooks' reset: each event on one of `Srcs' restarts behavior `B'.
+-spec set_reset(wiring(), name(), term()) -> {ok, wiring()} | {error, term()}.
+set_reset(W, B, Srcs) when is_list(Srcs) ->
+    maybe_all(W, B, fun(#{kind := behavior}) -> wire_input(W, B, ?RESET, Srcs);
+                       (#{kind := device}) -> {error, {not_a_behavior, B}}
+                    end);
+set_reset(_W, B, Other) ->
+    {error, {bad_reset, {B, Other}}}.
+
+maybe_all(W, Name, Fun) ->
+    case node(W, Name) of
+        {ok, Info} -> Fun(Info);
+        Err -> Err
+    end.
+
+wire_input(W = #{inputs := Inputs}, R, Input, Spec) ->
+    case input_spec({R, Input}, Spec, W) of
+        {ok, #{sources := []}} ->
+            {ok, W#{inputs := maps:remove({R, Input}, Inputs)}};
+        {ok, Norm = #{sources := Srcs}} ->
+            case input_hierarchy(W, {R, Input}, Srcs) of
+                ok -> {ok, W#{inputs := Inputs#{{R, Input} => Norm}}};
+                Err -> Err
+            end;
+        Err -> Err
+    end.
+
+input_spec(Where, Srcs, W) when is_list(Srcs) ->
+    input_spec(Where, #{sources => Srcs}, W);
+input_spec(Where, Spec, W) when is_map(Spec) ->
+    case maps:keys(maps:without([sources, buffer, idle], Spec)) of
+        [Bad | _] -> {error, {bad_option, {Where, Bad}}};
+        [] ->
+            Buffer = maps:get(buffer, Spec, all),
+            case lists:member(Buffer, [all, latest]) of
+                false -> {error, {bad_option, {Where, {buffer, Buffer}}}};
+                true ->
+                    case sources(Where, maps:get(sources, Spec, []), W) of
+                        {ok, Srcs} ->
+                            Idle = case Spec of
+                                       #{idle := V} -> {value, V};
+                                       #{} -> none
+                                   end,
+                            {ok, #{sources => Srcs, buffer => Buffer, idle => Idle}};
+                        Err -> Err
+                    end
+            end
+    end;
+input_spec(Where, Other, _W) ->
+    {error, {bad_input_spec, {Where, Other}}}.
+
+%% Normalises a source list to [{Src, DefaultHold}] and checks each entry.
+sources(Where, Srcs, W) when is_list(Srcs) ->
+    case fold_ok(fun(Entry, Acc) ->
+                         case source(Entry, W) of
+                             {ok, {Src, _} = E} ->
+                                 case lists:keymember(Src, 1, Acc) of
+                                     true -> {error, {duplicate_source, {Where, Src}}};
+                                     false -> {ok, [E | Acc]}
+                                 end;
+                             Err -> Err
+                         end
+                 end, [], Srcs) of
+        {ok, Rev} -> {ok, lists:reverse(Rev)};
+        Err -> Err
+    end;
+sources(Where, Other, _W) ->
+    {error, {bad_sources, {Where, Other}}}.
+
+source({E, Out}, W) when is_atom(E), is_atom(Out) ->
+    source({E, Out, #{}}, W);
+source({E, Out, Opts} = Entry, W) when is_atom(E), is_atom(Out), is_map(Opts) ->
+    case node(W, E) of
+        {error, _} = Err -> Err;
+        {ok, #{outputs := Outs}} ->
+            case {lists:member(Out, Outs), maps:keys(maps:without([hold], Opts))} of
+                {false, _} -> {error, {unknown_output, {E, Out}}};
+                {true, [Bad | _]} -> {error, {bad_option, {{E, Out}, Bad}}};
+                {true, []} ->
+                    case maps:get(hold, Opts, 0) of
+                        H when (is_integer(H) andalso H >= 0) orelse H =:= infinity ->
+                            {ok, {{E, Out}, H}};
+                        H -> {error, {bad_hold, {{E, Out}, H}}}
+                    end
+            end;
+        _ -> {error, {bad_source, Entry}}
+    end;
+source(Other, _W) ->
+    {error, {bad_source, Other}}.
+
+fold_ok(_Fun, Acc, []) -> {ok, Acc};
+fold_ok(Fun, Acc, [X | Xs]) ->
+    case Fun(X, Acc) of
+        {ok, Acc1} -> fold_ok(Fun, Acc1, Xs);
+        Err -> Err
+    end.
+
+%%====================================================================
+%% Hierarchy and cycles
+%%====================================================================
+
+layer(W, {E, _}) ->
+    {ok, #{layer := L}} = node(W, E),
+    L.
+
+%% Highest priority first: a source may not sit above one of a higher layer.
+input_hierarchy(_W, _Where, []) -> ok;
+input_hierarchy(W, Where, [{Si, _} | Rest]) ->
+    Li = layer(W, Si),
+    case [{Sj, Lj} || {Sj, _} <- Rest, (Lj = layer(W, Sj)) > Li] of
+        [] -> input_hierarchy(W, Where, Rest);
+        [{Sj, Lj} | _] -> {error, {hierarchy, {Where, {Si, Li}, {Sj, Lj}}}}
+    end.
+
+inhibitor_hierarchy(W, Out, Srcs) ->
+    LE = layer(W, Out),
+    case [{I, LI} || {I, _} <- Srcs, (LI = layer(W, I)) < LE] of
+        [] -> ok;
+        [{I, LI} | _] -> {error, {hierarchy, {Out, {inhibitor, I, LI}, {emitter, Out, LE}}}}
+    end.
+
+%% Any cycle of inhibitions is refused, except outputs of one layer that inhibit
+%% each other in pairs (every edge mutual, no ring of three or more).
+check_cycles(W = #{inhibitors := Inhs}) ->
+    Edges = [{I, O} || {O, Srcs} <- maps:to_list(Inhs), {I, _} <- Srcs],
+    G = digraph:new(),
+    try
+        [digraph:add_vertex(G, V) || {A, B} <- Edges, V <- [A, B]],
+        [digraph:add_edge(G, A, B) || {A, B} <- Edges],
+        Bad = [C || C <- digraph_utils:cyclic_strong_components(G),
+                    not allowed_component(W, lists:sort(C), Edges)],
+        case Bad of
+            [] -> ok;
+            [C | _] -> {error, {inhibition_cycle, lists:sort(C)}}
+        end
+    after
+        digraph:delete(G)
+    end.
+
+allowed_component(_W, [_], _Edges) -> false;  % an output inhibiting itself
+allowed_component(W, Members, Edges) ->
+    Inside = lists:usort([{A, B} || {A, B} <- Edges, lists:member(A, Members),
+                                    lists:member(B, Members)]),
+    Mutual = lists:all(fun({A, B}) -> lists:member({B, A}, Inside) end, Inside),
+    [L | Ls] = [layer(W, M) || M <- Members],
+    Mutual andalso lists:all(fun(X) -> X =:= L end, Ls)
+        andalso length(Inside) div 2 =:= length(Members) - 1.
+
+%%====================================================================
+%% Plan
+%%====================================================================
+
+%% @doc The processes a wiring needs and what each emitter sends where.
+-spec plan(wiring()) -> plan().
+plan(#{inputs := Inputs, inhibitors := Inhs}) ->
+    Groups = groups(Inhs),
+    GateOf = maps:from_list([{M, Key} || {Key, Ms} <- maps:to_list(Groups), M <- Ms]),
+    Upstream = fun(Src = {E, _}, Self) ->
+                       case GateOf of
+                           #{Src := Key} when Key =/= Self -> {gate, toroco_names:gate(Key)};
+                           #{} -> {emitter, toroco_names:node(E)}
+                       end
+               end,
+    Routers = maps:map(
+                fun({R, I}, #{sources := Srcs, buffer := B, idle := Idle}) ->
+                        #{reg => toroco_names:router(R, I), receiver => R, input => I,
+                          receiver_reg => toroco_names:node(R), sources => Srcs,
+                          upstreams => maps:from_list([{S, Upstream(S, none)} || {S, _} <- Srcs]),
+                          buffer => B, idle => Idle}
+                end, Inputs),
+    Gates0 = maps:map(
+               fun(Key, Members) ->
+                       Entries = maps:from_list([{M, maps:get(M, Inhs)} || M <- Members]),
+                       Srcs = lists:usort(Members ++ [I || {_, L} <- maps:to_list(Entries),
+                                                           {I, _} <- L]),
+                       #{reg => toroco_names:gate(Key), members => Members, entries => Entries,
+                         upstreams => maps:from_list([{S, Upstream(S, Key)} || S <- Srcs]),
+                         subs => #{}}
+               end, Groups),
+    Consumers = [{Reg, Ups} || #{reg := Reg, upstreams := Ups} <- maps:values(Routers)]
+        ++ [{Reg, Ups} || #{reg := Reg, upstreams := Ups} <- maps:values(Gates0)],
+    {Subs, Gates} =
+        lists:foldl(
+          fun({Reg, Ups}, Acc) ->
+                  maps:fold(fun({E, Out}, {emitter, _}, {SAcc, GAcc}) ->
+                                    {add_sub([E, Out], Reg, SAcc), GAcc};
+                               (Src, {gate, _}, {SAcc, GAcc}) ->
+                                    Key = maps:get(Src, GateOf),
+                                    {SAcc, add_sub([Key, subs, Src], Reg, GAcc)}
+                            end, Acc, Ups)
+          end, {#{}, Gates0}, lists:sort(Consumers)),
+    #{routers => Routers, gates => Gates, subs => Subs}.
+
+add_sub([K], Reg, Map) ->
+    maps:update_with(K, fun(L) -> lists:usort([Reg | L]) end, [Reg], Map);
+add_sub([K | Path], Reg, Map) ->
+    maps:put(K, add_sub(Path, Reg, maps:get(K, Map, #{})), Map).
+
+%% Groups of gated outputs: connected by mutual inhibition, keyed by the
+%% smallest member.
+groups(Inhs) ->
+    Gated = lists:sort(maps:keys(Inhs)),
+    Mutual = fun(A, B) ->
+                     lists:keymember(A, 1, maps:get(B, Inhs, [])) andalso
+                         lists:keymember(B, 1, maps:get(A, Inhs, []))
+             end,
+    {Groups, _} = lists:foldl(
+                    fun(O, {Acc, Seen}) ->
+                            case lists:member(O, Seen) of
+                                true -> {Acc, Seen};
+                                false ->
+                                    Comp = component([O], [], Gated, Mutual),
+                                    {Acc#{hd(Comp) => Comp}, Comp ++ Seen}
+                            end
+                    end, {#{}, []}, Gated),
+    Groups.
+
+component([], Done, _All, _Mutual) -> lists:sort(Done);
+component([X | Todo], Done, All, Mutual) ->
+    Next = [Y || Y <- All, Y =/= X, Mutual(X, Y), not lists:member(Y, Done),
+                 not lists:member(Y, Todo)],
+    component(Todo ++ Next, [X | Done], All, Mutual).
