@@ -76,8 +76,6 @@ static int export_channel(struct pwm_bank *b, struct servo *s, struct perr *e)
 
 static int setup(struct pwm_bank *b, struct servo *s, struct perr *e)
 {
-    if (export_channel(b, s, e) != 0)
-        return -1;
     /* duty_cycle may never exceed period: clear it before changing the period */
     if (write_attr(b, s, "duty_cycle", 0, e) != 0 ||
         write_attr(b, s, "period", s->cfg.period_ns, e) != 0 ||
@@ -91,8 +89,7 @@ static int setup(struct pwm_bank *b, struct servo *s, struct perr *e)
 int pwm_configure(struct pwm_bank *b, const struct servo_config *cfg, int n,
                   struct perr *e)
 {
-    struct servo old[MAX_SERVOS];
-    int old_n = b->n;
+    struct servo next[MAX_SERVOS];
 
     if (n < 0 || n > MAX_SERVOS) {
         perr_set_int(e, "too_many_servos", n);
@@ -112,23 +109,27 @@ int pwm_configure(struct pwm_bank *b, const struct servo_config *cfg, int n,
             }
         }
     }
-    memcpy(old, b->s, sizeof old);
-    b->n = n;
+    /* Every channel must exist before any servo changes: a missing chip
+     * then refuses the whole set and the servos in use keep running. */
     for (int i = 0; i < n; i++) {
-        memset(&b->s[i], 0, sizeof b->s[i]);
-        b->s[i].cfg = cfg[i];
+        memset(&next[i], 0, sizeof next[i]);
+        next[i].cfg = cfg[i];
+        if (export_channel(b, &next[i], e) != 0)
+            return -1;
     }
-    /* Channels that left the set stop driving their servo. */
-    for (int i = 0; i < old_n; i++) {
+    /* Channels that leave the set stop driving their servo. */
+    for (int i = 0; i < b->n; i++) {
         bool kept = false;
         for (int j = 0; j < n; j++)
-            kept |= old[i].cfg.pwmchip == cfg[j].pwmchip && old[i].cfg.channel == cfg[j].channel;
+            kept |= b->s[i].cfg.pwmchip == cfg[j].pwmchip && b->s[i].cfg.channel == cfg[j].channel;
         if (!kept) {
             struct perr ignored;
             perr_clear(&ignored);
-            (void)write_attr(b, &old[i], "enable", 0, &ignored);
+            (void)write_attr(b, &b->s[i], "enable", 0, &ignored);
         }
     }
+    memcpy(b->s, next, sizeof next[0] * (size_t)n);
+    b->n = n;
     for (int i = 0; i < n; i++) {
         if (setup(b, &b->s[i], e) != 0) {
             b->n = i;   /* keep only the servos that are really set up */

@@ -181,6 +181,28 @@ static void missing_chip_is_named(void)
     CHECK_STR(errno_atom(e.errnum), "enoent");
 }
 
+static void a_set_with_a_missing_chip_leaves_the_servos_running(void)
+{
+    const char *root = fixture_tmpdir();
+    struct pwm_bank b;
+    struct perr e;
+    struct servo_config s[2] = {servo("left", 0, 0, false), servo("far", 7, 0, false)};
+    struct servo_velocity go[1] = {{"left", 100}};
+
+    fixture_pwm(root, 0, 0, true);
+    pwm_init(&b, root);
+    perr_clear(&e);
+    CHECK_LL(pwm_configure(&b, s, 1, &e), 0);
+    CHECK_LL(pwm_enable(&b, true, &e), 0);
+    CHECK_LL(pwm_set(&b, go, 1, &e), 0);
+    CHECK_LL(pwm_configure(&b, s, 2, &e), -1);
+    CHECK_STR(e.reason, "sysfs");
+    CHECK_LL(b.n, 1);
+    CHECK_STR(fixture_read(root, "class/pwm/pwmchip0/pwm0/duty_cycle"), "2000000");
+    CHECK_STR(fixture_read(root, "class/pwm/pwmchip0/pwm0/enable"), "1");
+    CHECK_LL(pwm_set(&b, go, 1, &e), 0);
+}
+
 static void duplicates_are_refused_and_dropped_servos_disabled(void)
 {
     const char *root = fixture_tmpdir();
@@ -215,6 +237,7 @@ const struct test_case pwm_tests[] = {
     TEST_CASE(exports_a_missing_channel),
     TEST_CASE(finds_the_pwm_dash_chip_colon_channel_layout),
     TEST_CASE(missing_chip_is_named),
+    TEST_CASE(a_set_with_a_missing_chip_leaves_the_servos_running),
     TEST_CASE(duplicates_are_refused_and_dropped_servos_disabled),
     {NULL, NULL},
 };
