@@ -7,6 +7,8 @@
 -import(toroco_test_lib, [values/1, await_values/2, await_values/3, settle/1,
                           sensor/2, actuator/2, wait_until/2]).
 
+suite() -> [{timetrap, {seconds, 60}}].
+
 all() -> [{group, suppression}, {group, inputs}, {group, inhibition}, {group, wiring}].
 
 groups() ->
