@@ -54,6 +54,8 @@
                    neutral_ns => non_neg_integer(),
                    span_ns => non_neg_integer(),
                    reversed => boolean()}.
+%% active_low defaults to true (a button to ground, line pulled up),
+%% debounce_ms to 20.
 -type button() :: none | #{line := non_neg_integer(),
                            active_low => boolean(),
                            debounce_ms => non_neg_integer()}.
@@ -232,9 +234,14 @@ init(Opts) ->
 -spec handle_call(term(), gen_server:from(), state()) ->
           {reply, term(), state()} | {noreply, state()}.
 handle_call({request, Request}, From, #state{port = Port, next_ref = Ref} = State) ->
-    port_command(Port, term_to_binary({Ref, Request})),
-    Pending = maps:put(Ref, {From, Request}, State#state.pending),
-    {noreply, State#state{next_ref = Ref + 1, pending = Pending}};
+    case send_frame(Port, {Ref, Request}) of
+        ok ->
+            Pending = maps:put(Ref, {From, Request}, State#state.pending),
+            {noreply, State#state{next_ref = Ref + 1, pending = Pending}};
+        closed ->
+            %% the program just died; its exit_status, queued, restarts it
+            {reply, {error, {port_exit, closed}}, State}
+    end;
 handle_call(os_pid, _From, State) ->
     {reply, State#state.os_pid, State};
 handle_call({subscribe, Pid}, _From, #state{subscribers = Subs} = State) ->
@@ -361,10 +368,24 @@ apply_steps([{Section, Request} | Rest], State) ->
 %% meanwhile are dispatched as usual.
 -spec sync_request(request(), timeout(), state()) -> {term(), state()}.
 sync_request(Request, Timeout, #state{port = Port, next_ref = Ref} = State0) ->
-    port_command(Port, term_to_binary({Ref, Request})),
     State = State0#state{next_ref = Ref + 1},
-    Deadline = erlang:monotonic_time(millisecond) + Timeout,
-    await_reply(Ref, Deadline, State).
+    case send_frame(Port, {Ref, Request}) of
+        ok ->
+            Deadline = erlang:monotonic_time(millisecond) + Timeout,
+            await_reply(Ref, Deadline, State);
+        closed ->
+            {{error, {port_exit, closed}}, State}
+    end.
+
+%% A port whose program has died is closed before its exit_status is
+%% handled: writing to it then is not an error of this process.
+-spec send_frame(port(), {pos_integer(), request()}) -> ok | closed.
+send_frame(Port, Frame) ->
+    try port_command(Port, term_to_binary(Frame)) of
+        true -> ok
+    catch
+        error:badarg -> closed
+    end.
 
 -spec await_reply(pos_integer(), integer(), state()) -> {term(), state()}.
 await_reply(Ref, Deadline, #state{port = Port} = State) ->

@@ -8,6 +8,7 @@
 -export([all/0, groups/0, suite/0, init_per_suite/1, end_per_suite/1,
          init_per_testcase/2, end_per_testcase/2]).
 -export([threshold_crossings/1, analog_changes/1, sim_script/1, adc_errors/1,
+         button_edges/1, button_debounce/1,
          servo_duty/1, enable_disable/1, servo_errors/1,
          neutral_on_kill/1, neutral_on_watchdog/1, neutral_on_stdin_eof/1,
          neutral_on_owner_stop/1, bad_frames_raw/1, bad_requests_owner/1,
@@ -20,10 +21,11 @@ suite() ->
     [{timetrap, {seconds, 60}}].
 
 all() ->
-    [{group, adc}, {group, servos}, {group, safety}, {group, performance}].
+    [{group, adc}, {group, button}, {group, servos}, {group, safety}, {group, performance}].
 
 groups() ->
     [{adc, [], [threshold_crossings, analog_changes, sim_script, adc_errors]},
+     {button, [], [button_edges, button_debounce]},
      {servos, [], [servo_duty, enable_disable, servo_errors]},
      {safety, [], [neutral_on_kill, neutral_on_watchdog, neutral_on_stdin_eof,
                    neutral_on_owner_stop, bad_frames_raw, bad_requests_owner]},
@@ -112,6 +114,34 @@ adc_errors(Config) ->
     ok = toroco_pru_port:subscribe(S),
     ok = toroco_pru_port:sim_adc(S, 0, 10),
     ?assertEqual([{0, 10}], adc_events()).
+
+%%% ---------------------------------------------------------------------
+%%% Button
+%%% ---------------------------------------------------------------------
+
+button_edges(doc) ->
+    ["An active-low button reports pressed on a low line and released on a high one, once each"];
+button_edges(Config) ->
+    S = start(Config, #{button => #{line => 17, active_low => true, debounce_ms => 0}}),
+    ok = toroco_pru_port:subscribe(S),
+    [ok = toroco_pru_port:sim_button(S, L) || L <- [1, 0, 0, 1, 1, 0]],
+    ?assertEqual([pressed, released, pressed], button_events()),
+    ?assertEqual({error, {bad_level, 2}}, toroco_pru_port:sim_button(S, 2)).
+
+button_debounce(doc) ->
+    ["Bounces shorter than the debounce time give one edge, once the level holds"];
+button_debounce(Config) ->
+    S = start(Config, #{button => #{line => 17, active_low => false, debounce_ms => 30}}),
+    ok = toroco_pru_port:subscribe(S),
+    %% without the debounce these would be five edges
+    [ok = toroco_pru_port:sim_button(S, L) || L <- [1, 0, 1, 0, 1]],
+    receive
+        {toroco_pru_port, {button, pressed, _}} -> ok
+    after ?WAIT -> ct:fail(no_debounced_edge)
+    end,
+    %% the debounce timer has fired; anything else would be here by now
+    pong = toroco_pru_port:ping(S),
+    ?assertEqual([], button_events()).
 
 %%% ---------------------------------------------------------------------
 %%% Servos
@@ -358,6 +388,12 @@ pwm(Root, Ch, Attr) ->
 adc_events() ->
     receive
         {toroco_pru_port, {adc, Ch, V, _T}} -> [{Ch, V} | adc_events()]
+    after 0 -> []
+    end.
+
+button_events() ->
+    receive
+        {toroco_pru_port, {button, Edge, _T}} -> [Edge | button_events()]
     after 0 -> []
     end.
 
