@@ -24,17 +24,17 @@
 -export([start_link/1, child_spec/1]).
 -export([inject/3, info/1, suspend/1, resume/1, interface/3]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3, code_change/4]).
--export_type([spec/0, action/0]).
+-export_type([spec/0, action/0, actions/0, result/0]).
 
 -callback interface() -> #{inputs := [atom()], outputs := [atom()]}.
 -callback init(Params :: map()) ->
     {ok, State :: term(), Data :: term()} |
-    {ok, State :: term(), Data :: term(), Actions :: [action()] | action()}.
+    {ok, State :: term(), Data :: term(), Actions :: actions()}.
 -callback handle_input(Input :: atom(), Value :: term(), State :: term(), Data :: term()) ->
-    gen_statem:event_handler_result(term()).
+    result().
 -callback handle_event(gen_statem:event_type(), Content :: term(), State :: term(),
                        Data :: term()) ->
-    gen_statem:event_handler_result(term()).
+    result().
 -callback code_change(OldVsn :: term(), State :: term(), Data :: term(), Extra :: term()) ->
     {ok, NewState :: term(), NewData :: term()}.
 -callback terminate(Reason :: term(), State :: term(), Data :: term()) -> any().
@@ -46,6 +46,24 @@
                 | {unset, [atom()]}
                 | unset
                 | gen_statem:action().
+-type actions() :: [action()] | action().
+%% What a callback returns: a gen_statem event handler result whose actions
+%% may include the toroco actions.
+-type result() :: {next_state, State :: term(), Data :: term()}
+                | {next_state, State :: term(), Data :: term(), actions()}
+                | {keep_state, Data :: term()}
+                | {keep_state, Data :: term(), actions()}
+                | keep_state_and_data
+                | {keep_state_and_data, actions()}
+                | {repeat_state, Data :: term()}
+                | {repeat_state, Data :: term(), actions()}
+                | repeat_state_and_data
+                | {repeat_state_and_data, actions()}
+                | {stop, Reason :: term()}
+                | {stop, Reason :: term(), Data :: term()}
+                | {stop_and_reply, Reason :: term(), [gen_statem:reply_action()] | gen_statem:reply_action()}
+                | {stop_and_reply, Reason :: term(), [gen_statem:reply_action()] | gen_statem:reply_action(),
+                   Data :: term()}.
 -type spec() :: #{kind := behavior | device, name := atom(), module := module(),
                   layer := non_neg_integer(), args := term()}.
 

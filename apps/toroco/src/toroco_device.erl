@@ -18,13 +18,13 @@
 -callback interface(Opts :: map()) -> #{inputs := [atom()], outputs := [atom()]}.
 -callback init(Name :: atom(), Opts :: map()) ->
     {ok, State :: term(), Data :: term()} |
-    {ok, State :: term(), Data :: term(), Actions :: [toroco_behavior:action()]} |
+    {ok, State :: term(), Data :: term(), Actions :: toroco_behavior:actions()} |
     {error, Reason :: term()}.
 -callback handle_input(Input :: atom(), Value :: term(), State :: term(), Data :: term()) ->
-    gen_statem:event_handler_result(term()).
+    toroco_behavior:result().
 -callback handle_event(gen_statem:event_type(), Content :: term(), State :: term(),
                        Data :: term()) ->
-    gen_statem:event_handler_result(term()).
+    toroco_behavior:result().
 -callback info(State :: term(), Data :: term()) -> map().
 -callback terminate(Reason :: term(), State :: term(), Data :: term()) -> any().
 -optional_callbacks([handle_event/4, info/2, terminate/3]).

@@ -49,7 +49,7 @@ change(Module, Saved, Old) ->
     case Failed of
         [] -> ok;
         _ ->
-            [sys:replace_state(P, fun(_) -> St end) || {_, P, St} <- Saved],
+            _ = [sys:replace_state(P, fun(_) -> St end) || {_, P, St} <- Saved],
             rollback(Module, Old),
             logger:error("toroco: reload of ~p failed in ~p; old code kept", [Module, Failed]),
             {error, {code_change_failed, Failed}}

@@ -175,7 +175,7 @@ deliver([], D) ->
 deliver(_Values, D = #r{rx = undefined}) ->
     D;                                          % receiver down: lost, as specified
 deliver(Values, D = #r{buffer = all, rx = Rx, input = I}) ->
-    [Rx ! {'$toroco_in', I, V} || V <- Values],
+    _ = [Rx ! {'$toroco_in', I, V} || V <- Values],
     D;
 deliver(Values, D = #r{buffer = latest, inflight = true}) ->
     D#r{pending = {value, lists:last(Values)}};

@@ -197,7 +197,7 @@ rewire(Sources, Reset, C = #core{srcs = Old}) ->
                   fun({Src, Default}, {Acc, I}) ->
                           S = case {Old, lists:member(Src, Reset)} of
                                   {#{Src := Kept}, false} -> Kept;
-                                  _ -> #src{}
+                                  _ -> #src{idx = I}
                               end,
                           {Acc#{Src => S#src{idx = I, default = Default}}, I + 1}
                   end, {#{}, 1}, Sources),

@@ -221,16 +221,16 @@ rewire({error, _} = Err, _S) ->
 %% routers, then whatever is no longer needed.
 apply_plan(#{routers := OldR, gates := OldG, subs := OldSubs},
            #{routers := NewR, gates := NewG, subs := NewSubs}) ->
-    [ets:insert(?TABLE, {{subs, E}, Subs}) || {E, Subs} <- maps:to_list(NewSubs)],
-    [ets:delete(?TABLE, {subs, E}) || E <- maps:keys(OldSubs), not maps:is_key(E, NewSubs)],
-    [ets:insert(?TABLE, {{gate, K}, Cfg}) || {K, Cfg} <- maps:to_list(NewG)],
-    [ets:insert(?TABLE, {{router, K}, Cfg}) || {K, Cfg} <- maps:to_list(NewR)],
-    [ensure(gate, K, maps:is_key(K, OldG) andalso maps:get(K, OldG) =/= Cfg)
+    _ = [ets:insert(?TABLE, {{subs, E}, Subs}) || {E, Subs} <- maps:to_list(NewSubs)],
+    _ = [ets:delete(?TABLE, {subs, E}) || E <- maps:keys(OldSubs), not maps:is_key(E, NewSubs)],
+    _ = [ets:insert(?TABLE, {{gate, K}, Cfg}) || {K, Cfg} <- maps:to_list(NewG)],
+    _ = [ets:insert(?TABLE, {{router, K}, Cfg}) || {K, Cfg} <- maps:to_list(NewR)],
+    _ = [ensure(gate, K, maps:is_key(K, OldG) andalso maps:get(K, OldG) =/= Cfg)
      || {K, Cfg} <- gate_order(NewG)],
-    [ensure(router, K, maps:is_key(K, OldR) andalso maps:get(K, OldR) =/= Cfg)
+    _ = [ensure(router, K, maps:is_key(K, OldR) andalso maps:get(K, OldR) =/= Cfg)
      || {K, Cfg} <- lists:sort(maps:to_list(NewR))],
-    [stop(router, K) || K <- maps:keys(OldR), not maps:is_key(K, NewR)],
-    [stop(gate, K) || K <- maps:keys(OldG), not maps:is_key(K, NewG)],
+    _ = [stop(router, K) || K <- maps:keys(OldR), not maps:is_key(K, NewR)],
+    _ = [stop(gate, K) || K <- maps:keys(OldG), not maps:is_key(K, NewG)],
     ok.
 
 %% Starts a consumer that is not running, or re-wires one whose configuration
@@ -325,7 +325,7 @@ start_nodes([{Kind, Name, Module, Opts} | Rest], S, Started) ->
     case start_node(Spec, S) of
         {ok, S1} -> start_nodes(Rest, S1, [{Kind, Name} | Started]);
         Err ->
-            [undo_start(K, N, S) || {K, N} <- Started],
+            _ = [undo_start(K, N, S) || {K, N} <- Started],
             Err
     end.
 

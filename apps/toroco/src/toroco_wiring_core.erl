@@ -228,7 +228,7 @@ sources(Where, Other, _W) ->
 
 source({E, Out}, W) when is_atom(E), is_atom(Out) ->
     source({E, Out, #{}}, W);
-source({E, Out, Opts} = Entry, W) when is_atom(E), is_atom(Out), is_map(Opts) ->
+source({E, Out, Opts}, W) when is_atom(E), is_atom(Out), is_map(Opts) ->
     case node(W, E) of
         {error, _} = Err -> Err;
         {ok, #{outputs := Outs}} ->
@@ -241,8 +241,7 @@ source({E, Out, Opts} = Entry, W) when is_atom(E), is_atom(Out), is_map(Opts) ->
                             {ok, {{E, Out}, H}};
                         H -> {error, {bad_hold, {{E, Out}, H}}}
                     end
-            end;
-        _ -> {error, {bad_source, Entry}}
+            end
     end;
 source(Other, _W) ->
     {error, {bad_source, Other}}.
@@ -284,8 +283,8 @@ check_cycles(W = #{inhibitors := Inhs}) ->
     Edges = [{I, O} || {O, Srcs} <- maps:to_list(Inhs), {I, _} <- Srcs],
     G = digraph:new(),
     try
-        [digraph:add_vertex(G, V) || {A, B} <- Edges, V <- [A, B]],
-        [digraph:add_edge(G, A, B) || {A, B} <- Edges],
+        _ = [digraph:add_vertex(G, V) || {A, B} <- Edges, V <- [A, B]],
+        _ = [digraph:add_edge(G, A, B) || {A, B} <- Edges],
         Bad = [C || C <- digraph_utils:cyclic_strong_components(G),
                     not allowed_component(W, lists:sort(C), Edges)],
         case Bad of

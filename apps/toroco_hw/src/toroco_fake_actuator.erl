@@ -49,7 +49,7 @@ init(_Name, Opts) ->
     {ok, recording, #{rev => [], n => 0, max => maps:get(max_history, Opts, 100000),
                       waiters => []}}.
 
--spec handle_input(atom(), term(), recording, map()) -> term().
+-spec handle_input(atom(), term(), recording, map()) -> toroco_behavior:result().
 handle_input(In, V, _State, D = #{rev := Rev, n := N, max := Max, waiters := Ws}) ->
     Rev1 = [{In, V, erlang:monotonic_time(millisecond)} | Rev],
     {Rev2, N2} = case N + 1 > Max of
@@ -59,7 +59,7 @@ handle_input(In, V, _State, D = #{rev := Rev, n := N, max := Max, waiters := Ws}
     {Replies, Ws1} = check(Ws, lists:reverse(Rev2)),
     {keep_state, D#{rev := Rev2, n := N2, waiters := Ws1}, Replies}.
 
--spec handle_event(term(), term(), recording, map()) -> term().
+-spec handle_event(gen_statem:event_type(), term(), recording, map()) -> toroco_behavior:result().
 handle_event({call, From}, history, _S, #{rev := Rev}) ->
     {keep_state_and_data, [{reply, From, lists:reverse(Rev)}]};
 handle_event({call, From}, clear, _S, D) ->

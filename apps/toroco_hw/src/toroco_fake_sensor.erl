@@ -14,7 +14,7 @@
 interface(#{outputs := Outs}) when is_list(Outs) -> #{inputs => [], outputs => Outs};
 interface(Opts) -> error({bad_option, {outputs, maps:get(outputs, Opts, missing)}}).
 
--spec init(atom(), map()) -> {ok, sensing, map(), list()} | {error, term()}.
+-spec init(atom(), map()) -> {ok, sensing, map(), toroco_behavior:actions()} | {error, term()}.
 init(Name, Opts) ->
     Script = maps:get(script, Opts, []),
     case lists:all(fun valid_step/1, Script) of
@@ -33,7 +33,7 @@ next([Step | _]) -> [{state_timeout, element(1, Step), step}].
 handle_input(_Input, _Value, _State, _Data) ->
     keep_state_and_data.
 
--spec handle_event(term(), term(), sensing, map()) -> term().
+-spec handle_event(gen_statem:event_type(), term(), sensing, map()) -> toroco_behavior:result().
 handle_event(state_timeout, step, _State, D = #{script := [Step | Rest], steps := N}) ->
     {keep_state, D#{script := Rest, steps := N + 1}, [action(Step) | next(Rest)]};
 handle_event(_Type, _Content, _State, _Data) ->
