@@ -56,8 +56,12 @@ handle_input(In, V, _State, D = #{rev := Rev, n := N, max := Max, waiters := Ws}
                      true -> {lists:sublist(Rev1, Max), Max};
                      false -> {Rev1, N + 1}
                  end,
-    {Replies, Ws1} = check(Ws, lists:reverse(Rev2)),
-    {keep_state, D#{rev := Rev2, n := N2, waiters := Ws1}, Replies}.
+    case Ws of
+        [] -> {keep_state, D#{rev := Rev2, n := N2}};
+        _ ->
+            {Replies, Ws1} = check(Ws, lists:reverse(Rev2)),
+            {keep_state, D#{rev := Rev2, n := N2, waiters := Ws1}, Replies}
+    end.
 
 -spec handle_event(gen_statem:event_type(), term(), recording, map()) -> toroco_behavior:result().
 handle_event({call, From}, history, _S, #{rev := Rev}) ->
