@@ -31,7 +31,8 @@ ct: compile
 dialyzer: compile
 	rebar3 dialyzer
 
-test: deps port-test detector-test ct dialyzer
+test:
+	scripts/test
 
 run: compile detector
 	scripts/run $(WORLD)
