@@ -221,14 +221,17 @@ rewire({error, _} = Err, _S) ->
 %% routers, then whatever is no longer needed.
 apply_plan(#{routers := OldR, gates := OldG, subs := OldSubs},
            #{routers := NewR, gates := NewG, subs := NewSubs}) ->
-    _ = [ets:insert(?TABLE, {{subs, E}, Subs}) || {E, Subs} <- maps:to_list(NewSubs)],
+    Changed = fun(New, Old) -> [{K, V} || {K, V} <- maps:to_list(New), maps:get(K, Old, none) =/= V] end,
+    _ = [ets:insert(?TABLE, {{subs, E}, Subs}) || {E, Subs} <- Changed(NewSubs, OldSubs)],
     _ = [ets:delete(?TABLE, {subs, E}) || E <- maps:keys(OldSubs), not maps:is_key(E, NewSubs)],
-    _ = [ets:insert(?TABLE, {{gate, K}, Cfg}) || {K, Cfg} <- maps:to_list(NewG)],
-    _ = [ets:insert(?TABLE, {{router, K}, Cfg}) || {K, Cfg} <- maps:to_list(NewR)],
-    _ = [ensure(gate, K, maps:is_key(K, OldG) andalso maps:get(K, OldG) =/= Cfg)
-     || {K, Cfg} <- gate_order(NewG)],
-    _ = [ensure(router, K, maps:is_key(K, OldR) andalso maps:get(K, OldR) =/= Cfg)
-     || {K, Cfg} <- lists:sort(maps:to_list(NewR))],
+    _ = [ets:insert(?TABLE, {{gate, K}, Cfg}) || {K, Cfg} <- Changed(NewG, OldG)],
+    _ = [ets:insert(?TABLE, {{router, K}, Cfg}) || {K, Cfg} <- Changed(NewR, OldR)],
+    %% Only consumers that are new or whose configuration changed are touched,
+    %% so a change costs in proportion to what it changes.
+    _ = [ensure(gate, K, maps:is_key(K, OldG))
+         || {K, Cfg} <- gate_order(NewG), maps:get(K, OldG, none) =/= Cfg],
+    _ = [ensure(router, K, maps:is_key(K, OldR))
+         || {K, Cfg} <- lists:sort(maps:to_list(NewR)), maps:get(K, OldR, none) =/= Cfg],
     _ = [stop(router, K) || K <- maps:keys(OldR), not maps:is_key(K, NewR)],
     _ = [stop(gate, K) || K <- maps:keys(OldG), not maps:is_key(K, NewG)],
     ok.

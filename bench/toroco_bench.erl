@@ -1,0 +1,271 @@
+%% The benchmark: the thesis' internal and external tests (tables 5.2 and 5.3)
+%% on this runtime, then throughput and scaling. Prints Markdown tables, writes
+%% CSV files and a latency CDF (SVG) per test under the results directory.
+%%
+%% Run with `make bench' (or `scripts/bench'). `main/1' takes the results
+%% directory; env `TOROCO_BENCH_QUICK=1' runs shorter tests.
+-module(toroco_bench).
+-export([main/1]).
+
+-define(N, 10000).
+
+main([Dir]) ->
+    ok = filelib:ensure_path(Dir),
+    logger:set_primary_config(level, error),
+    Quick = os:getenv("TOROCO_BENCH_QUICK") =:= "1",
+    N = case Quick of true -> 2000; false -> ?N end,
+    io:format("# Torocó benchmark~n~nMachine: ~s~nOTP ~s, ~w schedulers~n~n",
+              [machine(), erlang:system_info(otp_release), erlang:system_info(schedulers_online)]),
+    warm_up(),
+    Internal = [internal(I, N, Dir) || I <- [closed, 1, 2, 5, 10]],
+    table("Internal test: behavior → router → behavior → router → actuator, " ++
+              integer_to_list(N) ++ " events", Internal, Dir, "internal"),
+    Tput = [throughput(W, case Quick of true -> 100000; false -> 500000 end) || W <- [1000]],
+    tput_table("Throughput, open loop with a bounded window", Tput, Dir, "throughput"),
+    External = external(N, Dir),
+    External =/= [] andalso table("External test: UDP sender → udp_link → behavior → udp_link → UDP receiver", External, Dir, "external"),
+    Sources = [sources_per_input(K, N, Dir) || K <- [1, 4, 16, 64]],
+    table("Sources per input (the others holding latches below the measured source)", Sources, Dir, "sources"),
+    Fanout = [fan_out(F, N div 2, Dir) || F <- [1, 8, 64]],
+    table("Fan-out: one output wired to F receivers", Fanout, Dir, "fanout"),
+    Alive = [alive(B, N, Dir) || B <- case Quick of true -> [10, 1000]; false -> [10, 1000, 10000] end],
+    table("Behaviors alive (each idle behavior has one wired input, so one router)", Alive, Dir, "alive"),
+    io:format("~n| behaviors alive | memory per idle behavior with its router (bytes) |~n|---:|---:|~n"),
+    [io:format("| ~w | ~w |~n", [B, M]) || #{label := B, mem_per := M} <- Alive],
+    io:format("~nCSV files and latency CDFs (SVG) in ~s~n", [Dir]),
+    halt(0).
+
+machine() ->
+    Cpu = case file:read_file("/proc/cpuinfo") of
+              {ok, B} ->
+                  case re:run(B, "model name\\s*:\\s*(.*)", [{capture, all_but_first, list}]) of
+                      {match, [M]} -> M;
+                      _ -> "unknown CPU"
+                  end;
+              _ -> "unknown CPU"
+          end,
+    io_lib:format("~s, ~w cores", [Cpu, erlang:system_info(logical_processors_available)]).
+
+%%====================================================================
+%% Networks
+%%====================================================================
+
+restart() ->
+    _ = application:stop(toroco_hw),
+    _ = application:stop(toroco),
+    {ok, _} = application:ensure_all_started(toroco_hw),
+    ok.
+
+pid(Name) -> whereis(toroco_names:node(Name)).
+
+%% source (layer 1) → relay (layer 0) → sink
+chain(Mode, N) ->
+    restart(),
+    ok = toroco:add_behavior(src, toroco_bench_source, #{layer => 1}),
+    ok = toroco:add_behavior(relay, toroco_bench_relay, #{layer => 0}),
+    ok = toroco:add_device(sink, toroco_bench_sink,
+                           #{expect => N, mode => Mode, source => pid(src), controller => self()}),
+    ok = toroco:set_inputs(relay, #{in => [{src, out}]}),
+    ok = toroco:set_inputs(sink, #{in => [{relay, out}]}).
+
+run(Mode, N, Timeout) ->
+    Cpu0 = cpu_ticks(), W0 = erlang:monotonic_time(nanosecond),
+    pid(src) ! {run, Mode, N},
+    receive
+        {sink_done, _, End, Lats} ->
+            Cpu1 = cpu_ticks(),
+            #{lat => Lats, wall_ns => End - W0, n => N,
+              cpu => 100 * (Cpu1 - Cpu0) / ticks_per_sec() / ((End - W0) / 1.0e9)}
+    after Timeout ->
+            #{lat => [], wall_ns => Timeout * 1000000, n => N, cpu => 0.0, lost => N}
+    end.
+
+warm_up() ->
+    chain(closed, 2000),
+    _ = run(closed, 2000, 10000),
+    ok.
+
+internal(Interval, N, Dir) ->
+    Mode = case Interval of closed -> closed; Ms -> {paced, Ms} end,
+    chain(case Mode of closed -> closed; _ -> none end, N),
+    R = run(Mode, N, N * 20 + 10000),
+    row(label(Interval), R, Dir, "internal_" ++ label(Interval)).
+
+throughput(W, N) ->
+    chain({window, 100}, N),
+    R = #{wall_ns := Ns} = run({window, W}, N, 120000),
+    Rate = round(N / (Ns / 1.0e9)),
+    #{label => W, n => N, rate => Rate, cpu => maps:get(cpu, R), lost => maps:get(lost, R, 0),
+      mailbox_max => 0}.
+
+sources_per_input(K, N, Dir) ->
+    chain(closed, N),
+    Others = [list_to_atom("hold" ++ integer_to_list(I)) || I <- lists:seq(2, K)],
+    [ok = toroco:add_behavior(O, toroco_bench_relay, #{layer => 0}) || O <- Others],
+    %% The measured source holds 1 s on each event (its router moves the timer
+    %% every time); the others hold latches below it.
+    ok = toroco:set_inputs(relay, #{in => [{src, out, #{hold => 1000}} | [{O, out} || O <- Others]]}),
+    [ok = toroco:inject({O, out}, ignore, #{latch => true}) || O <- Others],
+    R = run(closed, N, N * 20 + 10000),
+    row(K, R, Dir, "sources_" ++ integer_to_list(K)).
+
+fan_out(F, N, Dir) ->
+    restart(),
+    ok = toroco:add_behavior(src, toroco_bench_source, #{layer => 1}),
+    Sinks = [list_to_atom("sink" ++ integer_to_list(I)) || I <- lists:seq(1, F)],
+    [begin
+         ok = toroco:add_device(S, toroco_bench_sink,
+                                #{expect => N, mode => case S of sink1 -> closed; _ -> none end,
+                                  source => pid(src), controller => self()}),
+         ok = toroco:set_inputs(S, #{in => [{src, out}]})
+     end || S <- Sinks],
+    Cpu0 = cpu_ticks(), W0 = erlang:monotonic_time(nanosecond),
+    pid(src) ! {run, closed, N},
+    Results = [receive {sink_done, _, End, L} -> {End, L} after 60000 -> {W0, []} end || _ <- Sinks],
+    End = lists:max([E || {E, _} <- Results]),
+    Cpu1 = cpu_ticks(),
+    Lats = lists:append([L || {_, L} <- Results]),
+    R = #{lat => Lats, wall_ns => End - W0, n => N * F,
+          cpu => 100 * (Cpu1 - Cpu0) / ticks_per_sec() / ((End - W0) / 1.0e9)},
+    row(F, R, Dir, "fanout_" ++ integer_to_list(F)).
+
+alive(B, N, Dir) ->
+    chain(closed, N),
+    ok = toroco:add_device(idle_src, toroco_fake_sensor, #{outputs => [v]}),
+    garbage_collect(),
+    M0 = erlang:memory(total),
+    Names = [list_to_atom("idle" ++ integer_to_list(I)) || I <- lists:seq(1, B)],
+    Terms = [{behavior, Nm, toroco_bench_relay, #{layer => 0}} || Nm <- Names]
+        ++ [{inputs, Nm, #{in => [{idle_src, v}]}} || Nm <- Names],
+    ok = toroco_wiring:call({load, Terms}),
+    [garbage_collect(P) || P <- processes()],
+    M1 = erlang:memory(total),
+    R = run(closed, N, N * 20 + 60000),
+    Row = row(B, R, Dir, "alive_" ++ integer_to_list(B)),
+    Row#{mem_per => (M1 - M0) div B}.
+
+%%====================================================================
+%% External test
+%%====================================================================
+
+%% Needs the UDP link device and the C sender/receiver (bench/udp_bench.c,
+%% built by scripts/bench). Skipped with a message if either is missing.
+external(N, Dir) ->
+    Prog = filename:join(filename:dirname(Dir), "udp_bench"),
+    case {code:which(toroco_udp_link), filelib:is_regular(Prog)} of
+        {non_existing, _} -> io:format("~n(external test skipped: no toroco_udp_link)~n"), [];
+        {_, false} -> io:format("~n(external test skipped: no ~s)~n", [Prog]), [];
+        _ -> [external_run(Prog, I, N, Dir) || I <- [10, 5, 2, 1, 0.1]]
+    end.
+
+external_run(Prog, IntervalMs, N, Dir) ->
+    restart(),
+    {ok, InSock} = gen_udp:open(0), {ok, InPort} = inet:port(InSock), ok = gen_udp:close(InSock),
+    {ok, OutSock} = gen_udp:open(0), {ok, OutPort} = inet:port(OutSock), ok = gen_udp:close(OutSock),
+    ok = toroco:add_device(udp_in, toroco_udp_link, #{port => InPort, outputs => [event]}),
+    ok = toroco:add_behavior(relay, toroco_bench_relay, #{layer => 0}),
+    ok = toroco:add_device(udp_out, toroco_udp_link,
+                           #{port => 0, inputs => [in], peer => {{127, 0, 0, 1}, OutPort}}),
+    ok = toroco:set_inputs(relay, #{in => [{udp_in, event}]}),
+    ok = toroco:set_inputs(udp_out, #{in => [{relay, out}]}),
+    Cmd = lists:flatten(io_lib:format("~s ~w ~w ~w ~w", [Prog, InPort, OutPort, IntervalMs, N])),
+    Cpu0 = cpu_ticks(), W0 = erlang:monotonic_time(nanosecond),
+    Out = os:cmd(Cmd),
+    Cpu1 = cpu_ticks(), W1 = erlang:monotonic_time(nanosecond),
+    {Lats, Lost} = parse_udp_bench(Out),
+    R = #{lat => Lats, wall_ns => W1 - W0, n => N, lost => Lost,
+          cpu => 100 * (Cpu1 - Cpu0) / ticks_per_sec() / ((W1 - W0) / 1.0e9)},
+    row(IntervalMs, R, Dir, "external_" ++ lists:flatten(io_lib:format("~w", [IntervalMs]))).
+
+parse_udp_bench(Out) ->
+    Lines = string:split(string:trim(Out), "\n", all),
+    Lats = [list_to_integer(L) || "lat " ++ L <- Lines],
+    Lost = case [list_to_integer(L) || "lost " ++ L <- Lines] of [X] -> X; _ -> length(Lats) end,
+    {Lats, Lost}.
+
+%%====================================================================
+%% Figures
+%%====================================================================
+
+label(closed) -> "closed loop";
+label(Ms) -> io_lib:format("~w ms", [Ms]).
+
+row(Label, R = #{lat := Lats, wall_ns := Ns, n := N, cpu := Cpu}, Dir, File) ->
+    S = lists:sort(Lats),
+    Us = fun(X) -> X / 1000 end,
+    Row = case S of
+              [] -> #{label => Label, min => 0, avg => 0, max => 0, p50 => 0, p99 => 0};
+              _ -> #{label => Label, min => Us(hd(S)), max => Us(lists:last(S)),
+                     avg => Us(lists:sum(S) / length(S)), p50 => Us(pct(S, 0.50)),
+                     p99 => Us(pct(S, 0.99))}
+          end,
+    write_csv(filename:join(Dir, File ++ ".csv"), S),
+    write_cdf(filename:join(Dir, File ++ ".svg"), File, S),
+    Row#{interval_us => Us(Ns / max(1, N)), rate => round(N / (Ns / 1.0e9)), cpu => Cpu,
+         lost => maps:get(lost, R, N - length(Lats)) * min(1, length(Lats))}.
+
+pct(Sorted, P) -> lists:nth(max(1, round(P * length(Sorted))), Sorted).
+
+table(Title, Rows, Dir, File) ->
+    Header = "| test | max µs | avg µs | min µs | p50 µs | p99 µs | mean interval µs | events/s | CPU % | lost |",
+    Lines = [io_lib:format("| ~ts | ~.1f | ~.1f | ~.1f | ~.1f | ~.1f | ~.1f | ~w | ~.0f | ~w |",
+                           [to_s(L), float(Max), float(Avg), float(Min), float(P50), float(P99),
+                            float(Iv), Rate, float(Cpu), Lost])
+             || #{label := L, max := Max, avg := Avg, min := Min, p50 := P50, p99 := P99,
+                  interval_us := Iv, rate := Rate, cpu := Cpu, lost := Lost} <- Rows],
+    Text = ["\n### ", Title, "\n\n", Header, "\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+            lists:join("\n", Lines), "\n"],
+    io:put_chars(unicode:characters_to_binary(Text)),
+    ok = file:write_file(filename:join(Dir, File ++ ".md"), unicode:characters_to_binary(Text)).
+
+tput_table(Title, Rows, Dir, File) ->
+    Text = ["\n### ", Title, "\n\n| window | events | events/s | CPU % | lost |\n|---:|---:|---:|---:|---:|\n",
+            [io_lib:format("| ~w | ~w | ~w | ~.0f | ~w |~n", [W, N, Rate, float(Cpu), Lost])
+             || #{label := W, n := N, rate := Rate, cpu := Cpu, lost := Lost} <- Rows]],
+    io:put_chars(unicode:characters_to_binary(Text)),
+    ok = file:write_file(filename:join(Dir, File ++ ".md"), unicode:characters_to_binary(Text)).
+
+to_s(L) when is_integer(L) -> integer_to_list(L);
+to_s(L) when is_float(L) -> float_to_list(L, [{decimals, 1}, compact]);
+to_s(L) -> L.
+
+write_csv(File, Sorted) ->
+    ok = file:write_file(File, ["latency_ns\n", [[integer_to_list(round(X)), "\n"] || X <- Sorted]]).
+
+%% Latency CDF on a log scale from 1 µs to 100 ms.
+write_cdf(File, Title, Sorted) ->
+    W = 480, H = 300, M = 40,
+    Len = max(1, length(Sorted)),
+    X = fun(Ns) -> M + (W - 2 * M) * (math:log10(max(1000, Ns) / 1000) / 5) end,
+    Y = fun(P) -> H - M - (H - 2 * M) * P end,
+    Step = max(1, Len div 400),
+    Pts = [io_lib:format("~.1f,~.1f ", [float(X(V)), float(Y(I / Len))])
+           || {I, V} <- lists:zip(lists:seq(1, length(Sorted)), Sorted), I rem Step =:= 0],
+    Ticks = [io_lib:format("<text x='~.1f' y='~w' font-size='10' text-anchor='middle'>~s</text>",
+                           [float(X(Ns)), H - M + 14, T])
+             || {Ns, T} <- [{1000, "1µs"}, {10000, "10µs"}, {100000, "100µs"}, {1000000, "1ms"},
+                            {10000000, "10ms"}, {100000000, "100ms"}]],
+    Svg = [io_lib:format("<svg xmlns='http://www.w3.org/2000/svg' width='~w' height='~w'>", [W, H]),
+           "<rect width='100%' height='100%' fill='white'/>",
+           io_lib:format("<text x='~w' y='20' font-size='12'>~s latency CDF</text>", [M, Title]),
+           io_lib:format("<line x1='~w' y1='~w' x2='~w' y2='~w' stroke='black'/>", [M, H - M, W - M, H - M]),
+           io_lib:format("<line x1='~w' y1='~w' x2='~w' y2='~w' stroke='black'/>", [M, M, M, H - M]),
+           Ticks,
+           "<polyline fill='none' stroke='steelblue' stroke-width='1.5' points='", Pts, "'/></svg>\n"],
+    ok = file:write_file(File, unicode:characters_to_binary(Svg)).
+
+%%====================================================================
+%% CPU of this VM
+%%====================================================================
+
+cpu_ticks() ->
+    {ok, B} = file:read_file("/proc/self/stat"),
+    [_, Rest] = binary:split(B, <<") ">>),
+    F = string:lexemes(binary_to_list(Rest), " "),
+    list_to_integer(lists:nth(12, F)) + list_to_integer(lists:nth(13, F)).
+
+ticks_per_sec() ->
+    case string:trim(os:cmd("getconf CLK_TCK")) of
+        "" -> 100;
+        T -> list_to_integer(T)
+    end.
