@@ -25,8 +25,7 @@ handle_input(in, {T0, Seq}, _S, D = #{n := N, expect := Expect, mode := Mode,
         true -> Ctl ! {sink_done, self(), Now, lists:reverse(Lat1)},
                 {keep_state, D#{n := 0, lat := []}};
         false -> {keep_state, D#{n := N1, lat := Lat1}}
-    end.
-
+    end;
 handle_input(in, _Other, _S, _D) ->
     keep_state_and_data.
 
