@@ -14,8 +14,9 @@ main([Dir]) ->
     logger:set_primary_config(level, error),
     Quick = os:getenv("TOROCO_BENCH_QUICK") =:= "1",
     N = case Quick of true -> 2000; false -> ?N end,
-    io:format("# Torocó benchmark~n~nMachine: ~s~nOTP ~s, ~w schedulers~n~n",
-              [machine(), erlang:system_info(otp_release), erlang:system_info(schedulers_online)]),
+    io:format("~ts~n~nMachine: ~s~nOTP ~s, ~w schedulers~n~n",
+              [<<"# Torocó benchmark"/utf8>>, machine(), erlang:system_info(otp_release),
+               erlang:system_info(schedulers_online)]),
     warm_up(),
     Internal = [internal(I, N, Dir) || I <- [closed, 1, 2, 5, 10]],
     table("Internal test: behavior → router → behavior → router → actuator, " ++
@@ -208,9 +209,9 @@ pct(Sorted, P) -> lists:nth(max(1, round(P * length(Sorted))), Sorted).
 
 table(Title, Rows, Dir, File) ->
     Header = "| test | max µs | avg µs | min µs | p50 µs | p99 µs | mean interval µs | events/s | CPU % | lost |",
-    Lines = [io_lib:format("| ~ts | ~.1f | ~.1f | ~.1f | ~.1f | ~.1f | ~.1f | ~w | ~.0f | ~w |",
+    Lines = [io_lib:format("| ~ts | ~.1f | ~.1f | ~.1f | ~.1f | ~.1f | ~.1f | ~w | ~w | ~w |",
                            [to_s(L), float(Max), float(Avg), float(Min), float(P50), float(P99),
-                            float(Iv), Rate, float(Cpu), Lost])
+                            float(Iv), Rate, round(Cpu), Lost])
              || #{label := L, max := Max, avg := Avg, min := Min, p50 := P50, p99 := P99,
                   interval_us := Iv, rate := Rate, cpu := Cpu, lost := Lost} <- Rows],
     Text = ["\n### ", Title, "\n\n", Header, "\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
@@ -220,7 +221,7 @@ table(Title, Rows, Dir, File) ->
 
 tput_table(Title, Rows, Dir, File) ->
     Text = ["\n### ", Title, "\n\n| window | events | events/s | CPU % | lost |\n|---:|---:|---:|---:|---:|\n",
-            [io_lib:format("| ~w | ~w | ~w | ~.0f | ~w |~n", [W, N, Rate, float(Cpu), Lost])
+            [io_lib:format("| ~w | ~w | ~w | ~w | ~w |~n", [W, N, Rate, round(Cpu), Lost])
              || #{label := W, n := N, rate := Rate, cpu := Cpu, lost := Lost} <- Rows]],
     io:put_chars(unicode:characters_to_binary(Text)),
     ok = file:write_file(filename:join(Dir, File ++ ".md"), unicode:characters_to_binary(Text)).
