@@ -116,12 +116,12 @@ fan_out(F, N, Dir) ->
     Sinks = [list_to_atom("sink" ++ integer_to_list(I)) || I <- lists:seq(1, F)],
     [begin
          ok = toroco:add_device(S, toroco_bench_sink,
-                                #{expect => N, mode => case S of sink1 -> closed; _ -> none end,
+                                #{expect => N, mode => closed,
                                   source => pid(src), controller => self()}),
          ok = toroco:set_inputs(S, #{in => [{src, out}]})
      end || S <- Sinks],
     Cpu0 = cpu_ticks(), W0 = erlang:monotonic_time(nanosecond),
-    pid(src) ! {run, closed, N},
+    pid(src) ! {run, {closed, F}, N},
     Results = [receive {sink_done, _, End, L} -> {End, L} after 60000 -> {W0, []} end || _ <- Sinks],
     End = lists:max([E || {E, _} <- Results]),
     Cpu1 = cpu_ticks(),

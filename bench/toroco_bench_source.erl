@@ -16,11 +16,16 @@ now_ns() -> erlang:monotonic_time(nanosecond).
 
 emit(Seq) -> {send, #{out => {now_ns(), Seq}}}.
 
-handle_event(info, {run, closed, N}, _S, D) ->
-    {next_state, {closed, N}, D#{sent => 1}, [emit(1)]};
-handle_event(info, {arrived, Seq}, {closed, N}, D) when Seq < N ->
-    {keep_state, D#{sent => Seq + 1}, [emit(Seq + 1)]};
-handle_event(info, {arrived, _}, {closed, _}, D) ->
+handle_event(info, {run, closed, N}, S, D) ->
+    handle_event(info, {run, {closed, 1}, N}, S, D);
+handle_event(info, {run, {closed, F}, N}, _S, D) ->
+    {next_state, {closed, N, F, 0}, D#{sent => 1}, [emit(1)]};
+%% The next event goes when every one of the F receivers has the last one.
+handle_event(info, {arrived, Seq}, {closed, N, F, Got}, D) when Got + 1 < F ->
+    {next_state, {closed, N, F, Got + 1}, D#{last => Seq}};
+handle_event(info, {arrived, Seq}, {closed, N, F, _}, D) when Seq < N ->
+    {next_state, {closed, N, F, 0}, D#{sent => Seq + 1}, [emit(Seq + 1)]};
+handle_event(info, {arrived, _}, {closed, _, _, _}, D) ->
     {next_state, idle, D};
 handle_event(info, {run, {paced, Ms}, N}, _S, D) ->
     T0 = erlang:monotonic_time(millisecond),

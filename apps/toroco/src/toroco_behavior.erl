@@ -90,7 +90,7 @@
 
 -spec start_link(spec()) -> gen_statem:start_ret().
 start_link(Spec = #{name := Name}) ->
-    gen_statem:start_link({local, toroco_names:node(Name)}, ?MODULE, Spec, []).
+    gen_statem:start_link({local, toroco_names:node(Name)}, ?MODULE, Spec, toroco_upstream:start_opts()).
 
 %% @doc Behaviors are `transient': one that stops with reason `normal' is done.
 -spec child_spec(spec()) -> supervisor:child_spec().

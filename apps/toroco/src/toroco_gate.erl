@@ -29,7 +29,7 @@
 
 -spec start_link({atom(), atom()}) -> gen_statem:start_ret().
 start_link(Key) ->
-    gen_statem:start_link({local, toroco_names:gate(Key)}, ?MODULE, Key, []).
+    gen_statem:start_link({local, toroco_names:gate(Key)}, ?MODULE, Key, toroco_upstream:start_opts()).
 
 -spec child_spec({atom(), atom()}) -> supervisor:child_spec().
 child_spec(Key) ->

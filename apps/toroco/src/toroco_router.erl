@@ -38,7 +38,7 @@
 
 -spec start_link({atom(), atom()}) -> gen_statem:start_ret().
 start_link(Key = {R, I}) ->
-    gen_statem:start_link({local, toroco_names:router(R, I)}, ?MODULE, Key, []).
+    gen_statem:start_link({local, toroco_names:router(R, I)}, ?MODULE, Key, toroco_upstream:start_opts()).
 
 -spec child_spec({atom(), atom()}) -> supervisor:child_spec().
 child_spec(Key) ->

@@ -10,7 +10,7 @@
 %% is lost or repeated across the hand-over.
 -module(toroco_upstream).
 
--export([subscribe/3, unsubscribe/3, send/2, sync_timeout/0]).
+-export([subscribe/3, unsubscribe/3, send/2, sync_timeout/0, start_opts/0]).
 -export([new_links/0, rewire/3, detach_all/2, hello/4, late_state/5, down/2, upstream_pids/1]).
 -export_type([entry/0, synced/0, links/0]).
 
@@ -163,6 +163,14 @@ send(To, Msg) ->
     catch
         error:badarg -> ok
     end.
+
+%% @doc Start options of the network's processes (behaviors, devices,
+%% routers, gates): a process idle for `hibernate_after_ms' (app env, default
+%% 1000) hibernates, which shrinks an idle behavior with its router to a few
+%% kilobytes; a busy one never does.
+-spec start_opts() -> [gen_statem:start_opt()].
+start_opts() ->
+    [{hibernate_after, application:get_env(toroco, hibernate_after_ms, 1000)}].
 
 %% @doc How long wiring waits for an upstream's answer (app env `sync_timeout_ms').
 -spec sync_timeout() -> timeout().
