@@ -133,17 +133,23 @@ fan_out(F, N, Dir) ->
 alive(B, N, Dir) ->
     chain(closed, N),
     ok = toroco:add_device(idle_src, toroco_fake_sensor, #{outputs => [v]}),
-    garbage_collect(),
+    settle_memory(),
     M0 = erlang:memory(total),
     Names = [list_to_atom("idle" ++ integer_to_list(I)) || I <- lists:seq(1, B)],
     Terms = [{behavior, Nm, toroco_bench_relay, #{layer => 0}} || Nm <- Names]
         ++ [{inputs, Nm, #{in => [{idle_src, v}]}} || Nm <- Names],
     ok = toroco_wiring:call({load, Terms}),
-    [garbage_collect(P) || P <- processes()],
+    settle_memory(),
     M1 = erlang:memory(total),
     R = run(closed, N, N * 20 + 60000),
     Row = row(B, R, Dir, "alive_" ++ integer_to_list(B)),
     Row#{mem_per => (M1 - M0) div B}.
+
+%% Idle processes hibernate after hibernate_after_ms (1 s): measure after that.
+settle_memory() ->
+    timer:sleep(application:get_env(toroco, hibernate_after_ms, 1000) + 500),
+    _ = [garbage_collect(P) || P <- processes()],
+    ok.
 
 %%====================================================================
 %% External test
