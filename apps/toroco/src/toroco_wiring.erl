@@ -19,7 +19,6 @@
 -define(TABLE, toroco_wiring).
 
 -record(s, {wiring = toroco_wiring_core:new() :: toroco_wiring_core:wiring(),
-            plan = #{routers => #{}, gates => #{}, subs => #{}} :: toroco_wiring_core:plan(),
             layers = #{} :: #{non_neg_integer() => {pid(), reference()}},
             removed = [] :: [non_neg_integer()],
             stopping = false :: boolean()}).
@@ -210,10 +209,11 @@ remove_node(Kind, Name, S = #s{wiring = W, layers = Layers}) ->
 %% Applying plans
 %%====================================================================
 
-rewire({ok, W1}, S = #s{plan = Old}) ->
-    New = toroco_wiring_core:plan(W1),
-    apply_plan(Old, New),
-    {ok, S#s{wiring = W1, plan = New}};
+%% The plan of the current wiring is recomputed rather than kept: it would
+%% double the server's memory per behavior for a little CPU per change.
+rewire({ok, W1}, S = #s{wiring = W0}) ->
+    apply_plan(toroco_wiring_core:plan(W0), toroco_wiring_core:plan(W1)),
+    {ok, S#s{wiring = W1}};
 rewire({error, _} = Err, _S) ->
     Err.
 
@@ -275,9 +275,8 @@ order([{K, Cfg = #{upstreams := Ups}} | Rest], Blocked, Done) ->
         _ -> order(Rest, [{K, Cfg} | Blocked], Done)
     end.
 
-gates_of(Name, #s{plan = #{gates := Gates}}) ->
-    maps:from_list([{M, K} || {K, #{members := Ms}} <- maps:to_list(Gates),
-                              M = {E, _} <- Ms, E =:= Name]).
+gates_of(Name, #s{wiring = W}) ->
+    maps:filter(fun({E, _}, _) -> E =:= Name end, toroco_wiring_core:gates(W)).
 
 %%====================================================================
 %% Wiring files

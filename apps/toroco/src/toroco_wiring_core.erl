@@ -18,7 +18,7 @@
 -compile({no_auto_import, [node/2]}).
 -export([new/0, add_node/3, remove_node/2, node/2, nodes/1,
          set_inputs/3, set_inhibitors/3, set_reset/3,
-         inputs_of/2, inhibitors_of/2, plan/1]).
+         inputs_of/2, inhibitors_of/2, gates/1, plan/1]).
 -export_type([wiring/0, node_info/0, plan/0, router_config/0, gate_config/0]).
 
 -type name() :: atom().
@@ -353,6 +353,12 @@ add_sub([K], Reg, Map) ->
     maps:update_with(K, fun(L) -> lists:usort([Reg | L]) end, [Reg], Map);
 add_sub([K | Path], Reg, Map) ->
     maps:put(K, add_sub(Path, Reg, maps:get(K, Map, #{})), Map).
+
+%% @doc The gate of every inhibited output: output -> gate key (its group's
+%% smallest member).
+-spec gates(wiring()) -> #{source() => source()}.
+gates(#{inhibitors := Inhs}) ->
+    maps:from_list([{M, Key} || {Key, Ms} <- maps:to_list(groups(Inhs)), M <- Ms]).
 
 %% Groups of gated outputs: connected by mutual inhibition, keyed by the
 %% smallest member.
