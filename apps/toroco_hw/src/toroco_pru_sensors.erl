@@ -1,0 +1,238 @@
+%% @doc The PRU's ADC sensors (the Torobot's Sharp IR pair) as a device: one
+%% output per sensor, fed by the `pru_port' program's change reports.
+%%
+%% Options:
+%% <ul>
+%% <li>`sensors' (required): `[{SensorName, #{channel => 0..7, mode => analog |
+%%     analog_threshold, threshold_high => 0..4095, threshold_low => 0..4095}}]';
+%%     the thresholds are required for `analog_threshold', `low < high'.
+%%     Each sensor name is an output.</li>
+%% <li>`port': a `toroco_pru_port' owner (registered name or pid) shared with
+%%     the other PRU devices; without it the device starts its own owner from
+%%     the owner options (`backend', default `sim', `sysfs_root', `executable',
+%%     `sim_script', ...; see `toroco_pru_client').</li>
+%% </ul>
+%% The device configures the owner's whole ADC channel set, so one
+%% `toroco_pru_sensors' device serves one owner.
+%%
+%% It emits `{send, #{Sensor => Value}}' on each reported change: the raw
+%% value for `analog'; for `analog_threshold', `1' once a sample reaches
+%% `threshold_high' (near, for a Sharp IR) and `0' once one falls to
+%% `threshold_low', with the hysteresis done by the C program (the same code
+%% the PRU firmware runs). A value equal to the sensor's last emitted one is
+%% not emitted again (after a program restart the first sample is reported
+%% anew). {@link sim_adc/3} feeds a raw sample to a sensor's channel through
+%% the sim backend: the simulator's way in.
+%%
+%% `info/2' (under `device' in `toroco:inspect(Name)'): `sensors' (channel,
+%% mode, last value), `emitted', `foreign_events' (reports of channels that
+%% are not this device's), `reconnect_failures' and the attachment's `port',
+%% `port_status', `port_restarts', `port_losses'.
+-module(toroco_pru_sensors).
+-behaviour(toroco_device).
+
+-export([sim_adc/3]).
+-export([interface/1, init/2, handle_input/4, handle_event/4, info/2, terminate/3]).
+
+-define(SIM_CALL, '$toroco_pru_sensors_sim').
+
+%%====================================================================
+%% API
+%%====================================================================
+
+%% @doc Sim backend: one raw ADC sample (0..4095) on `Sensor''s channel of
+%% device `Device', through the program's real threshold/hysteresis code. The
+%% event it causes is on its way to the device when this returns.
+-spec sim_adc(atom(), atom(), 0..4095) -> ok | {error, term()}.
+sim_adc(Device, Sensor, Raw) ->
+    try gen_statem:call(toroco_names:node(Device), {?SIM_CALL, Sensor}, 5000) of
+        {ok, Port, Channel} ->
+            try toroco_pru_port:sim_adc(Port, Channel, Raw)
+            catch exit:{Reason, _} -> {error, {port_call, Reason}}
+            end;
+        {error, _} = Err ->
+            Err
+    catch
+        exit:{noproc, _} -> {error, {not_running, Device}};
+        exit:{Reason, _} -> {error, {Reason, Device}}
+    end.
+
+%%====================================================================
+%% toroco_device
+%%====================================================================
+
+-spec interface(map()) -> #{inputs := [], outputs := [atom()]}.
+interface(Opts) ->
+    Outs = case maps:get(sensors, Opts, []) of
+               L when is_list(L) -> [N || {N, _} <- L, is_atom(N)];
+               _ -> []
+           end,
+    #{inputs => [], outputs => lists:usort(Outs)}.
+
+-spec init(atom(), map()) -> {ok, up, map()} | {error, term()}.
+init(Name, Opts) ->
+    case options(Opts) of
+        {ok, Sensors, Client} ->
+            case toroco_pru_client:attach(Client, configure(Sensors)) of
+                {ok, C1} ->
+                    {ok, up, #{name => Name, client => C1, sensors => Sensors,
+                               by_channel => maps:from_list(
+                                               [{Ch, S} || {S, #{channel := Ch}} <- Sensors]),
+                               last => #{}, emitted => 0, foreign => 0, reconnect_failures => 0}};
+                {error, Reason, _} ->
+                    logger:warning("~p (toroco_pru_sensors) not started: ~0p", [Name, Reason],
+                                   #{domain => [toroco, hw]}),
+                    {error, Reason}
+            end;
+        {error, _} = Err ->
+            Err
+    end.
+
+-spec handle_input(atom(), term(), atom(), map()) -> keep_state_and_data.
+handle_input(_Input, _Value, _State, _D) ->
+    keep_state_and_data.
+
+-spec handle_event(gen_statem:event_type(), term(), up | down, map()) ->
+          gen_statem:event_handler_result(up | down).
+handle_event({call, From}, {?SIM_CALL, Sensor}, _State, #{name := Name, client := C,
+                                                          sensors := Sensors}) ->
+    Reply = case {lists:keyfind(Sensor, 1, Sensors), toroco_pru_client:server(C)} of
+                {false, _} -> {error, {unknown_sensor, {Name, Sensor}}};
+                {_, undefined} -> {error, {port_down, Name}};
+                {{_, #{channel := Ch}}, Pid} -> {ok, Pid, Ch}
+            end,
+    {keep_state_and_data, [{reply, From, Reply}]};
+handle_event({timeout, reconnect}, attach, down, D = #{name := Name, client := C,
+                                                       sensors := Sensors}) ->
+    case toroco_pru_client:attach(C, configure(Sensors)) of
+        {ok, C1} ->
+            logger:notice("~p attached to its pru_port again", [Name], #{domain => [toroco, hw]}),
+            {next_state, up, D#{client := C1}};
+        {error, Reason, C1} ->
+            retry(Reason, D#{client := C1})
+    end;
+handle_event(info, Msg, _State, D = #{name := Name, client := C}) ->
+    case toroco_pru_client:handle_info(Msg, C) of
+        {event, {adc, Ch, V, _T}} -> adc(Ch, V, D);
+        {event, _} -> keep_state_and_data;
+        {restarted, _Why, C1} -> {keep_state, D#{client := C1}};
+        {lost, Why, C1} ->
+            logger:warning("~p lost its pru_port (~0p); attaching again", [Name, Why],
+                           #{domain => [toroco, hw]}),
+            {Ms, C2} = toroco_pru_client:retry_ms(C1),
+            {next_state, down, D#{client := C2}, [{{timeout, reconnect}, Ms, attach}]};
+        unknown -> keep_state_and_data
+    end;
+handle_event({call, From}, Request, _State, #{name := Name}) ->
+    {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
+handle_event(_Type, _Content, _State, _D) ->
+    keep_state_and_data.
+
+-spec info(up | down, map()) -> map().
+info(_State, #{client := C, sensors := Sensors, last := Last, emitted := E, foreign := F,
+               reconnect_failures := RF}) ->
+    Ss = maps:from_list([{S, Cfg#{value => case Last of #{S := V} -> {value, V}; #{} -> none end}}
+                         || {S, Cfg} <- Sensors]),
+    maps:merge(toroco_pru_client:describe(C),
+               #{sensors => Ss, emitted => E, foreign_events => F, reconnect_failures => RF}).
+
+-spec terminate(term(), up | down, map()) -> ok.
+terminate(_Reason, _State, #{client := C}) ->
+    _ = toroco_pru_client:detach(C),
+    ok.
+
+%%====================================================================
+%% Internals
+%%====================================================================
+
+adc(Ch, V, D = #{by_channel := ByCh, last := Last, emitted := E, foreign := F}) ->
+    case ByCh of
+        #{Ch := S} ->
+            case Last of
+                #{S := V} -> keep_state_and_data;
+                #{} -> {keep_state, D#{last := Last#{S => V}, emitted := E + 1},
+                        [{send, #{S => V}}]}
+            end;
+        #{} ->
+            {keep_state, D#{foreign := F + 1}}
+    end.
+
+retry(Reason, D = #{name := Name, client := C, reconnect_failures := N}) ->
+    {Ms, C1} = toroco_pru_client:retry_ms(C),
+    logger:warning("~p could not attach to its pru_port (~0p); next try in ~b ms",
+                   [Name, Reason, Ms], #{domain => [toroco, hw]}),
+    {keep_state, D#{client := C1, reconnect_failures := N + 1},
+     [{{timeout, reconnect}, Ms, attach}]}.
+
+configure(Sensors) ->
+    Channels = [maps:with([channel, mode, threshold_high, threshold_low], Cfg)
+                || {_, Cfg} <- Sensors],
+    fun(Pid) ->
+            case toroco_pru_port:configure_adc(Pid, Channels) of
+                ok -> ok;
+                {error, R} -> {error, {adc, R}}
+            end
+    end.
+
+options(Opts) ->
+    Allowed = [port, sensors | toroco_pru_client:owner_keys()],
+    case [K || K <- maps:keys(Opts), not lists:member(K, Allowed)] of
+        [K | _] -> {error, {unknown_option, K}};
+        [] ->
+            case sensors(maps:get(sensors, Opts, missing)) of
+                {ok, Sensors} ->
+                    case toroco_pru_client:parse(Opts) of
+                        {ok, C} -> {ok, Sensors, C};
+                        Err -> Err
+                    end;
+                Err -> Err
+            end
+    end.
+
+sensors(L) when is_list(L), L =/= [] ->
+    case lists:foldl(fun sensor/2, {ok, []}, L) of
+        {ok, Rev} ->
+            Sensors = lists:reverse(Rev),
+            Names = [N || {N, _} <- Sensors],
+            Chs = [Ch || {_, #{channel := Ch}} <- Sensors],
+            case {Names -- lists:usort(Names), Chs -- lists:usort(Chs)} of
+                {[], []} -> {ok, Sensors};
+                {[N | _], _} -> {error, {bad_option, {sensors, {duplicate_sensor, N}}}};
+                {[], [Ch | _]} -> {error, {bad_option, {sensors, {duplicate_channel, Ch}}}}
+            end;
+        Err -> Err
+    end;
+sensors(Other) ->
+    {error, {bad_option, {sensors, Other}}}.
+
+sensor(_, {error, _} = Err) ->
+    Err;
+sensor({Name, Cfg} = S, {ok, Acc}) when is_atom(Name), is_map(Cfg) ->
+    Keys = [channel, mode, threshold_high, threshold_low],
+    Mode = maps:get(mode, Cfg, analog),
+    Ch = maps:get(channel, Cfg, missing),
+    case [K || K <- maps:keys(Cfg), not lists:member(K, Keys)] of
+        [K | _] -> {error, {bad_option, {sensors, {Name, {unknown_key, K}}}}};
+        [] when not is_integer(Ch); Ch < 0; Ch > 7 ->
+            {error, {bad_option, {sensors, {Name, {channel, Ch}}}}};
+        [] when Mode =:= analog ->
+            case maps:is_key(threshold_high, Cfg) orelse maps:is_key(threshold_low, Cfg) of
+                true -> {error, {bad_option, {sensors, {Name, thresholds_need_analog_threshold}}}};
+                false -> {ok, [{Name, #{channel => Ch, mode => analog}} | Acc]}
+            end;
+        [] when Mode =:= analog_threshold ->
+            High = maps:get(threshold_high, Cfg, missing),
+            Low = maps:get(threshold_low, Cfg, missing),
+            case is_integer(High) andalso is_integer(Low) andalso
+                0 =< Low andalso Low < High andalso High =< 4095 of
+                true ->
+                    {ok, [{Name, #{channel => Ch, mode => analog_threshold,
+                                   threshold_high => High, threshold_low => Low}} | Acc]};
+                false ->
+                    {error, {bad_option, {sensors, {Name, {thresholds, High, Low}}}}}
+            end;
+        [] ->
+            {error, {bad_option, {sensors, {element(1, S), {mode, Mode}}}}}
+    end;
+sensor(Other, _) ->
+    {error, {bad_option, {sensors, Other}}}.

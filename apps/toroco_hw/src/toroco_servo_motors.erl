@@ -1,0 +1,367 @@
+%% @doc The Torobot's two continuous-rotation servos as an actuator device,
+%% driven through the `pru_port' program's sysfs PWM.
+%%
+%% Inputs:
+%% <ul>
+%% <li>`setvel': `{Left, Right}', each a velocity in -100..100 (floats are
+%%     rounded; values out of range are clamped and counted as `clamped').</li>
+%% <li>`enable': `true' | `false'. Disabled, the servos are held at neutral and
+%%     their PWM outputs are off; `setvel' is remembered and applied on
+%%     `enable' (it is what the wiring currently commands).</li>
+%% </ul>
+%% Output `applied': `{send, #{applied => {Left, Right}}}' each time the
+%% velocities really applied to the servos change, `{0, 0}' included: on
+%% disable, on the program's watchdog, when the program dies and is
+%% restarted, when the owner is lost, and on terminate. A simulator wires its
+%% world to this output. After a safety stop (watchdog, program restart,
+%% owner lost) the command is forgotten: the servos stay at neutral until the
+%% next `setvel'.
+%%
+%% Options:
+%% <ul>
+%% <li>`servos': `#{left => Calib, right => Calib}', each merged over the
+%%     Torobot's defaults: left `#{pwmchip => 0, channel => 0}', right
+%%     `#{pwmchip => 0, channel => 1, reversed => true}' (the servos face
+%%     each other), both `period_ns => 20000000, neutral_ns => 1500000,
+%%     span_ns => 500000' (1-2 ms pulses; calibrate `neutral_ns' until a
+%%     servo at 0 stands still).</li>
+%% <li>`watchdog_ms' (default 500, 0 = off): the program puts the servos at
+%%     neutral when no servo command came for that long.</li>
+%% <li>`keepalive' (default `true'): while the device runs it repeats the
+%%     applied velocities every `watchdog_ms div 3', so the watchdog fires
+%%     only when this side stalls, not when the wiring holds a latched
+%%     velocity. With `false' a velocity lasts `watchdog_ms' unless sent
+%%     again.</li>
+%% <li>`enabled' (default `true').</li>
+%% <li>`port', or the owner options (`backend', default `sim', ...), as in
+%%     `toroco_pru_client'. An own owner on the `sim' backend without
+%%     `sysfs_root' gets a private fake PWM tree in a temporary directory
+%%     (removed on terminate), so the device runs anywhere.</li>
+%% </ul>
+%% The device configures the owner's whole servo set and its watchdog, so one
+%% `toroco_servo_motors' device serves one owner.
+%%
+%% `info/2': `applied', `commanded', `enabled', `clamped', `watchdogs',
+%% `port_errors', `bad_input' (by reason), `sysfs_root', `watchdog_ms',
+%% `keepalive_ms', and the attachment's `port', `port_status',
+%% `port_restarts', `port_losses'.
+-module(toroco_servo_motors).
+-behaviour(toroco_device).
+
+-export([default_servos/0]).
+-export([interface/1, init/2, handle_input/4, handle_event/4, info/2, terminate/3]).
+
+-define(STOP, {0, 0}).
+-define(CALIB_KEYS, [pwmchip, channel, period_ns, neutral_ns, span_ns, reversed]).
+
+%% @doc The Torobot's servo calibration, the base the `servos' option is
+%% merged over.
+-spec default_servos() -> #{left := map(), right := map()}.
+default_servos() ->
+    Base = #{period_ns => 20000000, neutral_ns => 1500000, span_ns => 500000,
+             reversed => false},
+    #{left => Base#{pwmchip => 0, channel => 0},
+      right => Base#{pwmchip => 0, channel => 1, reversed => true}}.
+
+%%====================================================================
+%% toroco_device
+%%====================================================================
+
+-spec interface(map()) -> #{inputs := [atom()], outputs := [atom()]}.
+interface(_Opts) ->
+    #{inputs => [setvel, enable], outputs => [applied]}.
+
+-spec init(atom(), map()) -> {ok, up, map(), list()} | {error, term()}.
+init(Name, Opts) ->
+    case options(Opts) of
+        {ok, Settings} ->
+            start(Name, Opts, Settings);
+        {error, _} = Err ->
+            Err
+    end.
+
+start(Name, Opts, S = #{servos := Servos}) ->
+    {Opts1, Tmp} = own_sysfs(Name, Opts, Servos),
+    {ok, Client} = toroco_pru_client:parse(Opts1),
+    D0 = maps:merge(S, #{name => Name, client => Client, tmp => Tmp,
+                         sysfs_root => maps:get(sysfs_root, Opts1, "/sys"),
+                         commanded => ?STOP, applied => ?STOP, clamped => 0,
+                         watchdogs => 0, port_errors => 0, reconnect_failures => 0,
+                         bad => toroco_bad_input:new(Name)}),
+    case toroco_pru_client:attach(Client, configure(D0)) of
+        {ok, C1} ->
+            {ok, up, D0#{client := C1}, keepalive(D0)};
+        {error, Reason, _} ->
+            remove_tmp(Tmp),
+            logger:warning("~p (toroco_servo_motors) not started: ~0p", [Name, Reason],
+                           #{domain => [toroco, hw]}),
+            {error, Reason}
+    end.
+
+-spec handle_input(atom(), term(), up | down, map()) ->
+          gen_statem:event_handler_result(up | down).
+handle_input(setvel, {L, R} = V, State, D = #{commanded := Old, clamped := N})
+  when is_number(L), is_number(R) ->
+    Cmd = {velocity(L), velocity(R)},
+    D1 = D#{commanded := Cmd, clamped := N + clamps(V, Cmd)},
+    case State of
+        up when Cmd =/= Old -> drive(D1);
+        _ -> {keep_state, D1}
+    end;
+handle_input(enable, On, State, D = #{enabled := Was}) when is_boolean(On) ->
+    case {State, On} of
+        {_, Was} -> keep_state_and_data;
+        {down, _} -> {keep_state, D#{enabled := On}};
+        {up, true} ->
+            case port(D, fun(P) -> toroco_pru_port:enable_servos(P, true) end) of
+                {ok, D1} -> drive(D1#{enabled := true});
+                {error, D1} -> {keep_state, D1}
+            end;
+        {up, false} ->
+            {_, D1} = port(D, fun(P) -> toroco_pru_port:set_servos(P, to_map(?STOP)) end),
+            {_, D2} = port(D1, fun(P) -> toroco_pru_port:enable_servos(P, false) end),
+            applied(?STOP, D2#{enabled := false})
+    end;
+handle_input(Input, V, _State, D = #{bad := B}) ->
+    {keep_state, D#{bad := toroco_bad_input:count(bad_value, {Input, V}, B)}}.
+
+-spec handle_event(gen_statem:event_type(), term(), up | down, map()) ->
+          gen_statem:event_handler_result(up | down).
+handle_event({timeout, keepalive}, tick, up, D = #{applied := A}) ->
+    {_, D1} = port(D, fun(P) -> toroco_pru_port:set_servos(P, to_map(A)) end),
+    {keep_state, D1, keepalive(D1)};
+handle_event({timeout, keepalive}, tick, down, _D) ->
+    keep_state_and_data;
+handle_event({timeout, reconnect}, attach, down, D = #{name := Name, client := C}) ->
+    case toroco_pru_client:attach(C, configure(D)) of
+        {ok, C1} ->
+            logger:notice("~p attached to its pru_port again", [Name], #{domain => [toroco, hw]}),
+            {next_state, up, D#{client := C1}, keepalive(D)};
+        {error, Reason, C1} ->
+            #{reconnect_failures := N} = D,
+            {Ms, C2} = toroco_pru_client:retry_ms(C1),
+            logger:warning("~p could not attach to its pru_port (~0p); next try in ~b ms",
+                           [Name, Reason, Ms], #{domain => [toroco, hw]}),
+            {keep_state, D#{client := C2, reconnect_failures := N + 1},
+             [{{timeout, reconnect}, Ms, attach}]}
+    end;
+handle_event(info, Msg, _State, D = #{name := Name, client := C}) ->
+    case toroco_pru_client:handle_info(Msg, C) of
+        {event, {watchdog, _T}} ->
+            watchdog(D);
+        {event, _} ->
+            keep_state_and_data;
+        {restarted, _Why, C1} ->
+            %% the owner re-applied the configuration: the servos are at neutral
+            applied(?STOP, D#{client := C1, commanded := ?STOP});
+        {lost, Why, C1} ->
+            logger:warning("~p lost its pru_port (~0p); servos assumed at neutral, "
+                           "attaching again", [Name, Why], #{domain => [toroco, hw]}),
+            {Ms, C2} = toroco_pru_client:retry_ms(C1),
+            {keep_state, D1, Actions} = applied(?STOP, D#{client := C2, commanded := ?STOP}),
+            {next_state, down, D1, [{{timeout, reconnect}, Ms, attach} | Actions]};
+        unknown ->
+            keep_state_and_data
+    end;
+handle_event({call, From}, Request, _State, #{name := Name}) ->
+    {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
+handle_event(_Type, _Content, _State, _D) ->
+    keep_state_and_data.
+
+-spec info(up | down, map()) -> map().
+info(_State, D = #{client := C, bad := B}) ->
+    maps:merge(toroco_pru_client:describe(C),
+               (maps:with([applied, commanded, enabled, clamped, watchdogs, port_errors,
+                           reconnect_failures, sysfs_root, watchdog_ms, servos], D))#{
+                 bad_input => toroco_bad_input:counts(B),
+                 keepalive_ms => keepalive_ms(D)}).
+
+-spec terminate(term(), up | down, map()) -> ok.
+terminate(_Reason, _State, #{name := Name, client := C, applied := A, tmp := Tmp}) ->
+    case toroco_pru_client:is_own(C) of
+        true -> ok;                 % stopping the own owner below puts them at neutral
+        false -> _ = toroco_pru_client:call(C, fun(P) -> toroco_pru_port:call(P, neutral, 1000) end)
+    end,
+    _ = toroco_pru_client:detach(C),
+    remove_tmp(Tmp),
+    case A of
+        ?STOP -> ok;
+        _ -> last_applied(Name, ?STOP)
+    end.
+
+%%====================================================================
+%% Driving
+%%====================================================================
+
+%% The servos follow the command while enabled, stand at neutral otherwise.
+drive(D = #{enabled := false}) ->
+    applied(?STOP, D);
+drive(D = #{commanded := Cmd}) ->
+    case port(D, fun(P) -> toroco_pru_port:set_servos(P, to_map(Cmd)) end) of
+        {ok, D1} -> applied(Cmd, D1);
+        {error, D1} -> {keep_state, D1}
+    end.
+
+watchdog(D = #{watchdogs := N, applied := ?STOP}) ->
+    {keep_state, D#{watchdogs := N + 1, commanded := ?STOP}};
+watchdog(D = #{watchdogs := N, name := Name}) ->
+    %% The program is at neutral already; saying so again also undoes a
+    %% keepalive that was queued behind the stall and re-drove the old speed.
+    logger:warning("~p: pru_port watchdog fired; servos at neutral until the next setvel",
+                   [Name], #{domain => [toroco, hw]}),
+    {_, D1} = port(D, fun(P) -> toroco_pru_port:set_servos(P, to_map(?STOP)) end),
+    applied(?STOP, D1#{watchdogs := N + 1, commanded := ?STOP}).
+
+applied(V, D = #{applied := V}) ->
+    {keep_state, D, []};
+applied(V, D) ->
+    {keep_state, D#{applied := V}, [{send, #{applied => V}}]}.
+
+port(D = #{client := C, port_errors := N, name := Name}, F) ->
+    case toroco_pru_client:call(C, F) of
+        ok -> {ok, D};
+        {error, Reason} ->
+            logger:warning("~p: servo command refused: ~0p", [Name, Reason],
+                           #{domain => [toroco, hw]}),
+            {error, D#{port_errors := N + 1}}
+    end.
+
+configure(#{servos := Servos, watchdog_ms := W, enabled := On}) ->
+    fun(P) ->
+            Steps = [{servos, fun() -> toroco_pru_port:configure_servos(P, Servos) end},
+                     {watchdog, fun() -> toroco_pru_port:configure_watchdog(P, W) end},
+                     {enabled, fun() -> toroco_pru_port:enable_servos(P, On) end}],
+            lists:foldl(fun({Section, F}, ok) ->
+                                case F() of
+                                    ok -> ok;
+                                    {error, R} -> {error, {Section, R}}
+                                end;
+                           (_, Err) -> Err
+                        end, ok, Steps)
+    end.
+
+keepalive(D) ->
+    case keepalive_ms(D) of
+        off -> [];
+        Ms -> [{{timeout, keepalive}, Ms, tick}]
+    end.
+
+keepalive_ms(#{keepalive := true, watchdog_ms := W}) when W > 0 -> max(10, W div 3);
+keepalive_ms(_) -> off.
+
+to_map({L, R}) -> #{left => L, right => R}.
+
+velocity(V) -> max(-100, min(100, round(V))).
+
+clamps({L, R}, {CL, CR}) ->
+    length([x || {V, C} <- [{L, CL}, {R, CR}], round(V) =/= C]).
+
+%% The engine carries out no actions returned from terminate/3, so the last
+%% `applied' goes out the way the engine sends an emission: to the output's
+%% consumers as the runtime's wiring table lists them. A consumer that is
+%% gone swallows it, as a cut wire would.
+last_applied(Name, V) ->
+    Consumers = maps:get(applied, toroco_wiring:subs_of(Name), []),
+    [toroco_upstream:send(R, {'$toroco', {Name, applied}, {send, V, default}})
+     || R <- Consumers],
+    ok.
+
+%%====================================================================
+%% Options
+%%====================================================================
+
+options(Opts) ->
+    Allowed = [port, servos, watchdog_ms, keepalive, enabled | toroco_pru_client:owner_keys()],
+    Checks = [{servos, fun servos/1, #{}},
+              {watchdog_ms, fun(V) -> is_integer(V) andalso V >= 0 end, 500},
+              {keepalive, fun is_boolean/1, true},
+              {enabled, fun is_boolean/1, true}],
+    case [K || K <- maps:keys(Opts), not lists:member(K, Allowed)] of
+        [K | _] ->
+            {error, {unknown_option, K}};
+        [] ->
+            case toroco_pru_client:parse(Opts) of
+                {ok, _} -> check(Checks, Opts, #{});
+                Err -> Err
+            end
+    end.
+
+check([], _Opts, Acc) ->
+    {ok, Acc};
+check([{K, Check, Default} | Rest], Opts, Acc) ->
+    V = maps:get(K, Opts, Default),
+    case Check(V) of
+        true -> check(Rest, Opts, Acc#{K => V});
+        false -> {error, {bad_option, {K, V}}};
+        {ok, V1} -> check(Rest, Opts, Acc#{K => V1});
+        {error, Why} -> {error, {bad_option, {K, Why}}}
+    end.
+
+servos(M) when is_map(M) ->
+    Defaults = default_servos(),
+    case maps:keys(maps:without([left, right], M)) of
+        [Bad | _] -> {error, {unknown_servo, Bad}};
+        [] ->
+            Merged = maps:map(fun(Side, Base) -> maps:merge(Base, maps:get(Side, M, #{})) end,
+                              Defaults),
+            case [{Side, Why} || {Side, Cal} <- maps:to_list(Merged),
+                                 Why <- [calibration_error(Cal, maps:get(Side, M, #{}))],
+                                 Why =/= ok] of
+                [] -> {ok, Merged};
+                [E | _] -> {error, E}
+            end
+    end;
+servos(Other) ->
+    {error, {not_a_map, Other}}.
+
+calibration_error(_Cal, Given) when not is_map(Given) ->
+    {not_a_map, Given};
+calibration_error(Cal = #{period_ns := P, neutral_ns := N, span_ns := S}, Given) ->
+    case [K || K <- maps:keys(Given), not lists:member(K, ?CALIB_KEYS)] of
+        [K | _] -> {unknown_key, K};
+        [] ->
+            Ints = [pwmchip, channel, period_ns, neutral_ns, span_ns],
+            case [K || K <- Ints, not (is_integer(maps:get(K, Cal)) andalso maps:get(K, Cal) >= 0)] of
+                [K | _] -> {K, maps:get(K, Cal)};
+                [] when not is_boolean(map_get(reversed, Cal)) -> {reversed, map_get(reversed, Cal)};
+                [] when P =:= 0; S > N; N + S > P -> {pulse_out_of_period, {P, N, S}};
+                [] -> ok
+            end
+    end.
+
+%% A private fake PWM tree for an own owner on the sim backend, so that the
+%% program's real PWM code runs against plain files.
+own_sysfs(Name, Opts, Servos) ->
+    Own = not maps:is_key(port, Opts),
+    case Own andalso maps:get(backend, Opts, sim) =:= sim andalso
+        not maps:is_key(sysfs_root, Opts) of
+        true ->
+            Root = filename:join(tmp_base(),
+                                 lists:flatten(io_lib:format("toroco_servo_motors_~s_~s_~b",
+                                                             [Name, os:getpid(),
+                                                              erlang:unique_integer([positive])]))),
+            _ = [fake_pwm(Root, Chip, Ch)
+                 || #{pwmchip := Chip, channel := Ch} <- maps:values(Servos)],
+            {Opts#{sysfs_root => Root}, Root};
+        false ->
+            {Opts, undefined}
+    end.
+
+tmp_base() ->
+    case os:getenv("TMPDIR") of
+        false -> "/tmp";
+        "" -> "/tmp";
+        Dir -> Dir
+    end.
+
+fake_pwm(Root, Chip, Ch) ->
+    ChipDir = filename:join(Root, "class/pwm/pwmchip" ++ integer_to_list(Chip)),
+    Dir = filename:join(ChipDir, "pwm" ++ integer_to_list(Ch)),
+    ok = filelib:ensure_dir(filename:join(Dir, "x")),
+    ok = file:write_file(filename:join(ChipDir, "export"), ""),
+    _ = [ok = file:write_file(filename:join(Dir, F), "0\n")
+         || F <- ["period", "duty_cycle", "enable"]],
+    ok.
+
+remove_tmp(undefined) -> ok;
+remove_tmp(Dir) -> _ = file:del_dir_r(Dir), ok.

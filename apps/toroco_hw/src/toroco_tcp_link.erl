@@ -1,0 +1,261 @@
+%% @doc A link to remote systems over TCP: a listening device whose clients
+%% exchange line-delimited JSON events with the network (the event format is
+%% in `toroco_net').
+%%
+%% Each value delivered to one of the device's `inputs' goes to every
+%% connected client as one line, `{"input": In, "value": V}\n'. Each line a
+%% client sends that reads `{"output": Out, "value": V}' with `Out' one of
+%% the device's `outputs' is emitted on `Out' (`"latch"', `"hold"' and
+%% `"unset"' as in `toroco_net'). A trailing `\r' is ignored, and so are
+%% empty lines.
+%%
+%% Options: `inputs', `outputs' (atom lists, default `[]'), `port' (default
+%% 0: ephemeral, see `info'), `ip' (bind address, default `{127,0,0,1}'),
+%% `allow' (client addresses, default `any'), `max_clients' (default 8),
+%% `max_line' (default 65536 bytes), `send_timeout' (default 1000 ms: a
+%% client that does not read is disconnected after that long).
+%%
+%% Resources stay bounded whatever clients do: at most `max_clients'
+%% connections (more are closed at once), at most `max_line' bytes buffered
+%% per client (a longer line is dropped as it comes and counted once), a
+%% partial line left by a disconnect is dropped. One process owns the
+%% listening socket and every connection; a linked acceptor process only
+%% accepts and hands each connection over.
+%%
+%% Counters in `info/2': `port', `ip', `clients' (connected now), `peers',
+%% `connections' (accepted so far), `accepted' and `rejected' lines,
+%% `rejected_by' (`oversized', `partial_line', `not_json', `not_object',
+%% `no_output', `unknown_output', `no_value', `bad_value', `bad_field'),
+%% `refused' and `refused_by' (`not_allowed', `too_many_clients',
+%% `accept_error'), `sent' lines, `send_errors', `unencodable'.
+-module(toroco_tcp_link).
+-behaviour(toroco_device).
+
+-export([interface/1, init/2, handle_input/4, handle_event/4, info/2, terminate/3]).
+
+-define(ACCEPTED, '$toroco_tcp_link_accepted').
+-define(ACCEPT_ERROR, '$toroco_tcp_link_accept_error').
+
+-spec interface(map()) -> #{inputs := [atom()], outputs := [atom()]}.
+interface(Opts) ->
+    #{inputs => atoms(maps:get(inputs, Opts, [])), outputs => atoms(maps:get(outputs, Opts, []))}.
+
+atoms(L) when is_list(L) -> lists:usort([A || A <- L, is_atom(A)]);
+atoms(_) -> [].
+
+-spec init(atom(), map()) -> {ok, listening, map()} | {error, term()}.
+init(Name, Opts) ->
+    Allowed = [inputs, outputs, port, ip, allow, max_clients, max_line, send_timeout],
+    Specs = [{port, {port, 0}}, {ip, {ip, {127, 0, 0, 1}}}, {allow, {allow, any}},
+             {max_clients, {pos_integer, 8}}, {max_line, {pos_integer, 65536}},
+             {send_timeout, {pos_integer, 1000}}],
+    case {[K || K <- maps:keys(Opts), not lists:member(K, Allowed)],
+          ports(inputs, Opts), ports(outputs, Opts), toroco_net:options(Specs, Opts)} of
+        {[K | _], _, _, _} -> {error, {unknown_option, K}};
+        {[], {error, _} = E, _, _} -> E;
+        {[], _, {error, _} = E, _} -> E;
+        {[], _, _, {error, _} = E} -> E;
+        {[], {ok, _}, {ok, Outs}, {ok, S}} -> listen(Name, S#{outputs => Outs})
+    end.
+
+ports(Key, Opts) ->
+    case maps:get(Key, Opts, []) of
+        L when is_list(L) ->
+            case lists:all(fun is_atom/1, L) of
+                true -> {ok, L};
+                false -> {error, {bad_option, {Key, L}}}
+            end;
+        Other -> {error, {bad_option, {Key, Other}}}
+    end.
+
+listen(Name, S = #{port := Port, ip := Ip, send_timeout := T}) ->
+    Family = case tuple_size(Ip) of 4 -> inet; 8 -> inet6 end,
+    case gen_tcp:listen(Port, [binary, Family, {ip, Ip}, {active, false}, {packet, raw},
+                               {reuseaddr, true}, {backlog, 128}, {nodelay, true},
+                               {send_timeout, T}, {send_timeout_close, true}]) of
+        {ok, L} ->
+            {ok, Actual} = inet:port(L),
+            {ok, listening, S#{name => Name, lsock => L, port := Actual,
+                               acceptor => start_acceptor(L), clients => #{},
+                               connections => 0, accepted => 0, sent => 0, send_errors => 0,
+                               unencodable => 0, acceptor_restarts => 0,
+                               bad => toroco_bad_input:new(Name),
+                               refusals => toroco_bad_input:new(Name)}};
+        {error, Reason} ->
+            logger:warning("~p (toroco_tcp_link) not started: ~0p", [Name, {tcp_listen, {Ip, Port}, Reason}],
+                           #{domain => [toroco, hw]}),
+            {error, {tcp_listen, {Ip, Port}, Reason}}
+    end.
+
+%%====================================================================
+%% Events out
+%%====================================================================
+
+-spec handle_input(atom(), term(), listening, map()) -> {keep_state, map()}.
+handle_input(Input, V, _State, D = #{clients := Cs, sent := N, unencodable := U,
+                                     name := Name}) ->
+    case toroco_net:encode_event(Input, V) of
+        {ok, Bin} ->
+            Line = [Bin, $\n],
+            {Ok, Failed} = lists:partition(fun(Sock) -> gen_tcp:send(Sock, Line) =:= ok end,
+                                           maps:keys(Cs)),
+            D1 = lists:foldl(fun(Sock, Acc) -> drop_client(Sock, send_failed, Acc) end,
+                             D#{sent := N + length(Ok)}, Failed),
+            #{send_errors := E} = D1,
+            {keep_state, D1#{send_errors := E + length(Failed)}};
+        {error, unencodable} ->
+            logger:warning("~p: the value on input ~p has no JSON form: ~0P",
+                           [Name, Input, V, 10], #{domain => [toroco, hw]}),
+            {keep_state, D#{unencodable := U + 1}}
+    end.
+
+%%====================================================================
+%% Connections and events in
+%%====================================================================
+
+-spec handle_event(gen_statem:event_type(), term(), listening, map()) ->
+          gen_statem:event_handler_result(listening).
+handle_event(info, {tcp, Sock, Data}, _State, D = #{clients := Cs}) when is_map_key(Sock, Cs) ->
+    {Actions, D1} = lines(Sock, Data, D),
+    _ = inet:setopts(Sock, [{active, once}]),
+    {keep_state, D1, Actions};
+handle_event(info, {tcp_closed, Sock}, _State, D) ->
+    {keep_state, drop_client(Sock, closed, D)};
+handle_event(info, {tcp_error, Sock, _Reason}, _State, D) ->
+    {keep_state, drop_client(Sock, error, D)};
+handle_event(info, {?ACCEPTED, Pid, Sock}, _State, D = #{acceptor := Pid}) ->
+    {keep_state, accepted(Sock, D)};
+handle_event(info, {?ACCEPT_ERROR, Reason}, _State, D = #{refusals := R}) ->
+    {keep_state, D#{refusals := toroco_bad_input:count(accept_error, Reason, R)}};
+handle_event(info, {'EXIT', Pid, Reason}, _State, D = #{acceptor := Pid, lsock := L, name := Name,
+                                                       acceptor_restarts := N}) ->
+    case Reason of
+        {shutdown, closed} ->
+            {stop, {listen_socket_closed, Name}};
+        _ ->
+            logger:warning("~p: acceptor ended (~0p); starting another", [Name, Reason],
+                           #{domain => [toroco, hw]}),
+            {keep_state, D#{acceptor := start_acceptor(L), acceptor_restarts := N + 1}}
+    end;
+handle_event({call, From}, Request, _State, #{name := Name}) ->
+    {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
+handle_event(_Type, _Content, _State, _D) ->
+    keep_state_and_data.
+
+accepted(Sock, D = #{clients := Cs, allow := Allow, max_clients := Max, refusals := R,
+                     connections := N}) ->
+    case inet:peername(Sock) of
+        {ok, {Ip, _} = Peer} ->
+            case {toroco_net:allowed(Ip, Allow), map_size(Cs) < Max} of
+                {false, _} ->
+                    gen_tcp:close(Sock),
+                    D#{refusals := toroco_bad_input:count(not_allowed, Peer, R)};
+                {true, false} ->
+                    gen_tcp:close(Sock),
+                    D#{refusals := toroco_bad_input:count(too_many_clients, Peer, R)};
+                {true, true} ->
+                    _ = inet:setopts(Sock, [{active, once}]),
+                    D#{clients := Cs#{Sock => #{peer => Peer, buf => <<>>, skipping => false}},
+                       connections := N + 1}
+            end;
+        {error, _} ->
+            %% gone before it was handed over
+            gen_tcp:close(Sock),
+            D
+    end.
+
+drop_client(Sock, Why, D = #{clients := Cs, bad := B}) ->
+    case maps:take(Sock, Cs) of
+        {#{buf := Buf, peer := Peer}, Cs1} ->
+            gen_tcp:close(Sock),
+            B1 = case Why =/= send_failed andalso byte_size(Buf) > 0 of
+                     true -> toroco_bad_input:count(partial_line, {Peer, Buf}, B);
+                     false -> B
+                 end,
+            D#{clients := Cs1, bad := B1};
+        error ->
+            D
+    end.
+
+%% Splits what came into lines; the incomplete tail stays buffered, unless
+%% it is already longer than a line may be.
+lines(Sock, Data, D = #{clients := Cs, max_line := Max}) ->
+    C = #{buf := Buf, skipping := Skipping} = maps:get(Sock, Cs),
+    [Tail | RevLines] = lists:reverse(binary:split(<<Buf/binary, Data/binary>>, <<"\n">>,
+                                                   [global])),
+    {Lines, Skipping1} = case {Skipping, lists:reverse(RevLines)} of
+                             {true, [_SkippedEnd | Rest]} -> {Rest, false};
+                             {_, All} -> {All, Skipping}
+                         end,
+    {Actions, D1} = lists:foldl(fun(L, {As, DAcc}) -> line(L, As, DAcc) end, {[], D}, Lines),
+    #{bad := B} = D1,
+    {Buf1, Skip2, B1} =
+        case byte_size(Tail) > Max of
+            true when Skipping1 -> {<<>>, true, B};
+            true -> {<<>>, true, toroco_bad_input:count(oversized, Tail, B)};
+            false when Skipping1 -> {<<>>, true, B};
+            false -> {Tail, false, B}
+        end,
+    {lists:reverse(Actions),
+     D1#{clients := Cs#{Sock := C#{buf := Buf1, skipping := Skip2}}, bad := B1}}.
+
+line(L0, As, D = #{max_line := Max, outputs := Outs, accepted := N, bad := B}) ->
+    L = case L0 of
+            <<Body:(byte_size(L0) - 1)/binary, $\r>> -> Body;
+            _ -> L0
+        end,
+    case L of
+        <<>> -> {As, D};
+        _ when byte_size(L) > Max -> {As, D#{bad := toroco_bad_input:count(oversized, L, B)}};
+        _ ->
+            case toroco_net:decode_event(L, Outs) of
+                {ok, Action} -> {[Action | As], D#{accepted := N + 1}};
+                {error, Reason} -> {As, D#{bad := toroco_bad_input:count(Reason, L, B)}}
+            end
+    end.
+
+%%====================================================================
+%% The acceptor
+%%====================================================================
+
+start_acceptor(L) ->
+    Device = self(),
+    spawn_link(fun() -> accept_loop(Device, L) end).
+
+accept_loop(Device, L) ->
+    case gen_tcp:accept(L) of
+        {ok, Sock} ->
+            case gen_tcp:controlling_process(Sock, Device) of
+                ok -> Device ! {?ACCEPTED, self(), Sock};
+                {error, _} -> gen_tcp:close(Sock)
+            end,
+            accept_loop(Device, L);
+        {error, closed} ->
+            exit({shutdown, closed});
+        {error, Reason} ->
+            %% out of file descriptors and the like: let it pass, then go on
+            Device ! {?ACCEPT_ERROR, Reason},
+            receive after 100 -> ok end,
+            accept_loop(Device, L)
+    end.
+
+%%====================================================================
+%% Inspection and end
+%%====================================================================
+
+-spec info(listening, map()) -> map().
+info(_State, D = #{clients := Cs, bad := B, refusals := R}) ->
+    (maps:with([port, ip, connections, accepted, sent, send_errors, unencodable,
+                acceptor_restarts, max_clients, max_line], D))#{
+      clients => map_size(Cs),
+      peers => lists:sort([P || #{peer := P} <- maps:values(Cs)]),
+      rejected => toroco_bad_input:total(B),
+      rejected_by => toroco_bad_input:counts(B),
+      refused => toroco_bad_input:total(R),
+      refused_by => toroco_bad_input:counts(R)}.
+
+-spec terminate(term(), listening, map()) -> ok.
+terminate(_Reason, _State, #{lsock := L, clients := Cs, acceptor := A}) ->
+    unlink(A),
+    _ = [gen_tcp:close(S) || S <- maps:keys(Cs)],
+    gen_tcp:close(L).

@@ -1,0 +1,126 @@
+%% @doc A link to remote systems over UDP, one JSON event per datagram (the
+%% event format is in `toroco_net').
+%%
+%% Each value delivered to one of the device's `inputs' is sent to every
+%% address in `peers' as `{"input": In, "value": V}'. Each datagram received
+%% that reads `{"output": Out, "value": V}' with `Out' one of the device's
+%% `outputs' is emitted on `Out' (a `send'; `"latch": true' makes it a
+%% `set', `"hold": Ms' gives it a hold, `"unset": true' unsets).
+%%
+%% Options: `inputs', `outputs' (atom lists, default `[]'), `peers'
+%% (`[{Addr, Port}]', default `[]'), `port' (default 0: ephemeral, see
+%% `info'), `ip' (bind address, default `{127,0,0,1}'), `allow' (sender
+%% addresses, default `any'), `max_datagram' (default 8192 bytes), `recbuf'
+%% (kernel receive buffer, default 1 MiB).
+%%
+%% Bad datagrams are dropped and counted by reason, with a logger warning
+%% naming the device at most once a second: `oversized', `not_json',
+%% `not_object', `no_output', `unknown_output', `no_value', `bad_value',
+%% `bad_field', `not_allowed'. An input value that has no JSON form
+%% (a pid, a fun) is counted as `unencodable'; a failed send as
+%% `send_errors'.
+%%
+%% `info/2': `port', `ip', `peers', `accepted', `rejected', `rejected_by',
+%% `sent', `unencodable', `send_errors'.
+-module(toroco_udp_link).
+-behaviour(toroco_device).
+
+-export([interface/1, init/2, handle_input/4, handle_event/4, info/2, terminate/3]).
+
+-spec interface(map()) -> #{inputs := [atom()], outputs := [atom()]}.
+interface(Opts) ->
+    #{inputs => atoms(maps:get(inputs, Opts, [])), outputs => atoms(maps:get(outputs, Opts, []))}.
+
+atoms(L) when is_list(L) -> lists:usort([A || A <- L, is_atom(A)]);
+atoms(_) -> [].
+
+-spec init(atom(), map()) -> {ok, linked, map()} | {error, term()}.
+init(Name, Opts) ->
+    Allowed = [inputs, outputs, peers, port, ip, allow, max_datagram, recbuf],
+    Specs = [{port, {port, 0}}, {ip, {ip, {127, 0, 0, 1}}}, {allow, {allow, any}},
+             {peers, {peers, []}}, {max_datagram, {pos_integer, 8192}},
+             {recbuf, {pos_integer, 1048576}}],
+    case {[K || K <- maps:keys(Opts), not lists:member(K, Allowed)],
+          ports(inputs, Opts), ports(outputs, Opts), toroco_net:options(Specs, Opts)} of
+        {[K | _], _, _, _} -> {error, {unknown_option, K}};
+        {[], {error, _} = E, _, _} -> E;
+        {[], _, {error, _} = E, _} -> E;
+        {[], _, _, {error, _} = E} -> E;
+        {[], {ok, _}, {ok, Outs}, {ok, S = #{port := Port, ip := Ip, max_datagram := Max,
+                                            recbuf := RecBuf}}} ->
+            case toroco_net:udp_open(Ip, Port, Max, RecBuf) of
+                {ok, Sock, Actual} ->
+                    {ok, linked, S#{name => Name, socket => Sock, port := Actual,
+                                    outputs => Outs, accepted => 0, sent => 0,
+                                    unencodable => 0, send_errors => 0,
+                                    bad => toroco_bad_input:new(Name)}};
+                {error, Reason} ->
+                    logger:warning("~p (toroco_udp_link) not started: ~0p", [Name, Reason],
+                                   #{domain => [toroco, hw]}),
+                    {error, Reason}
+            end
+    end.
+
+ports(Key, Opts) ->
+    case maps:get(Key, Opts, []) of
+        L when is_list(L) ->
+            case lists:all(fun is_atom/1, L) of
+                true -> {ok, L};
+                false -> {error, {bad_option, {Key, L}}}
+            end;
+        Other -> {error, {bad_option, {Key, Other}}}
+    end.
+
+-spec handle_input(atom(), term(), linked, map()) -> {keep_state, map()}.
+handle_input(Input, V, _State, D = #{socket := S, peers := Peers, sent := N,
+                                     send_errors := E, unencodable := U, name := Name}) ->
+    case toroco_net:encode_event(Input, V) of
+        {ok, Bin} ->
+            Failed = [Why || {Ip, Port} <- Peers,
+                             {error, Why} <- [gen_udp:send(S, Ip, Port, Bin)]],
+            case Failed of
+                [] -> ok;
+                [Why | _] -> logger:warning("~p could not send ~p: ~0p", [Name, Input, Why],
+                                            #{domain => [toroco, hw]})
+            end,
+            {keep_state, D#{sent := N + length(Peers) - length(Failed),
+                            send_errors := E + length(Failed)}};
+        {error, unencodable} ->
+            logger:warning("~p: the value on input ~p has no JSON form: ~0P",
+                           [Name, Input, V, 10], #{domain => [toroco, hw]}),
+            {keep_state, D#{unencodable := U + 1}}
+    end.
+
+-spec handle_event(gen_statem:event_type(), term(), linked, map()) ->
+          gen_statem:event_handler_result(linked).
+handle_event(info, {udp, S, Ip, _Port, Data}, _State,
+             D = #{socket := S, allow := Allow, max_datagram := Max, outputs := Outs}) ->
+    Result = case toroco_net:udp_check(Ip, Data, Allow, Max) of
+                 ok -> toroco_net:decode_event(Data, Outs);
+                 Err -> Err
+             end,
+    case Result of
+        {ok, Action} ->
+            #{accepted := N} = D,
+            {keep_state, D#{accepted := N + 1}, [Action]};
+        {error, Reason} ->
+            #{bad := B} = D,
+            {keep_state, D#{bad := toroco_bad_input:count(Reason, Data, B)}}
+    end;
+handle_event(info, {udp_passive, S}, _State, #{socket := S}) ->
+    toroco_net:udp_rearm(S),
+    keep_state_and_data;
+handle_event({call, From}, Request, _State, #{name := Name}) ->
+    {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
+handle_event(_Type, _Content, _State, _D) ->
+    keep_state_and_data.
+
+-spec info(linked, map()) -> map().
+info(_State, D = #{bad := B}) ->
+    (maps:with([port, ip, peers, accepted, sent, unencodable, send_errors], D))#{
+      rejected => toroco_bad_input:total(B),
+      rejected_by => toroco_bad_input:counts(B)}.
+
+-spec terminate(term(), linked, map()) -> ok.
+terminate(_Reason, _State, #{socket := S}) ->
+    gen_udp:close(S).
