@@ -172,7 +172,7 @@ external_run(Prog, IntervalMs, N, Dir) ->
     ok = toroco:add_device(udp_in, toroco_udp_link, #{port => InPort, outputs => [event]}),
     ok = toroco:add_behavior(relay, toroco_bench_relay, #{layer => 0}),
     ok = toroco:add_device(udp_out, toroco_udp_link,
-                           #{port => 0, inputs => [in], peer => {{127, 0, 0, 1}, OutPort}}),
+                           #{port => 0, inputs => [in], peers => [{{127, 0, 0, 1}, OutPort}]}),
     ok = toroco:set_inputs(relay, #{in => [{udp_in, event}]}),
     ok = toroco:set_inputs(udp_out, #{in => [{relay, out}]}),
     Cmd = lists:flatten(io_lib:format("~s ~w ~w ~w ~w", [Prog, InPort, OutPort, IntervalMs, N])),
