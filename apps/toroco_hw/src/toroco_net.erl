@@ -18,7 +18,10 @@
 %%     `set'; with `"hold": Ms' (or `"infinity"') a send with that hold;
 %%     `{"output": "Out", "unset": true}' an `unset'. `"as": "tuple"' turns
 %%     an array value into a tuple, `"as": "atom"' a string into an atom
-%%     that already exists (no atom is ever made from the network).</li>
+%%     that already exists (no atom is ever made from the network). An
+%%     object that names `"input"' and no `"output"' (what another link
+%%     sends) is taken as naming that output: two links, each with the
+%%     other's outputs as inputs, make a wire between two nodes.</li>
 %% </ul>
 %% Values map as Erlang term to JSON: numbers, `true'/`false'/`null',
 %% other atoms and UTF-8 binaries as strings, lists and tuples as arrays,
@@ -155,6 +158,9 @@ decode_event(Bin, Outputs) ->
         _:_ -> {error, not_json}
     end.
 
+event(#{<<"input">> := Name} = M, Outputs) when not is_map_key(<<"output">>, M) ->
+    %% what another link sends: two links make a wire between two nodes
+    event(maps:remove(<<"input">>, M#{<<"output">> => Name}), Outputs);
 event(#{<<"output">> := Name} = M, Outputs) when is_binary(Name) ->
     case [O || O <- Outputs, atom_to_binary(O, utf8) =:= Name] of
         [Out | _] -> op(Out, M);
