@@ -11,10 +11,11 @@
 
 main([Dir]) ->
     ok = filelib:ensure_path(Dir),
+    ok = io:setopts([{encoding, unicode}]),
     logger:set_primary_config(level, error),
     Quick = os:getenv("TOROCO_BENCH_QUICK") =:= "1",
     N = case Quick of true -> 2000; false -> ?N end,
-    io:format("~ts~n~nMachine: ~s~nOTP ~s, ~w schedulers~n~n",
+    io:format("~ts~n~nMachine: ~ts~nOTP ~s, ~w schedulers~n~n",
               [<<"# Torocó benchmark"/utf8>>, machine(), erlang:system_info(otp_release),
                erlang:system_info(schedulers_online)]),
     warm_up(),
@@ -222,14 +223,14 @@ table(Title, Rows, Dir, File) ->
                   interval_us := Iv, rate := Rate, cpu := Cpu, lost := Lost} <- Rows],
     Text = ["\n### ", Title, "\n\n", Header, "\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
             lists:join("\n", Lines), "\n"],
-    io:put_chars(unicode:characters_to_binary(Text)),
+    io:put_chars(Text),
     ok = file:write_file(filename:join(Dir, File ++ ".md"), unicode:characters_to_binary(Text)).
 
 tput_table(Title, Rows, Dir, File) ->
     Text = ["\n### ", Title, "\n\n| window | events | events/s | CPU % | lost |\n|---:|---:|---:|---:|---:|\n",
             [io_lib:format("| ~w | ~w | ~w | ~w | ~w |~n", [W, N, Rate, round(Cpu), Lost])
              || #{label := W, n := N, rate := Rate, cpu := Cpu, lost := Lost} <- Rows]],
-    io:put_chars(unicode:characters_to_binary(Text)),
+    io:put_chars(Text),
     ok = file:write_file(filename:join(Dir, File ++ ".md"), unicode:characters_to_binary(Text)).
 
 to_s(L) when is_integer(L) -> integer_to_list(L);
