@@ -46,7 +46,7 @@ valid_fn(F) when is_function(F, 2) -> true;
 valid_fn({M, F, A}) -> is_atom(M) andalso is_atom(F) andalso is_list(A);
 valid_fn(_) -> false.
 
--spec handle_input(atom(), term(), acting, map()) -> {keep_state, map()}.
+-spec handle_input(atom(), term(), acting, map()) -> toroco_behavior:result().
 handle_input(Input, V, _State, D = #{fn := Fn, calls := N}) ->
     D1 = D#{calls := N + 1},
     try call(Fn, Input, V) of
@@ -61,7 +61,7 @@ call({M, F, A}, Input, V) -> apply(M, F, [Input, V | A]);
 call(F, Input, V) -> F(Input, V).
 
 -spec handle_event(gen_statem:event_type(), term(), acting, map()) ->
-          gen_statem:event_handler_result(acting).
+          toroco_behavior:result().
 handle_event({call, From}, Request, _State, #{name := Name}) ->
     {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
 handle_event(_Type, _Content, _State, _D) ->

@@ -31,7 +31,8 @@ interface(Opts) ->
         _ -> #{inputs => [], outputs => []}
     end.
 
--spec init(atom(), map()) -> {ok, polling, map(), list()} | {error, term()}.
+-spec init(atom(), map()) -> {ok, polling, map(), toroco_behavior:actions()} |
+                                {error, term()}.
 init(Name, Opts) ->
     Fn = maps:get(fn, Opts, missing),
     Every = maps:get(every_ms, Opts, 1000),
@@ -57,12 +58,12 @@ valid_fn(F) when is_function(F, 0) -> true;
 valid_fn({M, F, A}) -> is_atom(M) andalso is_atom(F) andalso is_list(A);
 valid_fn(_) -> false.
 
--spec handle_input(atom(), term(), polling, map()) -> keep_state_and_data.
+-spec handle_input(atom(), term(), polling, map()) -> toroco_behavior:result().
 handle_input(_Input, _Value, _State, _D) ->
     keep_state_and_data.
 
 -spec handle_event(gen_statem:event_type(), term(), polling, map()) ->
-          gen_statem:event_handler_result(polling).
+          toroco_behavior:result().
 handle_event(state_timeout, poll, _State, D = #{fn := Fn, every_ms := Every, polls := P}) ->
     Next = {state_timeout, Every, poll},
     D1 = D#{polls := P + 1},

@@ -88,12 +88,12 @@ init(Name, Opts) ->
             Err
     end.
 
--spec handle_input(atom(), term(), atom(), map()) -> keep_state_and_data.
+-spec handle_input(atom(), term(), up | down, map()) -> toroco_behavior:result().
 handle_input(_Input, _Value, _State, _D) ->
     keep_state_and_data.
 
 -spec handle_event(gen_statem:event_type(), term(), up | down, map()) ->
-          gen_statem:event_handler_result(up | down).
+          toroco_behavior:result().
 handle_event({call, From}, {?SIM_CALL, Sensor}, _State, #{name := Name, client := C,
                                                           sensors := Sensors}) ->
     Reply = case {lists:keyfind(Sensor, 1, Sensors), toroco_pru_client:server(C)} of

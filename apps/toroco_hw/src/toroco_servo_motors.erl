@@ -71,7 +71,8 @@ default_servos() ->
 interface(_Opts) ->
     #{inputs => [setvel, enable], outputs => [applied]}.
 
--spec init(atom(), map()) -> {ok, up, map(), list()} | {error, term()}.
+-spec init(atom(), map()) -> {ok, up, map(), toroco_behavior:actions()} |
+                                {error, term()}.
 init(Name, Opts) ->
     case options(Opts) of
         {ok, Settings} ->
@@ -99,7 +100,7 @@ start(Name, Opts, S = #{servos := Servos}) ->
     end.
 
 -spec handle_input(atom(), term(), up | down, map()) ->
-          gen_statem:event_handler_result(up | down).
+          toroco_behavior:result().
 handle_input(setvel, {L, R} = V, State, D = #{commanded := Old, clamped := N})
   when is_number(L), is_number(R) ->
     Cmd = {velocity(L), velocity(R)},
@@ -126,7 +127,7 @@ handle_input(Input, V, _State, D = #{bad := B}) ->
     {keep_state, D#{bad := toroco_bad_input:count(bad_value, {Input, V}, B)}}.
 
 -spec handle_event(gen_statem:event_type(), term(), up | down, map()) ->
-          gen_statem:event_handler_result(up | down).
+          toroco_behavior:result().
 handle_event({timeout, keepalive}, tick, up, D = #{applied := A}) ->
     {_, D1} = port(D, fun(P) -> toroco_pru_port:set_servos(P, to_map(A)) end),
     {keep_state, D1, keepalive(D1)};

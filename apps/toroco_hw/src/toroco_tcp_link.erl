@@ -91,7 +91,7 @@ listen(Name, S = #{port := Port, ip := Ip, send_timeout := T}) ->
 %% Events out
 %%====================================================================
 
--spec handle_input(atom(), term(), listening, map()) -> {keep_state, map()}.
+-spec handle_input(atom(), term(), listening, map()) -> toroco_behavior:result().
 handle_input(Input, V, _State, D = #{clients := Cs, sent := N, unencodable := U,
                                      name := Name}) ->
     case toroco_net:encode_event(Input, V) of
@@ -114,7 +114,7 @@ handle_input(Input, V, _State, D = #{clients := Cs, sent := N, unencodable := U,
 %%====================================================================
 
 -spec handle_event(gen_statem:event_type(), term(), listening, map()) ->
-          gen_statem:event_handler_result(listening).
+          toroco_behavior:result().
 handle_event(info, {tcp, Sock, Data}, _State, D = #{clients := Cs}) when is_map_key(Sock, Cs) ->
     {Actions, D1} = lines(Sock, Data, D),
     _ = inet:setopts(Sock, [{active, once}]),
@@ -226,7 +226,7 @@ accept_loop(Device, L) ->
     case gen_tcp:accept(L) of
         {ok, Sock} ->
             case gen_tcp:controlling_process(Sock, Device) of
-                ok -> Device ! {?ACCEPTED, self(), Sock};
+                ok -> Device ! {?ACCEPTED, self(), Sock}, ok;
                 {error, _} -> gen_tcp:close(Sock)
             end,
             accept_loop(Device, L);

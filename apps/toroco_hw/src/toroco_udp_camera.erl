@@ -61,12 +61,12 @@ open(Name, Opts) ->
             Err
     end.
 
--spec handle_input(atom(), term(), receiving, map()) -> keep_state_and_data.
+-spec handle_input(atom(), term(), receiving, map()) -> toroco_behavior:result().
 handle_input(_Input, _Value, _State, _D) ->
     keep_state_and_data.
 
 -spec handle_event(gen_statem:event_type(), term(), receiving, map()) ->
-          gen_statem:event_handler_result(receiving).
+          toroco_behavior:result().
 handle_event(info, {udp, S, Ip, _Port, Data}, _State,
              D = #{socket := S, allow := Allow, max_datagram := Max}) ->
     Result = case toroco_net:udp_check(Ip, Data, Allow, Max) of

@@ -71,7 +71,7 @@ ports(Key, Opts) ->
         Other -> {error, {bad_option, {Key, Other}}}
     end.
 
--spec handle_input(atom(), term(), linked, map()) -> {keep_state, map()}.
+-spec handle_input(atom(), term(), linked, map()) -> toroco_behavior:result().
 handle_input(Input, V, _State, D = #{socket := S, peers := Peers, sent := N,
                                      send_errors := E, unencodable := U, name := Name}) ->
     case toroco_net:encode_event(Input, V) of
@@ -92,7 +92,7 @@ handle_input(Input, V, _State, D = #{socket := S, peers := Peers, sent := N,
     end.
 
 -spec handle_event(gen_statem:event_type(), term(), linked, map()) ->
-          gen_statem:event_handler_result(linked).
+          toroco_behavior:result().
 handle_event(info, {udp, S, Ip, _Port, Data}, _State,
              D = #{socket := S, allow := Allow, max_datagram := Max, outputs := Outs}) ->
     Result = case toroco_net:udp_check(Ip, Data, Allow, Max) of

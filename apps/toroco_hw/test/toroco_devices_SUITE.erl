@@ -277,9 +277,12 @@ neutral_on_remove(Config) ->
     await_input(world, applied, [{60, 60}]),
     ?assertEqual("1800000", pwm(Root, 0, "duty_cycle")),
     #{port := Owner} = dev(motors),
+    OsPid = toroco_pru_port:os_pid(Owner),
     ok = toroco:remove_device(motors),
     await_input(world, applied, [{60, 60}, {0, 0}]),
     ?assertNot(is_process_alive(Owner)),
+    %% the program writes neutral once more on its way out: read once it is gone
+    ok = wait_until(fun() -> not filelib:is_dir("/proc/" ++ integer_to_list(OsPid)) end, ?WAIT),
     ?assertEqual({?NEUTRAL, ?NEUTRAL}, {pwm(Root, 0, "duty_cycle"), pwm(Root, 1, "duty_cycle")}),
     %% the same without a tree of its own
     ok = toroco:add_device(motors, toroco_servo_motors, #{}),
