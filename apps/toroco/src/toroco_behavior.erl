@@ -37,7 +37,8 @@
     result().
 -callback code_change(OldVsn :: term(), State :: term(), Data :: term(), Extra :: term()) ->
     {ok, NewState :: term(), NewData :: term()}.
--callback terminate(Reason :: term(), State :: term(), Data :: term()) -> any().
+-callback terminate(Reason :: term(), State :: term(), Data :: term()) ->
+    {emit, actions()} | term().
 -optional_callbacks([handle_event/4, code_change/4, terminate/3]).
 
 -type action() :: {send, #{atom() => term()}}
@@ -262,11 +263,15 @@ handle_event(Type, Content, _S, #e{name = Name}) ->
     logger:warning("toroco: ~p ignored ~p event ~p", [Name, Type, Content]),
     keep_state_and_data.
 
+%% A user `terminate/3' may return `{emit, Actions}': its toroco actions are
+%% carried out before the process goes (a device's last word, e.g. motors
+%% reporting they stopped). Consumers drop the process's holds and latches
+%% when it is gone, whatever it said last.
 -spec terminate(term(), term(), #e{}) -> any().
-terminate(Reason, S, #e{module = M, user = UD}) ->
-    case erlang:function_exported(M, terminate, 3) of
-        true -> M:terminate(Reason, S, UD);
-        false -> ok
+terminate(Reason, S, E = #e{module = M, user = UD}) ->
+    case erlang:function_exported(M, terminate, 3) andalso M:terminate(Reason, S, UD) of
+        {emit, Actions} -> _ = actions(Actions, E), ok;
+        _ -> ok
     end.
 
 -spec code_change(term(), term(), #e{}, term()) -> {ok, term(), #e{}}.

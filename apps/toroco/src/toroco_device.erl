@@ -26,7 +26,8 @@
                        Data :: term()) ->
     toroco_behavior:result().
 -callback info(State :: term(), Data :: term()) -> map().
--callback terminate(Reason :: term(), State :: term(), Data :: term()) -> any().
+-callback terminate(Reason :: term(), State :: term(), Data :: term()) ->
+    {emit, toroco_behavior:actions()} | term().
 -optional_callbacks([handle_event/4, info/2, terminate/3]).
 
 %% @doc Starts device `Name' running `Module' with `Opts', registered and

@@ -135,7 +135,7 @@ reply({error, _} = Err, S) -> {reply, Err, S}.
 add_node(Kind, Name, Module, Opts, S = #s{wiring = W}) ->
     case node_spec(Kind, Name, Module, Opts) of
         {ok, Spec = #{layer := L, args := Args}} ->
-            case toroco_behavior:interface(Kind, Module, Args) of
+            case interface(Kind, Name, Module, Args) of
                 {ok, Ports} ->
                     Info = Ports#{kind => Kind, module => Module, layer => L},
                     case toroco_wiring_core:add_node(W, Name, Info) of
@@ -165,6 +165,13 @@ node_spec(behavior, Name, Module, Opts) ->
             {ok, #{kind => behavior, name => Name, module => Module, layer => L, args => P}}
     end.
 
+%% A module's interface, with the node named in the error if it has none.
+interface(Kind, Name, Module, Args) ->
+    case toroco_behavior:interface(Kind, Module, Args) of
+        {error, {bad_interface, {Module, Detail}}} -> {error, {bad_interface, {Name, Module, Detail}}};
+        Other -> Other
+    end.
+
 start_node(Spec = #{kind := Kind, name := Name, layer := L}, S) ->
     {Sup, S1} = case Kind of
                     device -> {toroco_devices_sup, S};
@@ -173,8 +180,12 @@ start_node(Spec = #{kind := Kind, name := Name, layer := L}, S) ->
     case supervisor:start_child(Sup, toroco_behavior:child_spec(Spec)) of
         {ok, _} -> {ok, S1};
         {ok, _, _} -> {ok, S1};
-        {error, Reason} -> {error, {start_failed, {Name, Reason}}}
+        {error, Reason} -> {error, {start_failed, {Name, start_reason(Reason)}}}
     end.
+
+%% The supervisor wraps an init failure with its own child record.
+start_reason({Reason, Child}) when element(1, Child) =:= child -> Reason;
+start_reason(Reason) -> Reason.
 
 layer_sup(L, S = #s{layers = Layers, removed = Removed}) ->
     case Layers of
@@ -307,7 +318,7 @@ validate_terms([T | Ts], W) ->
 validate_term({Kind, Name, Module, Opts}, W) when Kind =:= behavior; Kind =:= device ->
     case node_spec(Kind, Name, Module, Opts) of
         {ok, #{layer := L, args := Args}} ->
-            case toroco_behavior:interface(Kind, Module, Args) of
+            case interface(Kind, Name, Module, Args) of
                 {ok, Ports} ->
                     toroco_wiring_core:add_node(W, Name, Ports#{kind => Kind, module => Module,
                                                                 layer => L});

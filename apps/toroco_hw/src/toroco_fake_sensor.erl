@@ -17,7 +17,7 @@ interface(Opts) -> error({bad_option, {outputs, maps:get(outputs, Opts, missing)
 -spec init(atom(), map()) -> {ok, sensing, map(), toroco_behavior:actions()} | {error, term()}.
 init(Name, Opts) ->
     Script = maps:get(script, Opts, []),
-    case lists:all(fun valid_step/1, Script) of
+    case is_list(Script) andalso lists:all(fun valid_step/1, Script) of
         true -> {ok, sensing, #{name => Name, script => Script, steps => 0}, next(Script)};
         false -> {error, {bad_option, {Name, script}}}
     end.

@@ -177,8 +177,8 @@ info(_State, D = #{client := C, bad := B}) ->
                  bad_input => toroco_bad_input:counts(B),
                  keepalive_ms => keepalive_ms(D)}).
 
--spec terminate(term(), up | down, map()) -> ok.
-terminate(_Reason, _State, #{name := Name, client := C, applied := A, tmp := Tmp}) ->
+-spec terminate(term(), up | down, map()) -> ok | {emit, toroco_behavior:actions()}.
+terminate(_Reason, _State, #{client := C, applied := A, tmp := Tmp}) ->
     case toroco_pru_client:is_own(C) of
         true -> ok;                 % stopping the own owner below puts them at neutral
         false -> _ = toroco_pru_client:call(C, fun(P) -> toroco_pru_port:call(P, neutral, 1000) end)
@@ -187,7 +187,7 @@ terminate(_Reason, _State, #{name := Name, client := C, applied := A, tmp := Tmp
     remove_tmp(Tmp),
     case A of
         ?STOP -> ok;
-        _ -> last_applied(Name, ?STOP)
+        _ -> {emit, [{send, #{applied => ?STOP}}]}
     end.
 
 %%====================================================================
@@ -256,16 +256,6 @@ velocity(V) -> max(-100, min(100, round(V))).
 
 clamps({L, R}, {CL, CR}) ->
     length([x || {V, C} <- [{L, CL}, {R, CR}], round(V) =/= C]).
-
-%% The engine carries out no actions returned from terminate/3, so the last
-%% `applied' goes out the way the engine sends an emission: to the output's
-%% consumers as the runtime's wiring table lists them. A consumer that is
-%% gone swallows it, as a cut wire would.
-last_applied(Name, V) ->
-    Consumers = maps:get(applied, toroco_wiring:subs_of(Name), []),
-    [toroco_upstream:send(R, {'$toroco', {Name, applied}, {send, V, default}})
-     || R <- Consumers],
-    ok.
 
 %%====================================================================
 %% Options
