@@ -190,7 +190,8 @@ release(M, G = #gate{members = Ms}) ->
 finish({G, Fwd}) -> {G#gate{next = earliest(G)}, Fwd}.
 
 expire(Now, G = #gate{holds = Hs}) ->
-    G#gate{holds = maps:filter(fun(_, D) -> not (is_integer(D) andalso D =< Now) end, Hs)}.
+    G1 = G#gate{holds = maps:filter(fun(_, D) -> not (is_integer(D) andalso D =< Now) end, Hs)},
+    G1#gate{next = earliest(G1)}.
 
 earliest(#gate{holds = Hs}) ->
     maps:fold(fun(_, D, E) when is_integer(D) -> min(D, E);

@@ -69,15 +69,16 @@ input(Name, I, Wired) ->
     end.
 
 output(Name, O, Inhibitors, Gates, Latches) ->
-    Inhibited = case Gates of
-                    #{{Name, O} := Key} ->
-                        case toroco_gate:info(Key) of
-                            #{{Name, O} := #{inhibited := I}} -> I;
-                            _ -> false
-                        end;
-                    #{} -> false
-                end,
+    {Inhibited, Holds} = case Gates of
+                             #{{Name, O} := Key} ->
+                                 case toroco_gate:info(Key) of
+                                     #{{Name, O} := #{inhibited := I, holds := H}} -> {I, H};
+                                     _ -> {false, []}
+                                 end;
+                             #{} -> {false, []}
+                         end,
     #{inhibited => Inhibited, inhibitors => [S || {S, _} <- Inhibitors],
+      inhibitor_holds => Holds,
       latch => case Latches of
                    #{O := V} -> {value, V};
                    #{} -> none
@@ -87,85 +88,277 @@ output(Name, O, Inhibitors, Gates, Latches) ->
 %% top/0
 %%====================================================================
 
+%% Cells longer than this are cut (the last column of a table is not).
+-define(CELL, 40).
+%% Depth to which values are printed.
+-define(DEPTH, 8).
+%% How long top waits for a busy behavior to tell its state.
+-define(STATE_TIMEOUT, 500).
+
+%% @doc Prints {@link top_iodata/0} to the caller's group leader.
 -spec top() -> ok.
 top() ->
-    io:put_chars(unicode:characters_to_binary(top_iodata())).
+    io:put_chars(top_iodata()).
 
-%% @doc The `top/0' table as text.
+%% @doc The `top/0' table as text: the layers, then one row per behavior
+%% and device (highest layer first, devices last) with its status, the
+%% state of its callback module, its message queue and its restarts (see
+%% `toroco_restarts'); then every wired input with its winner, holds (ms
+%% left), latched values and last value delivered; the inhibited outputs;
+%% and the devices' own counters.
 -spec top_iodata() -> iodata().
 top_iodata() ->
+    _ = toroco_restarts:install(),
     #{behaviors := Bs, devices := Ds, layers := Layers, removed_layers := Removed} = overview(),
-    Rows = [row(N) || N <- Bs ++ Ds],
-    [io_lib:format("Torocó  ~ts  layers ~w  taken out ~w~n",
-                   [calendar:system_time_to_rfc3339(erlang:system_time(second)),
-                    maps:keys(Layers), Removed]),
-     io_lib:format("~-20s ~-8s ~5s ~-10s ~6s ~8s~n",
-                   [name, kind, layer, status, queue, reds]),
-     [io_lib:format("~-20s ~-8s ~5w ~-10s ~6w ~8w~n", [N, K, L, S, Q, R])
-      || {N, K, L, S, Q, R, _} <- Rows],
-     "\ninputs (winner, holds ms, latches)\n",
-     [[io_lib:format("  ~w.~w <- ~w  holds ~w  latches ~w~n",
-                     [N, I, W, Hs, Ls])
-       || {I, #{winner := W, holds := Hs, latches := Ls, sources := [_ | _]}}
-              <- maps:to_list(maps:get(inputs, Info, #{}))]
-      || {N, _, _, _, _, _, Info} <- Rows],
-     "\ninhibited outputs\n",
-     [[io_lib:format("  ~w.~w by ~w~n", [N, O, Inh])
-       || {O, #{inhibited := true, inhibitors := Inh}} <- maps:to_list(maps:get(outputs, Info, #{}))]
-      || {N, _, _, _, _, _, Info} <- Rows],
-     "\ndevice counters\n",
-     [io_lib:format("  ~w ~w~n", [N, C]) || {N, _, _, _, _, _, #{device := C}} <- Rows]].
+    Nodes = [row(N) || N <- Bs ++ Ds],
+    Sorted = lists:sort(fun(A, B) -> order(A) =< order(B) end, Nodes),
+    {UpMs, _} = erlang:statistics(wall_clock),
+    [io_lib:format("toroco top  ~w  ~ts  up ~ts~n",
+                   [erlang:node(), calendar:system_time_to_rfc3339(erlang:system_time(second)),
+                    duration(UpMs)]),
+     "layers     ", case lists:reverse(lists:sort(maps:to_list(Layers))) of
+                        [] -> "none";
+                        Ls -> lists:join("  ", [io_lib:format("~w: ~ts", [L, names(Ns)])
+                                                || {L, Ns} <- Ls])
+                    end, "\n",
+     "taken out  ", case Removed of
+                        [] -> "none";
+                        _ -> lists:join(" ", [integer_to_list(L) || L <- Removed])
+                    end, "\n\n",
+     table(["NODE", "KIND", "LAYER", "STATUS", "STATE", "QUEUE", "RESTARTS", "MODULE"],
+           [[atom_to_list(N), atom_to_list(K), text(L), atom_to_list(St), value(S),
+             text(Q), text(R), atom_to_list(M)]
+            || #{name := N, kind := K, layer := L, status := St, state := S, queue := Q,
+                 restarts := R, module := M} <- Sorted]),
+     section("INPUT", ["WINNER", "HOLDS (ms left)", "LATCHED", "LAST"],
+             [[port(N, I), source(W), holds(Hs), latches(Lt), last(Last)]
+              || #{name := N, info := Info} <- Sorted,
+                 {I, #{sources := [_ | _], winner := W, holds := Hs, latches := Lt,
+                       last := Last}} <- lists:sort(maps:to_list(maps:get(inputs, Info, #{})))]),
+     section("INHIBITED OUTPUT", ["BY", "LATCH"],
+             [[port(N, O), names([source(S) || S <- Inh]), last(Latch)]
+              || #{name := N, info := Info} <- Sorted,
+                 {O, #{inhibited := true, inhibitors := Inh, latch := Latch}}
+                     <- lists:sort(maps:to_list(maps:get(outputs, Info, #{})))]),
+     section("DEVICE", ["COUNTERS"],
+             [[atom_to_list(N), counters(C)]
+              || #{name := N, info := #{device := C}} <- Sorted, is_map(C)])].
 
 row(N) ->
     Info = case node(N) of
                #{} = I -> I;
-               _ -> #{}
+               {error, _} -> #{}
            end,
-    {Q, R} = case whereis(toroco_names:node(N)) of
-                 undefined -> {'-', '-'};
-                 Pid -> case erlang:process_info(Pid, [message_queue_len, reductions]) of
-                            [{_, Q0}, {_, R0}] -> {Q0, R0};
-                            undefined -> {'-', '-'}
-                        end
-             end,
-    {N, maps:get(kind, Info, '?'), maps:get(layer, Info, '?'), maps:get(status, Info, down),
-     Q, R, Info}.
+    Pid = whereis(toroco_names:node(N)),
+    #{name => N, info => Info,
+      kind => maps:get(kind, Info, '?'), layer => maps:get(layer, Info, '?'),
+      module => maps:get(module, Info, '?'), status => maps:get(status, Info, down),
+      state => user_state(Pid), queue => queue(Pid), restarts => toroco_restarts:count(N)}.
+
+%% Behaviors from the highest layer down, then devices; by name within.
+order(#{kind := behavior, layer := L, name := N}) when is_integer(L) -> {0, -L, N};
+order(#{kind := device, name := N}) -> {1, 0, N};
+order(#{name := N}) -> {2, 0, N}.
+
+%% The callback module's state (the gen_statem state of the engine).
+user_state(undefined) -> '-';
+user_state(Pid) ->
+    try sys:get_state(Pid, ?STATE_TIMEOUT) of
+        {S, _Data} -> {value, S};
+        _ -> '?'
+    catch exit:_ -> busy
+    end.
+
+queue(undefined) -> '-';
+queue(Pid) ->
+    case erlang:process_info(Pid, message_queue_len) of
+        {message_queue_len, Q} -> Q;
+        undefined -> '-'
+    end.
+
+section(_Title, _Header, []) ->
+    [];
+section(Title, Header, Rows) ->
+    ["\n", table([Title | Header], Rows)].
+
+%% Left-aligned columns two spaces apart; cells cut at ?CELL characters
+%% except in the last column.
+table(Header, Rows) ->
+    Cut = [[cut(C) || C <- lists:droplast(Row)] ++ [lists:last(Row)] || Row <- Rows],
+    All = [Header | [[unicode:characters_to_list(C) || C <- Row] || Row <- Cut]],
+    Widths = lists:foldl(fun(Row, Ws) -> [max(W, string:length(C)) || {W, C} <- lists:zip(Ws, Row)] end,
+                         [0 || _ <- Header], All),
+    [[string:trim(lists:join("  ", [string:pad(C, W) || {C, W} <- lists:zip(Row, Widths)]),
+                  trailing), "\n"]
+     || Row <- All].
+
+cut(Chars) ->
+    S = unicode:characters_to_list(Chars),
+    case string:length(S) > ?CELL of
+        true -> string:slice(S, 0, ?CELL - 3) ++ "...";
+        false -> S
+    end.
+
+text(T) when is_atom(T) -> atom_to_list(T);
+text(T) when is_integer(T) -> integer_to_list(T);
+text(T) -> io_lib:format("~tw", [T]).
+
+value({value, V}) -> show(V, ?DEPTH);
+value(Other) -> text(Other).
+
+port(N, P) -> io_lib:format("~w.~w", [N, P]).
+
+source(none) -> "-";
+source({E, O}) -> port(E, O).
+
+names([]) -> "-";
+names(Ns) -> lists:join(" ", [case N of
+                                  A when is_atom(A) -> atom_to_list(A);
+                                  S -> S
+                              end || N <- Ns]).
+
+holds([]) -> "-";
+holds(Hs) -> lists:join(" ", [[source(S), "=", case Ms of
+                                                   infinity -> "inf";
+                                                   _ -> integer_to_list(Ms)
+                                               end] || {S, Ms} <- Hs]).
+
+latches([]) -> "-";
+latches(Ls) -> lists:join(" ", [[source(S), "=", value({value, V})] || {S, V} <- Ls]).
+
+last({value, V}) -> value({value, V});
+last(none) -> "-".
+
+counters(C) ->
+    lists:join(" ", [[text(K), "=", show(V, 6)] || {K, V} <- lists:sort(maps:to_list(C))]).
+
+%% A value on one line, strings as strings, cut at depth `Depth'.
+show(V, Depth) -> io_lib:format("~9999tP", [V, Depth]).
+
+duration(Ms) ->
+    S = Ms div 1000,
+    io_lib:format("~w:~2..0w:~2..0w", [S div 3600, S rem 3600 div 60, S rem 60]).
 
 %%====================================================================
 %% wiring_dot/0
 %%====================================================================
 
-%% @doc Behaviors and devices are records with inputs on the left and outputs
-%% on the right; suppression edges are solid (labelled with their priority,
-%% 1 = highest), inhibition edges dashed red, reset edges dotted.
+%% @doc The wiring as a Graphviz `dot' graph, drawn as Brooks drew his
+%% networks: each behavior a box with its inputs on the left and its outputs
+%% on the right, grouped by layer (highest on top), devices in grey with
+%% rounded corners. A wire from an output to the one input it feeds is a
+%% plain arrow. Where an input has several sources, their wires meet in a
+%% blue suppressor node `S' whose incoming wires are numbered by priority
+%% (1 = highest; a wiring entry's hold is added, `h 500'). An inhibited
+%% output goes through a red inhibitor node `I' before it reaches anything,
+%% and each inhibitor's wire into it is dashed red with a flat end. A reset
+%% wire is dotted and ends on the behavior's name.
 -spec dot() -> iodata().
 dot() ->
     {W, _} = toroco_wiring:call(wiring),
     Nodes = lists:sort(maps:to_list(toroco_wiring_core:nodes(W))),
-    Edges = lists:append(
-              [[edge(S, {N, I}, P, I) || {I, #{sources := Srcs}} <- lists:sort(maps:to_list(
-                                                                     toroco_wiring_core:inputs_of(W, N))),
-                                         {P, {S, _}} <- lists:zip(lists:seq(1, length(Srcs)), Srcs)]
-               || {N, _} <- Nodes]),
-    Inh = [io_lib:format("  ~s -> ~s [style=dashed, color=red, label=\"inhibits\"];~n",
-                         [port(I, out), port({E, O}, out)])
-           || {E, #{outputs := Outs}} <- Nodes, O <- Outs,
-              {I, _} <- toroco_wiring_core:inhibitors_of(W, {E, O})],
-    ["digraph toroco {\n  rankdir=LR;\n  node [shape=record, fontname=\"Helvetica\"];\n",
-     [io_lib:format("  ~s [label=\"{~s|{~s}|~s}\"~s];~n",
-                    [quote(N), ports(Ins, in), io_lib:format("~w\\nlayer ~w", [N, L]),
-                     ports(Outs, out), case K of device -> ", style=rounded"; _ -> "" end])
-      || {N, #{inputs := Ins, outputs := Outs, layer := L, kind := K}} <- Nodes],
-     Edges, Inh, "}\n"].
+    Inhibited = [{{E, O}, Inhs} || {E, #{outputs := Outs}} <- Nodes, O <- Outs,
+                                   Inhs <- [toroco_wiring_core:inhibitors_of(W, {E, O})],
+                                   Inhs =/= []],
+    Inputs = [{{R, I}, Spec} || {R, _} <- Nodes,
+                                {I, Spec} <- lists:sort(maps:to_list(
+                                                          toroco_wiring_core:inputs_of(W, R)))],
+    %% Where the wire of an output starts: its port, or its inhibitor node.
+    From = fun(Src) -> case lists:keymember(Src, 1, Inhibited) of
+                           true -> [id("I", Src)];
+                           false -> [out_port(Src)]
+                       end end,
+    ["digraph toroco {\n"
+     "  rankdir=LR; nodesep=0.3; ranksep=0.6; newrank=true;\n"
+     "  node [fontname=\"Helvetica\", fontsize=10];\n"
+     "  edge [fontname=\"Helvetica\", fontsize=9, arrowsize=0.7];\n",
+     [["  ", box(N, Info), "\n"] || {N, Info} <- Nodes],
+     %% Inhibitor nodes on the outputs they inhibit.
+     [[io_lib:format("  ~s [shape=circle, label=\"I\", width=0.25, fixedsize=true, "
+                     "color=red3, fontcolor=red3];~n", [id("I", Src)]),
+       io_lib:format("  ~s -> ~s [arrowhead=none, color=red3];~n", [out_port(Src), id("I", Src)]),
+       [io_lib:format("  ~s -> ~s [style=dashed, color=red3, arrowhead=tee~s];~n",
+                      [F, id("I", Src), hold_label(H, "")])
+        || {Inh, H} <- Inhs, F <- From(Inh)]]
+      || {Src, Inhs} <- Inhibited],
+     %% Inputs: one source is a plain wire, several meet in a suppressor.
+     [case Srcs of
+          [{S, H}] ->
+              [io_lib:format("  ~s -> ~s~s;~n", [F, to(R, I), attrs(hold_label(H, ""))])
+               || F <- From(S)];
+          _ ->
+              [io_lib:format("  ~s [shape=circle, label=\"S\", width=0.25, fixedsize=true, "
+                             "color=blue3, fontcolor=blue3];~n", [id("S", {R, I})]),
+               io_lib:format("  ~s -> ~s [color=blue3];~n", [id("S", {R, I}), to(R, I)]),
+               [io_lib:format("  ~s -> ~s [color=blue3, label=\"~s\"];~n",
+                              [F, id("S", {R, I}), priority_label(P, H)])
+                || {P, {S, H}} <- lists:zip(lists:seq(1, length(Srcs)), Srcs), F <- From(S)]]
+      end
+      || {{R, I}, #{sources := Srcs}} <- Inputs, Srcs =/= []],
+     "}\n"].
 
-edge(S, {R, '$reset'}, _P, _I) ->
-    io_lib:format("  ~s -> ~s [style=dotted, label=\"reset\"];~n", [port(S, out), quote(R)]);
-edge(S, To, P, _I) ->
-    io_lib:format("  ~s -> ~s [label=\"~w\"];~n", [port(S, out), port(To, in), P]).
+%% A behavior or device as an HTML-like table: inputs left, outputs right.
+box(N, #{kind := Kind, module := M, layer := L, inputs := Ins, outputs := Outs}) ->
+    Rows = max(1, max(length(Ins), length(Outs))),
+    Cell = fun(Dir, Ps, K) ->
+                   case lists:nth(K, Ps ++ lists:duplicate(Rows, none)) of
+                       none -> "<TD BORDER=\"0\"></TD>";
+                       P -> io_lib:format("<TD PORT=\"~s\" ALIGN=\"~s\">~ts</TD>",
+                                          [port_id(Dir, P), case Dir of
+                                                                in -> "LEFT";
+                                                                out -> "RIGHT"
+                                                            end, html(P)])
+                   end
+           end,
+    Sub = case Kind of
+              behavior -> io_lib:format("layer ~w &middot; ~ts", [L, html(M)]);
+              device -> html(M)
+          end,
+    Name = io_lib:format("<TD ROWSPAN=\"~w\" PORT=\"name\"><B>~ts</B><BR/>"
+                         "<FONT POINT-SIZE=\"8\">~ts</FONT></TD>", [Rows, html(N), Sub]),
+    Body = [["<TR>", Cell(in, Ins, K), case K of 1 -> Name; _ -> "" end, Cell(out, Outs, K), "</TR>"]
+            || K <- lists:seq(1, Rows)],
+    Style = case Kind of
+                device -> " style=\"rounded\" bgcolor=\"grey92\"";
+                behavior -> ""
+            end,
+    io_lib:format("~s [shape=plaintext, label=<<TABLE BORDER=\"1\" CELLBORDER=\"0\" "
+                  "CELLSPACING=\"0\" CELLPADDING=\"3\"~s>~s</TABLE>>];",
+                  [quote(N), Style, Body]).
 
-ports(Ports, Dir) ->
-    lists:join("|", [io_lib:format("<~s_~s> ~w", [Dir, P, P]) || P <- Ports]).
+to(R, '$reset') -> [quote(R), ":name:n [style=dotted, label=\"reset\"]"];
+to(R, I) -> in_port({R, I}).
 
-port({N, P}, Dir) -> io_lib:format("~s:~s_~s", [quote(N), Dir, P]).
+attrs("") -> "";
+attrs(Label) -> [" [", Label, "]"].
 
-quote(N) -> io_lib:format("\"~w\"", [N]).
+hold_label(0, _) -> "";
+hold_label(H, "") -> io_lib:format("label=\"h ~w\"", [H]);
+hold_label(H, Sep) -> io_lib:format("~sh ~w", [Sep, H]).
+
+priority_label(P, 0) -> integer_to_list(P);
+priority_label(P, H) -> [integer_to_list(P), hold_label(H, " ")].
+
+out_port({N, P}) -> [quote(N), ":", port_id(out, P), ":e"].
+in_port({N, P}) -> [quote(N), ":", port_id(in, P), ":w"].
+
+port_id(Dir, P) -> io_lib:format("~s_~s", [Dir, word(P)]).
+
+id(Kind, {N, P}) -> [$", escape(lists:flatten(io_lib:format("~s:~w/~w", [Kind, N, P]))), $"].
+
+quote(N) -> [$", escape(atom_to_list(N)), $"].
+
+escape(S) -> lists:flatmap(fun($") -> "\\\""; ($\\) -> "\\\\"; (C) -> [C] end, S).
+
+%% Port names must be plain words; atoms need not be, and are then written
+%% in hex.
+word(A) ->
+    S = atom_to_list(A),
+    case re:run(S, "^[A-Za-z_][A-Za-z0-9_]*$", [{capture, none}]) of
+        match -> S;
+        nomatch -> ["x", binary:encode_hex(atom_to_binary(A))]
+    end.
+
+html(A) when is_atom(A) ->
+    lists:flatmap(fun($<) -> "&lt;"; ($>) -> "&gt;"; ($&) -> "&amp;"; ($") -> "&quot;"; (C) -> [C] end,
+                  atom_to_list(A)).

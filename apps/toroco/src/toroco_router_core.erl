@@ -94,6 +94,10 @@ sources(#core{by_idx = ByIdx}) -> tuple_to_list(ByIdx).
 
 %% @doc The inspection view of SPEC §6 (lists in priority order).
 -spec info(core(), integer()) -> map().
+info(C = #core{next = Next}, Now) when Next =< Now ->
+    %% as of Now, even if the shell's timer has not fired yet
+    {C1, _} = expire(Now, C),
+    info(C1, Now);
 info(C = #core{srcs = Srcs, top = Top, last = Last}, Now) ->
     Order = sources(C),
     #{sources => Order,

@@ -19,7 +19,8 @@ groups() ->
                         burst_arrives_complete_and_in_order, two_inputs_are_independent]},
      {inputs, [], [idle_on_last_hold_end_not_at_wiring, buffer_latest_keeps_mailbox_bounded]},
      {inhibition, [], [inhibitor_silences_output_everywhere, inhibition_ends_holds,
-                       set_while_inhibited_reenters_on_release, mutual_pair_first_holder_wins,
+                       set_while_inhibited_reenters_on_release, timed_inhibition_ends,
+                       mutual_pair_first_holder_wins,
                        mutual_pair_wired_while_both_hold, inhibitor_that_only_sends_inhibits_nothing]},
      {wiring, [], [wiring_delivers_latched_winner, rewire_keeps_state_of_sources_that_stay,
                    empty_list_unwires, reset_restarts_from_init]}].
@@ -278,6 +279,27 @@ set_while_inhibited_reenters_on_release(_) ->
     #{outputs := #{out := #{latch := {value, turn2}, inhibited := true}}} = toroco:inspect(hi),
     ok = toroco:inject({i, out}, x, #{hold => 0}),
     await_values(a, [fwd, turn2]).
+
+timed_inhibition_ends() ->
+    [{doc, "An inhibitor's timed hold ends by itself; the output is free again and inspect shows the countdown."}].
+timed_inhibition_ends(_) ->
+    ok = toroco:add_behavior(e, tb_relay, #{layer => 0}),
+    ok = toroco:add_behavior(i, tb_relay, #{layer => 1}),
+    actuator(a, [in]),
+    ok = toroco:set_inputs(a, #{in => [{e, out}]}),
+    ok = toroco:set_inhibitors(e, #{out => [{i, out}]}),
+    ok = toroco:inject({i, out}, on, #{hold => 300}),
+    #{outputs := #{out := #{inhibited := true, inhibitor_holds := [{{i, out}, Ms}]}}} = toroco:inspect(e),
+    true = Ms > 0 andalso Ms =< 300,
+    ok = toroco:inject({e, out}, during),
+    wait_until(fun() -> not inhibited(e, out) end, 2000),
+    ok = toroco:inject({e, out}, 'after'),
+    await_values(a, ['after']),
+    %% the gate is idle again, not spinning
+    {_, R1} = erlang:process_info(whereis(toroco_names:gate({e, out})), reductions),
+    timer:sleep(200),
+    {_, R2} = erlang:process_info(whereis(toroco_names:gate({e, out})), reductions),
+    true = R2 - R1 < 1000.
 
 mutual_pair_first_holder_wins() ->
     [{doc, "Two same-layer outputs inhibiting each other: the one whose hold started first wins."}].
