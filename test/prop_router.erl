@@ -567,7 +567,7 @@ postcondition(S, Call = {call, _, Fun, _}, {Ret, Obs}) ->
                   end,
     count(commands),
     case {returned(Ret), ExpectedRet} of
-        {R, R} -> agree(Want, Obs, 40);
+        {R, R} -> agree(Fun, Want, Obs, 40);
         {R, _} -> io:format("~n~p returned ~p~n", [Call, R]), false
     end.
 
@@ -575,16 +575,21 @@ returned(ok) -> ok;
 returned({error, {hierarchy, _}}) -> hierarchy;
 returned(Other) -> Other.
 
-%% The network may still be on its way (a restart): look again, bounded.
-agree(Want, Obs, Tries) when Want =:= Obs -> Tries >= 0;
-agree(Want, Obs, 0) ->
+%% The network may still be on its way: look again, bounded. Second looks
+%% are counted by command, and the first sight of each is logged.
+agree(_Fun, Want, Obs, Tries) when Want =:= Obs -> Tries >= 0;
+agree(_Fun, Want, Obs, 0) ->
     io:format("~nthe network disagrees with the model~n  model:   ~p~n  network: ~p~n",
               [Want, Obs]),
     false;
-agree(Want = #{history := H}, _Obs, Tries) ->
-    count(second_looks),
+agree(Fun, Want = #{history := H}, Obs, Tries) ->
+    case count({second_look, Fun}) of
+        1 -> io:format("~nfirst second look (~p):~n  model:   ~p~n  network: ~p~n",
+                       [Fun, Want, Obs]);
+        _ -> ok
+    end,
     _ = toroco_fake_actuator:await(?ACT, fun(Hist) -> [V || {_, V, _} <- Hist] =:= H end, 25),
-    agree(Want, observe(), Tries - 1).
+    agree(Fun, Want, observe(), Tries - 1).
 
 %% @doc The property: `numtests' sequences on networks built afresh each time.
 prop_network() ->
