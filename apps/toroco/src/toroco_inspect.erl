@@ -278,20 +278,29 @@ dot() ->
                      "color=red3, fontcolor=red3];~n", [id("I", Src)]),
        io_lib:format("  ~s -> ~s [arrowhead=none, color=red3];~n", [out_port(Src), id("I", Src)]),
        [io_lib:format("  ~s -> ~s [style=dashed, color=red3, arrowhead=tee~s];~n",
-                      [F, id("I", Src), hold_label(H, "")])
+                      [F, id("I", Src), case H of
+                                            0 -> "";
+                                            _ -> [", label=\"", hold(H), "\""]
+                                        end])
         || {Inh, H} <- Inhs, F <- From(Inh)]]
       || {Src, Inhs} <- Inhibited],
      %% Inputs: one source is a plain wire, several meet in a suppressor.
      [case Srcs of
           [{S, H}] ->
-              [io_lib:format("  ~s -> ~s~s;~n", [F, to(R, I), attrs(hold_label(H, ""))])
+              [io_lib:format("  ~s -> ~s~s;~n", [F, to(R, I), case H of
+                                                                 0 -> "";
+                                                                 _ -> [" [label=\"", hold(H), "\"]"]
+                                                             end])
                || F <- From(S)];
           _ ->
               [io_lib:format("  ~s [shape=circle, label=\"S\", width=0.25, fixedsize=true, "
                              "color=blue3, fontcolor=blue3];~n", [id("S", {R, I})]),
                io_lib:format("  ~s -> ~s [color=blue3];~n", [id("S", {R, I}), to(R, I)]),
-               [io_lib:format("  ~s -> ~s [color=blue3, label=\"~s\"];~n",
-                              [F, id("S", {R, I}), priority_label(P, H)])
+               [io_lib:format("  ~s -> ~s [color=blue3, label=\"~w~s\"];~n",
+                              [F, id("S", {R, I}), P, case H of
+                                                          0 -> "";
+                                                          _ -> [" ", hold(H)]
+                                                      end])
                 || {P, {S, H}} <- lists:zip(lists:seq(1, length(Srcs)), Srcs), F <- From(S)]]
       end
       || {{R, I}, #{sources := Srcs}} <- Inputs, Srcs =/= []],
@@ -329,15 +338,9 @@ box(N, #{kind := Kind, module := M, layer := L, inputs := Ins, outputs := Outs})
 to(R, '$reset') -> [quote(R), ":name:n [style=dotted, label=\"reset\"]"];
 to(R, I) -> in_port({R, I}).
 
-attrs("") -> "";
-attrs(Label) -> [" [", Label, "]"].
-
-hold_label(0, _) -> "";
-hold_label(H, "") -> io_lib:format("label=\"h ~w\"", [H]);
-hold_label(H, Sep) -> io_lib:format("~sh ~w", [Sep, H]).
-
-priority_label(P, 0) -> integer_to_list(P);
-priority_label(P, H) -> [integer_to_list(P), hold_label(H, " ")].
+%% A wiring entry's hold, as the edge label shows it.
+hold(infinity) -> "h inf";
+hold(H) -> ["h ", integer_to_list(H)].
 
 out_port({N, P}) -> [quote(N), ":", port_id(out, P), ":e"].
 in_port({N, P}) -> [quote(N), ":", port_id(in, P), ":w"].

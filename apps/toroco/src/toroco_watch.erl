@@ -1,85 +1,235 @@
 %% @doc `toroco:watch/2': a bounded live trace of deliveries, safe on a running
-%% robot (the limits of recon_trace are the model).
+%% robot (recon_trace's limits are the model).
 %%
-%% One watcher process at a time traces the `receive' events of the watched
-%% behavior or device and prints each input delivery to the group leader of the
-%% caller. It stops by itself after `max' deliveries (default 100), after
-%% `seconds' (default 60), or as soon as deliveries come faster than `rate' per
-%% second (default 50), and says why it stopped.
+%% One watcher process at a time (registered as `toroco_watch') traces the
+%% messages the watched behavior or device receives and prints each input
+%% delivered to it, `{Receiver, Input}' or every input of a `Receiver', to
+%% the group leader of the caller (in a remote shell, that shell):
+%% ```
+%% 1.204 s  motors.setvel <- {80,80}
+%% '''
+%% It stops by itself, and says why, at the first of these limits:
+%% <ul>
+%% <li>`max' deliveries printed (default 100);</li>
+%% <li>`seconds' since the start (default 60);</li>
+%% <li>more than `rate' deliveries within one second (default 50): a flood is
+%%     not printed, the watch stops instead;</li>
+%% <li>the shell it prints to going away.</li>
+%% </ul>
+%% `toroco:unwatch()' stops it earlier; a new watch replaces the running one.
+%% A receiver that restarts is traced again under its new pid. Other
+%% options: `io' (an io device to print to instead of the group leader) and
+%% `notify' (a pid that gets `{toroco_watch, stopped, {Why, Printed}}' with
+%% `Why' one of `max', `seconds', `rate', `io_gone', `unwatch').
+%%
+%% Tracing uses the BEAM's tracer slot of the receiver's process: if
+%% something else (dbg, recon) already traces it, the watch is refused with
+%% `{error, {already_traced, Name}}'.
 -module(toroco_watch).
 
 -export([start/2, stop/0]).
+-export_type([opts/0, why/0]).
+
+-type opts() :: #{max => pos_integer(), seconds => number(), rate => pos_integer(),
+                  io => io:device(), notify => pid()}.
+-type why() :: max | seconds | rate | io_gone | unwatch.
 
 -define(NAME, toroco_watch).
+-define(DEFAULTS, #{max => 100, seconds => 60, rate => 50}).
+-define(DEPTH, 12).
+%% How often a watcher whose receiver went down looks for its restart.
+-define(REATTACH_MS, 20).
 
--spec start(atom() | {atom(), atom()}, map()) -> ok | {error, term()}.
+-record(w, {name :: atom(),
+            input :: atom() | all,
+            pid :: pid() | undefined,
+            mon :: reference() | undefined,
+            io :: io:device(),
+            notify :: pid() | undefined,
+            max :: pos_integer(),
+            rate :: pos_integer(),
+            start :: integer(),
+            count = 0 :: non_neg_integer(),
+            window = 0 :: integer(),
+            in_window = 0 :: non_neg_integer()}).
+
+%%====================================================================
+%% API
+%%====================================================================
+
+-spec start(atom() | {atom(), atom()}, opts()) -> ok | {error, term()}.
 start(What, Opts) when is_map(Opts) ->
-    {Name, Input} = case What of
-                        {N, I} -> {N, I};
-                        N -> {N, all}
-                    end,
-    case whereis(toroco_names:node(Name)) of
-        undefined when is_atom(Name) -> {error, {not_running, Name}};
-        undefined -> {error, {bad_watch, What}};
-        Pid ->
-            stop(),
-            Limits = #{max => maps:get(max, Opts, 100), seconds => maps:get(seconds, Opts, 60),
-                       rate => maps:get(rate, Opts, 50), out => group_leader(),
-                       notify => maps:get(notify, Opts, undefined)},
-            Caller = self(),
-            {W, Ref} = spawn_monitor(fun() -> watcher(Caller, Pid, Name, Input, Limits) end),
-            receive
-                {W, tracing} -> erlang:demonitor(Ref, [flush]), ok;
-                {'DOWN', Ref, process, W, Reason} -> {error, {watch_failed, Reason}}
-            end
+    case {target(What), options(Opts)} of
+        {{ok, Name, Input}, {ok, O}} ->
+            case whereis(toroco_names:node(Name)) of
+                undefined -> {error, {not_running, Name}};
+                Pid -> launch(Name, Input, Pid, O)
+            end;
+        {{error, _} = Err, _} -> Err;
+        {_, {error, _} = Err} -> Err
     end;
 start(What, Opts) ->
     {error, {bad_option, {What, Opts}}}.
 
+%% @doc Stops the running watch, if any; returns once its tracing is off.
 -spec stop() -> ok.
 stop() ->
     case whereis(?NAME) of
         undefined -> ok;
         Pid ->
             Ref = erlang:monitor(process, Pid),
-            Pid ! stop,
+            Pid ! {?NAME, stop},
             receive {'DOWN', Ref, process, Pid, _} -> ok end
     end.
 
-watcher(Caller, Pid, Name, Input, Limits = #{seconds := Secs}) ->
-    register(?NAME, self()),
-    erlang:trace(Pid, true, ['receive', {tracer, self()}]),
-    Caller ! {self(), tracing},
-    erlang:send_after(Secs * 1000, self(), timeout),
-    Start = erlang:monotonic_time(millisecond),
-    loop(Pid, Name, Input, Limits, 0, Start).
+%%====================================================================
+%% Checking the request
+%%====================================================================
 
-loop(Pid, Name, Input, Limits = #{max := Max, rate := Rate, out := Out}, Count, Start) ->
-    receive
-        {trace, Pid, 'receive', Msg} ->
-            case delivery(Msg) of
-                {I, V} when Input =:= all; I =:= Input ->
-                    Now = erlang:monotonic_time(millisecond),
-                    io:format(Out, "~w ms  ~w.~w <- ~tp~n", [Now - Start, Name, I, V]),
-                    C = Count + 1,
-                    Elapsed = max(1, Now - Start),
-                    if C >= Max -> done(Pid, Limits, {max, C});
-                       C > 10, C * 1000 / Elapsed > Rate -> done(Pid, Limits, {rate, C});
-                       true -> loop(Pid, Name, Input, Limits, C, Start)
-                    end;
-                _ -> loop(Pid, Name, Input, Limits, Count, Start)
+target({Name, Input}) when is_atom(Name), is_atom(Input) ->
+    case toroco_wiring:call({node, Name}) of
+        {ok, #{inputs := Ins}} ->
+            case lists:member(Input, Ins) of
+                true -> {ok, Name, Input};
+                false -> {error, {unknown_input, {Name, Input}}}
             end;
-        {trace, _, _, _} -> loop(Pid, Name, Input, Limits, Count, Start);
-        timeout -> done(Pid, Limits, {seconds, Count});
-        stop -> done(Pid, Limits, {stopped, Count})
+        {error, _} = Err -> Err
+    end;
+target(Name) when is_atom(Name) ->
+    case toroco_wiring:call({node, Name}) of
+        {ok, _} -> {ok, Name, all};
+        {error, _} = Err -> Err
+    end;
+target(Other) ->
+    {error, {bad_watch, Other}}.
+
+options(Opts) ->
+    O = maps:merge(?DEFAULTS, Opts),
+    case [{K, V} || {K, V} <- lists:sort(maps:to_list(O)), not option(K, V)] of
+        [] -> {ok, O};
+        [Bad | _] -> {error, {bad_option, Bad}}
+    end.
+
+option(max, V) -> is_integer(V) andalso V > 0;
+option(rate, V) -> is_integer(V) andalso V > 0;
+option(seconds, V) -> is_number(V) andalso V > 0;
+option(io, V) -> is_pid(V) orelse is_atom(V);
+option(notify, V) -> is_pid(V);
+option(_, _) -> false.
+
+%%====================================================================
+%% The watcher
+%%====================================================================
+
+launch(Name, Input, Pid, O) ->
+    stop(),
+    Io = maps:get(io, O, group_leader()),
+    Caller = self(),
+    {W, Ref} = spawn_monitor(fun() -> init(Caller, Name, Input, Pid, Io, O) end),
+    receive
+        {W, tracing} -> erlang:demonitor(Ref, [flush]), ok;
+        {W, {error, _} = Err} -> erlang:demonitor(Ref, [flush]), Err;
+        {'DOWN', Ref, process, W, Reason} -> {error, {watch_failed, Reason}}
+    end.
+
+init(Caller, Name, Input, Pid, Io, O = #{seconds := Secs}) ->
+    true = register(?NAME, self()),
+    _ = is_pid(Io) andalso erlang:monitor(process, Io),
+    Now = erlang:monotonic_time(millisecond),
+    S = #w{name = Name, input = Input, io = Io, notify = maps:get(notify, O, undefined),
+           max = maps:get(max, O), rate = maps:get(rate, O), start = Now, window = Now},
+    case attach(Pid, S) of
+        {ok, S1} ->
+            Caller ! {self(), tracing},
+            erlang:send_after(round(Secs * 1000), self(), {?NAME, seconds}),
+            loop(S1);
+        {error, _} = Err ->
+            Caller ! {self(), Err}
+    end.
+
+attach(Pid, S = #w{name = Name}) ->
+    Mon = erlang:monitor(process, Pid),
+    try erlang:trace(Pid, true, ['receive', monotonic_timestamp, {tracer, self()}]) of
+        _ -> {ok, S#w{pid = Pid, mon = Mon}}
+    catch error:badarg ->
+            erlang:demonitor(Mon, [flush]),
+            case is_process_alive(Pid) of
+                true -> {error, {already_traced, Name}};
+                false -> {error, {not_running, Name}}
+            end
+    end.
+
+loop(S = #w{pid = Pid, mon = Mon, io = Io}) ->
+    receive
+        {trace_ts, Pid, 'receive', Msg, Ts} ->
+            delivered(delivery(Msg), Ts, S);
+        {trace_ts, _, _, _, _} ->
+            loop(S);
+        {'DOWN', Mon, process, Pid, Reason} ->
+            say(S, "watch: ~w went down (~tW)~n", [S#w.name, Reason, 4]),
+            erlang:send_after(?REATTACH_MS, self(), {?NAME, reattach}),
+            loop(S#w{pid = undefined, mon = undefined});
+        {?NAME, reattach} when Pid =:= undefined ->
+            reattach(S);
+        {'DOWN', _, process, Io, _} ->
+            done(S, io_gone);
+        {?NAME, seconds} ->
+            done(S, seconds);
+        {?NAME, stop} ->
+            done(S, unwatch);
+        _ ->
+            loop(S)
+    end.
+
+reattach(S = #w{name = Name}) ->
+    case whereis(toroco_names:node(Name)) of
+        undefined ->
+            erlang:send_after(?REATTACH_MS, self(), {?NAME, reattach}),
+            loop(S);
+        Pid ->
+            case attach(Pid, S) of
+                {ok, S1} ->
+                    say(S1, "watch: ~w is back~n", [Name]),
+                    loop(S1);
+                {error, Why} ->
+                    say(S, "watch: cannot trace ~w again: ~tw~n", [Name, Why]),
+                    done(S, unwatch)
+            end
     end.
 
 delivery({'$toroco_in', I, V}) -> {I, V};
-delivery({'$toroco_in', I, V, _}) -> {I, V};
+delivery({'$toroco_in', I, V, _Router}) -> {I, V};
 delivery(_) -> other.
 
-done(Pid, #{out := Out, notify := Notify}, Why) ->
-    catch erlang:trace(Pid, false, ['receive']),
-    io:format(Out, "watch stopped: ~w~n", [Why]),
-    _ = is_pid(Notify) andalso (Notify ! {toroco_watch, stopped, Why}),
+delivered({I, V}, Ts, S = #w{input = Input}) when Input =:= all; I =:= Input ->
+    Ms = erlang:convert_time_unit(Ts, native, millisecond),
+    S1 = #w{count = C, in_window = InW, rate = Rate, max = Max} = tick(Ms, S),
+    if InW > Rate ->
+           done(S1, rate);
+       true ->
+           say(S1, "~.3f s  ~w.~w <- ~9999tP~n", [(Ms - S1#w.start) / 1000, S1#w.name, I, V, ?DEPTH]),
+           case C + 1 of
+               Max -> done(S1#w{count = Max}, max);
+               C1 -> loop(S1#w{count = C1})
+           end
+    end;
+delivered(_, _Ts, S) ->
+    loop(S).
+
+%% Deliveries are counted in one-second windows from the start.
+tick(Ms, S = #w{window = W, in_window = N}) when Ms - W < 1000 ->
+    S#w{in_window = N + 1};
+tick(Ms, S = #w{start = Start}) ->
+    S#w{window = Ms - (Ms - Start) rem 1000, in_window = 1}.
+
+done(S = #w{pid = Pid, count = C, notify = Notify}, Why) ->
+    _ = is_pid(Pid) andalso (catch erlang:trace(Pid, false, ['receive'])),
+    Why =/= io_gone andalso say(S, "watch stopped: ~w after ~w deliveries~n", [Why, C]),
+    _ = is_pid(Notify) andalso (Notify ! {?NAME, stopped, {Why, C}}),
     ok.
+
+say(#w{io = Io}, Fmt, Args) ->
+    try io:format(Io, Fmt, Args) of
+        ok -> true
+    catch _:_ -> false
+    end.
