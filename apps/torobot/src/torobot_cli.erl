@@ -1,0 +1,61 @@
+%% @doc The Erlang side of `scripts/run': runs one world with
+%% `torobot_sim', prints the live status and the summary, and ends the node
+%% with an exit status.
+%%
+%% Output (stdout): a status line each simulated second (rewritten in place
+%% on a terminal), the path of the SVG, and the summary as one JSON object
+%% on the last line. Exit status 0 after a run, 1 when the run failed, 2
+%% for a bad world or wiring file; the reason goes to stderr.
+-module(torobot_cli).
+
+-export([main/1, format_error/1]).
+
+%% @doc `[WorldFile, SvgFile, Status, WiringFile]', as `erl -run' passes
+%% them; `Status' is `tty' (rewrite one line) or `lines'. Never returns.
+-spec main([string()]) -> no_return().
+main([World, Svg, Status, Wiring]) ->
+    Opts = #{svg => Svg, wiring => Wiring,
+             status => case Status of
+                           "tty" -> tty;
+                           _ -> true
+                       end},
+    case torobot_sim:run(World, Opts) of
+        {ok, Summary} ->
+            io:format("svg: ~ts~n~s~n", [Svg, torobot_sim:summary_json(Summary)]),
+            halt(0);
+        {error, {Kind, _, _} = Reason} when Kind =:= world; Kind =:= wiring ->
+            io:format(standard_error, "torobot: ~ts~n", [format_error(Reason)]),
+            halt(2);
+        {error, Reason} ->
+            io:format(standard_error, "torobot: ~ts~n", [format_error(Reason)]),
+            halt(1)
+    end;
+main(Args) ->
+    io:format(standard_error, "torobot: bad arguments ~p~n", [Args]),
+    halt(2).
+
+%% @doc A one-line human reading of a `torobot_sim:run/2' error.
+-spec format_error(term()) -> unicode:chardata().
+format_error({world, File, {file, Why}}) ->
+    io_lib:format("cannot read world file ~ts: ~ts", [File, file_reason(Why)]);
+format_error({world, File, Reason}) ->
+    io_lib:format("bad world file ~ts: ~ts", [File, world_reason(Reason)]);
+format_error({wiring, File, Why}) ->
+    io_lib:format("cannot read wiring file ~ts: ~ts", [File, file_reason(Why)]);
+format_error(Reason) ->
+    io_lib:format("the run failed: ~0p", [Reason]).
+
+file_reason({Line, Module, Desc}) when is_integer(Line) ->
+    io_lib:format("line ~b: ~ts", [Line, Module:format_error(Desc)]);
+file_reason(Posix) when is_atom(Posix) ->
+    file:format_error(Posix);
+file_reason(Other) ->
+    io_lib:format("~0p", [Other]).
+
+world_reason({bad_term, Term}) -> io_lib:format("bad term ~0p", [Term]);
+world_reason({duplicate, Term}) -> io_lib:format("~0p given twice", [Term]);
+world_reason({missing, Key}) -> io_lib:format("no ~s term", [Key]);
+world_reason({outside_arena, Term}) -> io_lib:format("~0p lies outside the arena", [Term]);
+world_reason({blocked_start, Robot, Obstacle}) ->
+    io_lib:format("~0p starts overlapping ~0p", [Robot, Obstacle]);
+world_reason(Other) -> io_lib:format("~0p", [Other]).

@@ -1,0 +1,195 @@
+%% The Torobot in its simulated worlds (test/worlds/*.world): each case runs
+%% the shipped wiring (config/torobot.wiring) on the real runtime and
+%% devices through torobot_sim, in real time, and checks the run's summary.
+%% The cases run one after another: each run starts and stops the
+%% applications, and one node holds one network. Summaries are logged (and
+%% put in each case's comment), the SVG of each run is in the case's
+%% priv_dir.
+-module(torobot_scenarios_SUITE).
+
+-include_lib("common_test/include/ct.hrl").
+-include_lib("stdlib/include/assert.hrl").
+
+-compile([export_all, nowarn_export_all]).
+
+suite() ->
+    [{timetrap, {minutes, 2}}].
+
+all() ->
+    [empty_arena, red_in_view, blue_on_path, blue_near_wall, blue_near_wall_without_holds,
+     red_behind_blue, red_follower_crashing].
+
+init_per_suite(Config) ->
+    Root = root(),
+    [{root, Root}, {wiring, filename:join([Root, "config", "torobot.wiring"])} | Config].
+
+end_per_suite(_Config) ->
+    ok.
+
+init_per_testcase(_Case, Config) ->
+    Config.
+
+end_per_testcase(_Case, _Config) ->
+    _ = persistent_term:erase(torobot_crashes),
+    ok.
+
+%%====================================================================
+%% Cases
+%%====================================================================
+
+empty_arena() ->
+    [{doc, "Forward and the IR avoids alone roam an empty arena for a minute without "
+      "touching a wall."}].
+empty_arena(Config) ->
+    {Summary, World} = run("empty.world", Config),
+    ?assertEqual(0, maps:get(wall_contacts, Summary)),
+    ?assertEqual(none, maps:get(red_touched_ms, Summary)),
+    %% it roams, it does not stand still or spin in place
+    ?assert(maps:get(distance_m, Summary) > 5.0),
+    ?assert(won(World, [hold_left, hold_right, avoid_left, avoid_right])).
+
+red_in_view() ->
+    [{doc, "A red ball in view is charged and touched within 30 s, hitting no wall."}].
+red_in_view(Config) ->
+    {Summary, World} = run("red_in_view.world", Config),
+    #{red_touched_ms := Red, wall_contacts := Walls} = Summary,
+    ?assert(is_integer(Red) andalso Red =< 30000),
+    ?assertEqual(0, Walls),
+    ?assert(won(World, [red_follower])).
+
+blue_on_path() ->
+    [{doc, "A blue ball on the path is steered around: neither it nor a wall is touched."}].
+blue_on_path(Config) ->
+    {Summary, World} = run("blue_on_path.world", Config),
+    ?assertMatch(#{blue_contacts := 0, wall_contacts := 0}, Summary),
+    ?assert(won(World, [trq_ignore])).
+
+blue_near_wall() ->
+    [{doc, "Blue close to a wall on an oblique approach: the holds keep the avoid's turn "
+      "while blue is seen, and neither the ball nor the wall is touched."}].
+blue_near_wall(Config) ->
+    {Summary, World} = run("blue_near_wall.world", Config),
+    ?assertMatch(#{blue_contacts := 0, wall_contacts := 0}, Summary),
+    ?assert(won(World, [hold_left, hold_right])).
+
+blue_near_wall_without_holds() ->
+    [{doc, "The same world with the hold modules taken out of the wiring hits the wall: "
+      "the holds are what blue_near_wall checks."}].
+blue_near_wall_without_holds(Config) ->
+    Wiring = without_holds(Config),
+    {Summary, _World} = run("blue_near_wall.world", [{wiring, Wiring} | Config]),
+    ?assert(maps:get(wall_contacts, Summary) + maps:get(blue_contacts, Summary) > 0).
+
+red_behind_blue() ->
+    [{doc, "Red hidden behind blue at the start: the robot steers away from blue, sees red "
+      "once off the line, and touches it."}].
+red_behind_blue(Config) ->
+    {Summary, World} = run("red_behind_blue.world", Config),
+    ?assert(is_integer(maps:get(red_touched_ms, Summary))),
+    ?assertEqual(0, maps:get(wall_contacts, Summary)),
+    ?assert(won(World, [trq_ignore])).
+
+red_follower_crashing() ->
+    [{doc, "A red_follower that crashes every 2 s while it sees red: it is restarted, its "
+      "layer is taken out in the end, and the layers below go on avoiding walls."}].
+red_follower_crashing(Config) ->
+    Crashes = counters:new(1, []),
+    persistent_term:put(torobot_crashes, Crashes),
+    Wiring = with_module(red_follower, torobot_crashing_follower, Config),
+    %% each second of the run, note whether red_follower's layer is out
+    Self = self(),
+    Watch = fun(TimeS) -> Self ! {layers_out, TimeS, maps:get(removed_layers, toroco:inspect())} end,
+    {Summary, World} = run("red_crashing.world", [{wiring, Wiring}, {each_second, Watch} | Config]),
+    N = counters:get(Crashes, 1),
+    Out = [T || {T, Removed} <- flush_layers_out(), lists:member(4, Removed)],
+    Tags = [{T, Tag} || {T, _, _, Tag} <- torobot_world:trajectory(World)],
+    ct:log("red_follower crashed ~b times; its layer out from ~p s", [N, first(Out)]),
+    %% it crashed, was restarted (won the motors again after a crash), and
+    %% its layer was taken out in the end
+    ?assert(N >= 2),
+    ?assert(lists:any(fun({T, Tag}) -> T > 2500 andalso Tag =:= red_follower end, Tags)),
+    ?assertNotEqual(none, first(Out)),
+    %% the layers below carried on: no wall touched, and the avoids turned
+    %% the robot after the first crash
+    ?assertEqual(0, maps:get(wall_contacts, Summary)),
+    ?assert(lists:any(fun({T, Tag}) -> T > 2000 andalso
+                                           lists:member(Tag, [avoid_left, avoid_right,
+                                                              hold_left, hold_right])
+                      end, Tags)),
+    ct:comment("~s; ~b crashes, layer out at ~p s; red ~s",
+               [torobot_sim:summary_json(Summary), N, first(Out),
+                case maps:get(red_touched_ms, Summary) of
+                    none -> "not reached";
+                    _ -> "reached"
+                end]).
+
+flush_layers_out() ->
+    receive {layers_out, T, Removed} -> [{T, Removed} | flush_layers_out()]
+    after 0 -> []
+    end.
+
+first([]) -> none;
+first([X | _]) -> X.
+
+%%====================================================================
+%% Helpers
+%%====================================================================
+
+run(WorldName, Config) ->
+    Root = ?config(root, Config),
+    World = filename:join([Root, "test", "worlds", WorldName]),
+    Svg = filename:join(?config(priv_dir, Config), filename:rootname(WorldName) ++ ".svg"),
+    EachSecond = proplists:get_value(each_second, Config, fun(_) -> ok end),
+    Second = counters:new(1, []),
+    Status = fun(Line) ->
+                     ct:log("~s", [Line]),
+                     counters:add(Second, 1, 1),
+                     EachSecond(counters:get(Second, 1))
+             end,
+    Opts = #{wiring => ?config(wiring, Config), svg => Svg, status => Status},
+    {ok, Final} = torobot_sim:simulate(World, Opts),
+    Summary = torobot_world:summary(Final),
+    Json = torobot_sim:summary_json(Summary),
+    ct:pal("~s: ~s (winners: ~p)", [WorldName, Json, winners(Final)]),
+    ct:comment("~s", [Json]),
+    {Summary, Final}.
+
+%% Whether one of Tags won the motors at some tick of the run.
+won(World, Tags) ->
+    lists:any(fun(Tag) -> lists:member(Tag, Tags) end, winners(World)).
+
+winners(World) ->
+    lists:usort([Tag || {_, _, _, Tag} <- torobot_world:trajectory(World)]).
+
+%% The shipped wiring with the hold modules taken out.
+without_holds(Config) ->
+    {ok, Terms} = file:consult(?config(wiring, Config)),
+    Holds = [hold_left, hold_right],
+    Kept = [strip_holds(T, Holds) || T <- Terms,
+                                     not lists:member(element(2, T), Holds)],
+    write_terms("without_holds.wiring", Kept, Config).
+
+strip_holds({inputs, motors, #{setvel := #{sources := Srcs} = In} = Ins}, Holds) ->
+    {inputs, motors, Ins#{setvel := In#{sources := [S || S <- Srcs,
+                                                        not lists:member(element(1, S), Holds)]}}};
+strip_holds(Term, _Holds) ->
+    Term.
+
+%% The shipped wiring with behavior Name running Module instead.
+with_module(Name, Module, Config) ->
+    {ok, Terms} = file:consult(?config(wiring, Config)),
+    Swapped = [case T of
+                   {behavior, Name, _, Opts} -> {behavior, Name, Module, Opts};
+                   _ -> T
+               end || T <- Terms],
+    write_terms(atom_to_list(Module) ++ ".wiring", Swapped, Config).
+
+write_terms(FileName, Terms, Config) ->
+    File = filename:join(?config(priv_dir, Config), FileName),
+    ok = file:write_file(File, [io_lib:format("~tp.~n", [T]) || T <- Terms]),
+    File.
+
+%% The project's root: this file is apps/torobot/test/ in it.
+root() ->
+    Source = proplists:get_value(source, ?MODULE:module_info(compile)),
+    filename:dirname(filename:dirname(filename:dirname(filename:dirname(Source)))).
