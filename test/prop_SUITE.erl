@@ -84,9 +84,7 @@ network_matches_model(_Config) ->
         ct:pal("timed inhibitor holds are not left to expire in this run: "
                "toroco_gate_core does not come back from the end of one "
                "(see gate_core_matches_oracle)"),
-    ct:pal("inhibitors are not switched while a wired member holds by a send: "
-           "see gate_attach_keeps_send_hold"),
-    check(prop_router:prop_network(#{gate_timed => GateTimed}), 500, 60).
+    check(prop_router:prop_network(#{gate_timed => GateTimed, regate_keeps_send_holds => true}), 500, 60).
 
 gate_attach_keeps_send_hold() ->
     [{doc, "Attaching an inhibitor that does not hold leaves the member's send hold at "

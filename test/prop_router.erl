@@ -365,9 +365,14 @@ m_set_inputs(S = #{router := R0}, W, Idle) ->
     m_router(S#{router := R, wiring := W},
              {rewire, Srcs, #{idle => IdleL}, Synced, Fresh}).
 
-%% `[]' stops the router: nothing more reaches the actuator on that input.
-m_unwire(S) ->
-    S#{router := undefined, wiring := []}.
+%% `[]' stops the router: its sources all let go first (a holder letting go
+%% delivers the idle value), then nothing more reaches the actuator there.
+m_unwire(S = #{router := undefined}) ->
+    S#{wiring := []};
+m_unwire(S = #{cfg := #{idle := Idle}}) ->
+    IdleL = case Idle of true -> {value, idle}; false -> none end,
+    S1 = m_router(S, {rewire, [], #{idle => IdleL}, [], []}),
+    S1#{router := undefined, wiring := []}.
 
 %% Attaching a gate: it takes the current latches; a member it inhibits is cut
 %% at the router, a free one keeps its state there.

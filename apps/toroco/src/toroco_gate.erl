@@ -88,8 +88,11 @@ handle_event(info, {'$toroco_gate', Src, Op}, _, D = #g{links = #{ups := Ups}}) 
 handle_event(info, {'$toroco_sub', Src, Reg}, _, D = #g{core = C, subs = Subs}) ->
     case lists:member(Src, toroco_gate_core:members(C)) of
         true ->
-            toroco_upstream:send(Reg, {'$toroco_state', gate, Src, self(),
-                                       toroco_gate_core:state_for(Src, C)}),
+            State = case toroco_gate_core:is_inhibited(Src, C) of
+                        true -> inhibited;
+                        false -> toroco_gate_core:state_for(Src, C)
+                    end,
+            toroco_upstream:send(Reg, {'$toroco_state', gate, Src, self(), State}),
             Regs = lists:usort([Reg | maps:get(Src, Subs, [])]),
             {keep_state, D#g{subs = Subs#{Src => Regs}}};
         false ->
@@ -108,7 +111,7 @@ handle_event(info, {'$toroco_hello', Tag, Src, Pid}, _, D = #g{links = L}) ->
 handle_event(info, {'$toroco_state', Tag, Src, Pid, Latch}, _, D = #g{links = L}) ->
     case {toroco_upstream:late_state(Tag, Src, Pid, Latch, L), Latch} of
         {{ok, L1}, {value, V}} -> step({op, Src, {set, V}}, D#g{links = L1});
-        {{ok, L1}, none} -> {keep_state, D#g{links = L1}};
+        {{ok, L1}, _NoLatch} -> {keep_state, D#g{links = L1}};
         {ignore, _} -> keep_state_and_data
     end;
 handle_event(info, {'DOWN', _, process, Pid, _}, _, D = #g{links = L}) ->
@@ -134,11 +137,11 @@ terminate(_Reason, _, #g{links = L, reg = Reg}) ->
 
 configure(#{members := Members, entries := Entries, upstreams := Ups, subs := Subs},
           D = #g{links = L, reg = Reg, subs = OldSubs}) ->
-    {L1, Synced, Fresh} = toroco_upstream:rewire(Ups, L, Reg),
+    {L1, Synced, Reset} = toroco_upstream:rewire(Ups, L, Reg),
     %% Keep subscribers that attached on their own; add the planned ones.
     Subs1 = maps:from_list([{M, lists:usort(maps:get(M, Subs, []) ++ maps:get(M, OldSubs, []))}
                             || M <- Members]),
-    D1 = run({rewire, Members, Entries, Synced, Fresh}, D#g{links = L1, subs = Subs1}),
+    D1 = run({rewire, Members, Entries, Synced, Reset}, D#g{links = L1, subs = Subs1}),
     timer(D1).
 
 step(Event, D) ->

@@ -15,7 +15,7 @@
 %% is the inspection view.
 -module(toroco_gate_core).
 
--export([new/0, handle/3, next_deadline/1, state_for/2, info/2, members/1]).
+-export([new/0, handle/3, next_deadline/1, state_for/2, is_inhibited/2, info/2, members/1]).
 -export_type([core/0]).
 
 -type source() :: {atom(), atom()}.
@@ -89,6 +89,14 @@ state_for(Member, #gate{members = Ms}) ->
     case Ms of
         #{Member := #member{inhibited = false, latch = L}} -> L;
         #{} -> none
+    end.
+
+%% @doc Whether `Member' is inhibited now.
+-spec is_inhibited(source(), core()) -> boolean().
+is_inhibited(Member, #gate{members = Ms}) ->
+    case Ms of
+        #{Member := #member{inhibited = I}} -> I;
+        #{} -> false
     end.
 
 -spec info(core(), integer()) -> #{source() => map()}.

@@ -17,7 +17,7 @@
 -module(toroco_router).
 -behaviour(gen_statem).
 
--export([start_link/1, child_spec/1, rewire/1, info/1]).
+-export([start_link/1, child_spec/1, rewire/1, unwire/1, info/1]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3]).
 
 -record(r, {key :: {atom(), atom()},
@@ -50,6 +50,14 @@ child_spec(Key) ->
 -spec rewire({atom(), atom()}) -> ok.
 rewire({R, I}) ->
     gen_statem:call(toroco_names:router(R, I), rewire, infinity).
+
+%% @doc The input is being unwired as a whole: drop every source (delivering
+%% `idle' if one held) before the router is stopped.
+-spec unwire({atom(), atom()}) -> ok.
+unwire({R, I}) ->
+    try gen_statem:call(toroco_names:router(R, I), unwire, 5000)
+    catch exit:_ -> ok
+    end.
 
 %% @doc The inspection view of the input (SPEC §6), or `none' if the router is
 %% not running.
@@ -111,6 +119,7 @@ handle_event(info, {'$toroco_hello', Tag, Src, Pid}, _, D = #r{links = L}) ->
     end;
 handle_event(info, {'$toroco_state', Tag, Src, Pid, Latch}, _, D = #r{links = L}) ->
     case toroco_upstream:late_state(Tag, Src, Pid, Latch, L) of
+        {ok, L1} when Latch =:= inhibited -> {keep_state, D#r{links = L1}};
         {ok, L1} -> step({sync, [{Src, Latch}]}, D#r{links = L1});
         ignore -> keep_state_and_data
     end;
@@ -123,6 +132,9 @@ handle_event(info, {'DOWN', _, process, Pid, _}, _, D = #r{links = L}) ->
 handle_event({call, From}, rewire, _, D = #r{key = Key}) ->
     {ok, Cfg} = toroco_wiring:lookup({router, Key}),
     {D1, Actions} = configure(Cfg, D),
+    {keep_state, D1, [{reply, From, ok} | Actions]};
+handle_event({call, From}, unwire, _, D) ->
+    {D1, Actions} = timer(run(unwire, D)),
     {keep_state, D1, [{reply, From, ok} | Actions]};
 handle_event({call, From}, info, _, D = #r{core = C, buffer = B}) ->
     Info = toroco_router_core:info(C, now_ms()),
@@ -143,9 +155,9 @@ terminate(_Reason, _, #r{links = L, reg = Reg}) ->
 
 configure(#{sources := Srcs, upstreams := Ups, buffer := B, idle := Idle},
           D = #r{links = L, reg = Reg}) ->
-    {L1, Synced, Fresh} = toroco_upstream:rewire(Ups, L, Reg),
+    {L1, Synced, Reset} = toroco_upstream:rewire(Ups, L, Reg),
     D1 = D#r{links = L1, buffer = B},
-    timer(run({rewire, Srcs, #{idle => Idle}, Synced, Fresh}, D1)).
+    timer(run({rewire, Srcs, #{idle => Idle}, Synced, Reset}, D1)).
 
 step(Event, D) ->
     steps([Event], D).

@@ -36,7 +36,8 @@
       | receiver_up
       | {rewire, [{source(), non_neg_integer() | infinity}], #{idle => latch()},
          Synced :: [{source(), latch()}], Reset :: [source()]}
-      | {sync, [{source(), latch()}]}.
+      | {sync, [{source(), latch()}]}
+      | unwire.
 
 -record(src, {idx :: pos_integer(),
               default = 0 :: non_neg_integer() | infinity,
@@ -75,6 +76,9 @@ handle({op, Src, Op}, Now, C = #core{srcs = Srcs}) ->
     end;
 handle(tick, _Now, C) ->
     {C, []};
+handle(unwire, Now, C = #core{idle = Idle}) ->
+    %% The whole input goes: a holder lets go of it, so `idle' is delivered.
+    handle({rewire, [], #{idle => Idle}, [], []}, Now, C);
 handle(receiver_up, _Now, C) ->
     repick(false, C#core{last = none}, []);
 handle({sync, Synced}, _Now, C = #core{top = Top0}) ->

@@ -16,7 +16,7 @@
 
 -type source() :: {atom(), atom()}.
 -type entry() :: {source(), {emitter | gate, atom()}}.
--type synced() :: {source(), pid() | undefined, toroco_router_core:latch()}.
+-type synced() :: {source(), pid() | undefined, toroco_router_core:latch() | inhibited}.
 -type upstream() :: {emitter | gate, atom()}.
 %% What a consumer knows of its upstreams: where each source comes from, the
 %% pid of the incarnation it currently listens to, and one monitor per pid.
@@ -34,7 +34,10 @@ new_links() -> #{ups => #{}, pids => #{}, mons => #{}}.
 %% @doc Moves the links to a new set of upstreams: unsubscribes from the
 %% sources that left (or whose upstream changed), subscribes to the new ones
 %% and waits for their latches. Returns the synced latches and the sources
-%% whose state starts afresh.
+%% whose state starts afresh: the new ones, and those that now come through a
+%% gate that inhibits them. A source that only moved between its emitter and
+%% a gate that lets it through keeps its hold (a gate that inhibits nothing
+%% changes nothing).
 -spec rewire(#{source() => upstream()}, links(), atom()) ->
           {links(), [{source(), toroco_router_core:latch()}], [source()]}.
 rewire(NewUps, Links = #{ups := OldUps}, MyReg) ->
@@ -46,7 +49,12 @@ rewire(NewUps, Links = #{ups := OldUps}, MyReg) ->
     L2 = lists:foldl(fun({S, Pid, _}, Acc) when is_pid(Pid) -> listen(S, Pid, Acc);
                         (_, Acc) -> Acc
                      end, L1, Synced),
-    {L2, [{S, Latch} || {S, _, Latch} <- Synced], [S || {S, _} <- Fresh]}.
+    Reset = [S || {S, _, Latch} <- Synced, Latch =:= inhibited orelse not maps:is_key(S, OldUps)],
+    {L2, [{S, latch(Latch)} || {S, _, Latch} <- Synced], Reset}.
+
+%% A gate answers `inhibited' for a member it holds back: no latch gets through.
+latch(inhibited) -> none;
+latch(Latch) -> Latch.
 
 %% @doc Unsubscribes from every upstream (the consumer is going away).
 -spec detach_all(links(), atom()) -> ok.
@@ -65,7 +73,7 @@ hello(Tag, Src, Pid, Links = #{ups := Ups}) ->
 %% @doc An answer to a subscription that came after the wait gave up on it.
 -spec late_state(emitter | gate, source(), pid(), toroco_router_core:latch(), links()) ->
           {ok, links()} | ignore.
-late_state(Tag, Src, Pid, _Latch, Links = #{ups := Ups, pids := Pids}) ->
+late_state(Tag, Src, Pid, _State, Links = #{ups := Ups, pids := Pids}) ->
     case {Ups, Pids} of
         {#{Src := {Tag, _}}, #{Src := _}} -> ignore;
         {#{Src := {Tag, _}}, #{}} -> {ok, listen(Src, Pid, Links)};

@@ -263,6 +263,7 @@ ensure(Kind, Key, Changed) ->
     end.
 
 stop(Kind, Key) ->
+    _ = Kind =:= router andalso toroco_router:unwire(Key),
     _ = supervisor:terminate_child(toroco_routers_sup, {Kind, Key}),
     _ = supervisor:delete_child(toroco_routers_sup, {Kind, Key}),
     ets:delete(?TABLE, {Kind, Key}).

@@ -180,7 +180,7 @@ two_inputs_are_independent(_) ->
 %%--------------------------------------------------------------------
 
 idle_on_last_hold_end_not_at_wiring() ->
-    [{doc, "idle is delivered when the last holder lets go, never at wiring time."}].
+    [{doc, "idle is delivered when the last holder lets go (unset, expiry, removal, unwiring), never at wiring time."}].
 idle_on_last_hold_end_not_at_wiring(_) ->
     two_sources({0, 0}),
     settle(a),
@@ -192,7 +192,10 @@ idle_on_last_hold_end_not_at_wiring(_) ->
     ok = toroco:inject({lo, out}, {20, 20}, #{latch => true}),
     await_values(a, [{50, 50}, {10, 10}, {0, 0}, {20, 20}]),
     ok = toroco:remove_behavior(lo),
-    await_values(a, [{50, 50}, {10, 10}, {0, 0}, {20, 20}, {0, 0}]).
+    await_values(a, [{50, 50}, {10, 10}, {0, 0}, {20, 20}, {0, 0}]),
+    ok = toroco:inject({hi, out}, {30, 30}, #{latch => true}),
+    ok = toroco:set_inputs(a, #{in => []}),              % unwiring the holder's input
+    await_values(a, [{50, 50}, {10, 10}, {0, 0}, {20, 20}, {0, 0}, {30, 30}, {0, 0}]).
 
 buffer_latest_keeps_mailbox_bounded() ->
     [{doc, "With buffer => latest a slow receiver gets the newest value and its mailbox stays small."}].
