@@ -244,15 +244,17 @@ duration(Ms) ->
 %%====================================================================
 
 %% @doc The wiring as a Graphviz `dot' graph, drawn as Brooks drew his
-%% networks: each behavior a box with its inputs on the left and its outputs
-%% on the right, grouped by layer (highest on top), devices in grey with
-%% rounded corners. A wire from an output to the one input it feeds is a
-%% plain arrow. Where an input has several sources, their wires meet in a
-%% blue suppressor node `S' whose incoming wires are numbered by priority
-%% (1 = highest; a wiring entry's hold is added, `h 500'). An inhibited
-%% output goes through a red inhibitor node `I' before it reaches anything,
-%% and each inhibitor's wire into it is dashed red with a flat end. A reset
-%% wire is dotted and ends on the behavior's name.
+%% networks: each behavior a box with its inputs on the left, its outputs on
+%% the right and its layer under its name; devices in grey with rounded
+%% corners. Wires run left to right, from sensors to actuators (a column per
+%% layer would stretch the picture without saying more than the labels). A
+%% wire from an output to the one input it feeds is a plain arrow. Where an
+%% input has several sources, their wires meet in a blue suppressor node `S'
+%% whose incoming wires are numbered by priority (1 = highest; a wiring
+%% entry's hold is added, `h 500'). An inhibited output goes through a red
+%% inhibitor node `I' before it reaches anything, and each inhibitor's wire
+%% into it is dashed red with a flat end. A reset wire is dotted and ends on
+%% the behavior's name. `toroco_ops:wiring_svg/1' renders it.
 -spec dot() -> iodata().
 dot() ->
     {W, _} = toroco_wiring:call(wiring),
@@ -269,7 +271,7 @@ dot() ->
                            false -> [out_port(Src)]
                        end end,
     ["digraph toroco {\n"
-     "  rankdir=LR; nodesep=0.3; ranksep=0.6; newrank=true;\n"
+     "  rankdir=LR; nodesep=0.25; ranksep=0.4;\n"
      "  node [fontname=\"Helvetica\", fontsize=10];\n"
      "  edge [fontname=\"Helvetica\", fontsize=9, arrowsize=0.7];\n",
      [["  ", box(N, Info), "\n"] || {N, Info} <- Nodes],
