@@ -182,15 +182,29 @@ section(Title, Header, Rows) ->
     ["\n", table([Title | Header], Rows)].
 
 %% Left-aligned columns two spaces apart; cells cut at ?CELL characters
-%% except in the last column.
+%% except in the last column. A cell `{lines, [Line]}' takes a line each,
+%% the other cells of its row stay on the first.
 table(Header, Rows) ->
-    Cut = [[cut(C) || C <- lists:droplast(Row)] ++ [lists:last(Row)] || Row <- Rows],
-    All = [Header | [[unicode:characters_to_list(C) || C <- Row] || Row <- Cut]],
+    All = [Header | lists:append([expand(Row) || Row <- Rows])],
     Widths = lists:foldl(fun(Row, Ws) -> [max(W, string:length(C)) || {W, C} <- lists:zip(Ws, Row)] end,
                          [0 || _ <- Header], All),
     [[string:trim(lists:join("  ", [string:pad(C, W) || {C, W} <- lists:zip(Row, Widths)]),
                   trailing), "\n"]
      || Row <- All].
+
+%% One table row as the lines it takes, each a list of cell strings.
+expand(Row) ->
+    N = length(Row),
+    Cells = [case {K, C} of
+                 {_, {lines, Ls}} -> [cut(L) || L <- Ls];
+                 {N, _} -> [unicode:characters_to_list(C)];
+                 _ -> [cut(C)]
+             end || {K, C} <- lists:zip(lists:seq(1, N), Row)],
+    Height = lists:max([length(C) || C <- Cells]),
+    [[case length(C) >= K of
+          true -> lists:nth(K, C);
+          false -> ""
+      end || C <- Cells] || K <- lists:seq(1, Height)].
 
 cut(Chars) ->
     S = unicode:characters_to_list(Chars),
@@ -217,14 +231,15 @@ names(Ns) -> lists:join(" ", [case N of
                                   S -> S
                               end || N <- Ns]).
 
+%% One line per source, in priority order.
 holds([]) -> "-";
-holds(Hs) -> lists:join(" ", [[source(S), "=", case Ms of
-                                                   infinity -> "inf";
-                                                   _ -> integer_to_list(Ms)
-                                               end] || {S, Ms} <- Hs]).
+holds(Hs) -> {lines, [[source(S), "=", case Ms of
+                                          infinity -> "inf";
+                                          _ -> integer_to_list(Ms)
+                                      end] || {S, Ms} <- Hs]}.
 
 latches([]) -> "-";
-latches(Ls) -> lists:join(" ", [[source(S), "=", value({value, V})] || {S, V} <- Ls]).
+latches(Ls) -> {lines, [[source(S), "=", value({value, V})] || {S, V} <- Ls]}.
 
 last({value, V}) -> value({value, V});
 last(none) -> "-".

@@ -164,14 +164,22 @@ top_shows_the_whole_network(_Config) ->
         [hd(string:lexemes(L, " ")) || L <- Lines, re:run(L, " (behavior|device) ") =/= nomatch],
     ["INPUT", "WINNER", "HOLDS", "(ms", "left)", "LATCHED", "LAST"] = row(Lines, "^INPUT "),
     %% b's send holds 60 s; lo's latch holds until unset.
-    ["a.in", "b.out", "b.out=" ++ Ms, "lo.out=inf", "lo.out=fwd", "stop"] = row(Lines, "^a\\.in "),
+    %% One line per holding or latched source, in priority order.
+    {["a.in", "b.out", "b.out=" ++ Ms, "lo.out=fwd", "stop"], [Next | _]} =
+        row_and_next(Lines, "^a\\.in "),
     true = list_to_integer(Ms) > 50000,
+    ["lo.out=inf"] = string:lexemes(Next, " "),
     ["b.in", "-", "-", "-", "{hold,stop,60000}"] = row(Lines, "^b\\.in "),
     ["b.in2", "-", "-", "-", "-"] = row(Lines, "^b\\.in2 "),
     ["INHIBITED", "OUTPUT", "BY", "LATCH"] = row(Lines, "^INHIBITED "),
     ["lo.out2", "inh.out", "-"] = row(Lines, "^lo\\.out2 "),
     ["a", "deliveries=2", "waiters=0"] = row(Lines, "^a +deliveries="),
     ["s", "script_steps_done=0", "script_steps_left=0"] = row(Lines, "^s +script").
+
+%% The cells of the one line matching Re, and the lines after it.
+row_and_next(Lines, Re) ->
+    Cells = row(Lines, Re),
+    {Cells, tl(lists:dropwhile(fun(L) -> re:run(L, Re, [{capture, none}]) =/= match end, Lines))}.
 
 %% The cells of the one line matching Re.
 row(Lines, Re) ->
