@@ -34,7 +34,7 @@ all() -> [random_faults_leave_the_robot_whole].
 %% allows (that taking-out is tested in toroco_lifecycle_SUITE), so the
 %% intensities are raised for this run.
 init_per_testcase(_, Config) ->
-    ok = application:load(toroco),
+    _ = application:load(toroco),
     [application:set_env(toroco, K, {100000, 1})
      || K <- [layer_restart_intensity, device_restart_intensity, router_restart_intensity]],
     {ok, _} = application:ensure_all_started(toroco_hw),
