@@ -172,11 +172,14 @@ interface(Kind, Name, Module, Args) ->
         Other -> Other
     end.
 
-start_node(Spec = #{kind := Kind, name := Name, layer := L}, S) ->
+start_node(Spec = #{kind := Kind, name := Name, layer := L, module := M}, S) ->
     {Sup, S1} = case Kind of
                     device -> {toroco_devices_sup, S};
                     behavior -> layer_sup(L, S)
                 end,
+    %% A later failed hot reload of the module can only be undone with the
+    %% object code kept from now.
+    ok = toroco_reload:remember(M),
     case supervisor:start_child(Sup, toroco_behavior:child_spec(Spec)) of
         {ok, _} -> {ok, S1};
         {ok, _, _} -> {ok, S1};
