@@ -92,6 +92,8 @@ output(Name, O, Inhibitors, Gates, Latches) ->
 -define(CELL, 40).
 %% Depth to which values are printed.
 -define(DEPTH, 8).
+%% Device counters wrap at this width.
+-define(COUNTERS_WIDTH, 90).
 %% How long top waits for a busy behavior to tell its state.
 -define(STATE_TIMEOUT, 500).
 
@@ -196,6 +198,7 @@ table(Header, Rows) ->
 expand(Row) ->
     N = length(Row),
     Cells = [case {K, C} of
+                 {N, {lines, Ls}} -> [unicode:characters_to_list(L) || L <- Ls];
                  {_, {lines, Ls}} -> [cut(L) || L <- Ls];
                  {N, _} -> [unicode:characters_to_list(C)];
                  _ -> [cut(C)]
@@ -244,8 +247,20 @@ latches(Ls) -> {lines, [[source(S), "=", value({value, V})] || {S, V} <- Ls]}.
 last({value, V}) -> value({value, V});
 last(none) -> "-".
 
+%% key=value pairs, as many on a line as fit in ?COUNTERS_WIDTH characters.
 counters(C) ->
-    lists:join(" ", [[text(K), "=", show(V, 6)] || {K, V} <- lists:sort(maps:to_list(C))]).
+    Pairs = [unicode:characters_to_list([text(K), "=", show(V, 6)])
+             || {K, V} <- lists:sort(maps:to_list(C))],
+    {lines, [lists:join(" ", Line) || Line <- fill(Pairs, [], 0, [])]}.
+
+fill([], [], _, Lines) -> lists:reverse(Lines);
+fill([], Line, _, Lines) -> lists:reverse([lists:reverse(Line) | Lines]);
+fill([P | Ps], [], _, Lines) -> fill(Ps, [P], string:length(P), Lines);
+fill([P | Ps], Line, Len, Lines) ->
+    case Len + 1 + string:length(P) > ?COUNTERS_WIDTH of
+        true -> fill([P | Ps], [], 0, [lists:reverse(Line) | Lines]);
+        false -> fill(Ps, [P | Line], Len + 1 + string:length(P), Lines)
+    end.
 
 %% A value on one line, strings as strings, cut at depth `Depth'.
 show(V, Depth) -> io_lib:format("~9999tP", [V, Depth]).
