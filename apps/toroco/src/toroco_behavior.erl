@@ -5,7 +5,9 @@
 %% `init/1' and reacts to inputs with `handle_input/4'; it emits by returning the
 %% toroco actions `{send, #{Out => V}}', `{send, #{Out => V}, #{hold => H}}',
 %% `{set, #{Out => V}}', `{unset, [Out]}' and `unset' among its gen_statem
-%% actions (SPEC §4, §5). The user's state is the gen_statem state, so
+%% actions (SPEC §4, §5). `{redeliver, [Input]}' asks those inputs' routers to
+%% forget the last value delivered and deliver the current winner's latch
+%% again (a device whose hardware came back uses it to catch up). The user's state is the gen_statem state, so
 %% `state_timeout', `postpone' and the other gen_statem actions work as usual;
 %% the user's data is kept inside this module's data.
 %%
@@ -46,6 +48,7 @@
                 | {set, #{atom() => term()}}
                 | {unset, [atom()]}
                 | unset
+                | {redeliver, [atom()]}
                 | gen_statem:action().
 -type actions() :: [action()] | action().
 %% What a callback returns: a gen_statem event handler result whose actions
@@ -355,6 +358,9 @@ actions([{unset, Outs} | T], E, Acc) when is_list(Outs) ->
 actions([unset | T], E = #e{outputs = Outs}, Acc) ->
     actions(T, lists:foldl(fun(Out, EAcc) -> emit(Out, unset, EAcc) end, E,
                            maps:keys(Outs)), Acc);
+actions([{redeliver, Ins} | T], E = #e{name = Name, inputs = Declared}, Acc) when is_list(Ins) ->
+    receiver_up(Name, [I || I <- Ins, lists:member(I, Declared)]),
+    actions(T, E, Acc);
 actions([A | T], E, Acc) when element(1, A) =:= send; element(1, A) =:= set;
                              element(1, A) =:= unset ->
     logger:error("toroco: ~p returned a malformed action ~p; dropped", [E#e.name, A]),

@@ -13,9 +13,12 @@
 %% velocities really applied to the servos change, `{0, 0}' included: on
 %% disable, on the program's watchdog, when the program dies and is
 %% restarted, when the owner is lost, and on terminate. A simulator wires its
-%% world to this output. After a safety stop (watchdog, program restart,
-%% owner lost) the command is forgotten: the servos stay at neutral until the
-%% next `setvel'.
+%% world to this output. After a safety stop the command is forgotten and the
+%% servos are at neutral. When the program was restarted or the owner found
+%% again, the device asks its `setvel' router for the current winner again,
+%% so a latched command (the Torobot's `forward') drives the servos once the
+%% port is back; after a watchdog stop (this side stalled) the servos stay at
+%% neutral until the next `setvel'.
 %%
 %% Options:
 %% <ul>
@@ -137,7 +140,7 @@ handle_event({timeout, reconnect}, attach, down, D = #{name := Name, client := C
     case toroco_pru_client:attach(C, configure(D)) of
         {ok, C1} ->
             logger:notice("~p attached to its pru_port again", [Name], #{domain => [toroco, hw]}),
-            {next_state, up, D#{client := C1}, keepalive(D)};
+            {next_state, up, D#{client := C1}, keepalive(D) ++ [{redeliver, [setvel]}]};
         {error, Reason, C1} ->
             #{reconnect_failures := N} = D,
             {Ms, C2} = toroco_pru_client:retry_ms(C1),
@@ -153,8 +156,11 @@ handle_event(info, Msg, _State, D = #{name := Name, client := C}) ->
         {event, _} ->
             keep_state_and_data;
         {restarted, _Why, C1} ->
-            %% the owner re-applied the configuration: the servos are at neutral
-            applied(?STOP, D#{client := C1, commanded := ?STOP});
+            %% The owner re-applied the configuration: the servos are at
+            %% neutral. The wiring's current command (a latched setvel) is
+            %% asked for again, so the robot carries on once the port is back.
+            {keep_state, D1, Actions} = applied(?STOP, D#{client := C1, commanded := ?STOP}),
+            {keep_state, D1, Actions ++ [{redeliver, [setvel]}]};
         {lost, Why, C1} ->
             logger:warning("~p lost its pru_port (~0p); servos assumed at neutral, "
                            "attaching again", [Name, Why], #{domain => [toroco, hw]}),

@@ -12,7 +12,7 @@
 -export([threshold_crossings/1, raw_analog_changes/1, sim_adc_errors/1,
          shared_port_lost_and_back/1,
          servo_duty/1, clamping_and_bad_values/1, enable_disable/1,
-         neutral_on_port_death/1, neutral_on_watchdog/1, keepalive_and_stall/1,
+         neutral_on_port_death/1, latched_command_back_after_port_restart/1, neutral_on_watchdog/1, keepalive_and_stall/1,
          neutral_on_remove/1,
          button_edges/1,
          camera_datagrams/1, camera_allow_list/1,
@@ -33,7 +33,7 @@ groups() ->
     [{pru_sensors, [], [threshold_crossings, raw_analog_changes, sim_adc_errors,
                         shared_port_lost_and_back]},
      {servo_motors, [], [servo_duty, clamping_and_bad_values, enable_disable,
-                         neutral_on_port_death, neutral_on_watchdog, keepalive_and_stall,
+                         neutral_on_port_death, latched_command_back_after_port_restart, neutral_on_watchdog, keepalive_and_stall,
                          neutral_on_remove]},
      {button, [], [button_edges]},
      {camera, [], [camera_datagrams, camera_allow_list]},
@@ -224,6 +224,21 @@ neutral_on_port_death(Config) ->
     #{port_restarts := 1, commanded := {0, 0}} = dev(motors),
     ok = toroco:inject({cmd, setvel}, {10, 10}),
     await_input(world, applied, [{100, 100}, {0, 0}, {10, 10}]).
+
+latched_command_back_after_port_restart(doc) ->
+    ["After the port program restarts, neutral first, then the wiring's latched setvel drives again"];
+latched_command_back_after_port_restart(Config) ->
+    Root = ?config(root, Config),
+    ok = toroco:add_device(motors, toroco_servo_motors, #{sysfs_root => Root}),
+    motor_rig(),
+    ok = toroco:inject({cmd, setvel}, {80, 80}, #{latch => true}),
+    await_input(world, applied, [{80, 80}]),
+    #{port := Owner} = dev(motors),
+    OsPid = toroco_pru_port:os_pid(Owner),
+    "" = os:cmd("kill -9 " ++ integer_to_list(OsPid)),
+    await_input(world, applied, [{80, 80}, {0, 0}, {80, 80}]),
+    ?assertNotEqual(OsPid, toroco_pru_port:os_pid(Owner)),
+    #{port_restarts := 1, commanded := {80, 80}} = dev(motors).
 
 neutral_on_watchdog(doc) ->
     ["Without keepalive a velocity lasts the watchdog period: then neutral and applied {0, 0}"];
