@@ -34,7 +34,7 @@ dialyzer: compile
 test:
 	scripts/test
 
-run: compile detector
+run: compile
 	scripts/run $(WORLD)
 
 bench: compile
