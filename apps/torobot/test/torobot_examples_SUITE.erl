@@ -430,7 +430,9 @@ mouse_drives_an_example_from_recorded_events(Config) ->
     %% The recording appears once the example is wired (events read before
     %% would reach no one); the mouse finds it at its next try.
     run(sensor_signalling, #{mouse => Path}),
-    ok = file:write_file(Path, [click_events(?BTN_LEFT), click_events(?BTN_RIGHT)]),
+    %% written aside and renamed, so the mouse never opens a half-written file
+    ok = file:write_file(Path ++ ".tmp", [click_events(?BTN_LEFT), click_events(?BTN_RIGHT)]),
+    ok = file:rename(Path ++ ".tmp", Path),
     expect(actuator, #{signal => [{left, pressed}, {left, released},
                                   {right, pressed}, {right, released}]}, 5000),
     #{module := toroco_mouse, device := #{status := open, button_events := 4}} =
