@@ -17,7 +17,8 @@ all() -> [{group, prod}, {group, board}].
 
 groups() ->
     [{prod, [sequence], [daemon_starts_with_a_fresh_cookie, eval_inspects_the_running_torobot,
-                         top_through_eval_and_top_command, stop_stops_the_node]},
+                         top_through_eval_and_top_command, wiring_command_loads_a_file,
+                         stop_stops_the_node]},
      {board, [sequence], [board_tarball_is_minimal, board_release_boots_on_system_erlang,
                           board_port_runs_under_qemu, board_port_unit_tests_under_qemu,
                           deploy_dry_run_shows_the_install]}].
@@ -119,6 +120,24 @@ top_through_eval_and_top_command(Config) ->
     match(Top, "^motors +device +0 +running "),
     match(Top, "^motors\\.setvel +[a-z_]+\\.motors "),
     nomatch = re:run(Top, "^ok$", [multiline]).
+
+wiring_command_loads_a_file() ->
+    [{doc, "bin/torobot wiring FILE (what the board's service runs after the start) loads a "
+           "wiring file into the running node and exits 0; a refused file exits 1 with the "
+           "reason."}].
+wiring_command_loads_a_file(Config) ->
+    Dir = ?config(rel, Config),
+    Priv = ?config(priv_dir, Config),
+    Good = filename:join(Priv, "extra.wiring"),
+    ok = file:write_file(Good, "{behavior, ct_forward, torobot_forward, #{params => #{speed => 10}}}.\n"),
+    {0, "ok\n"} = cmd(Config, Dir, "bin/" ++ ?REL ++ " wiring " ++ Good, 60),
+    {0, "running\n"} = cmd(Config, Dir, "bin/" ++ ?REL ++
+                               " eval 'maps:get(status, toroco:inspect(ct_forward)).'", 30),
+    Bad = filename:join(Priv, "bad.wiring"),
+    ok = file:write_file(Bad, "{inputs, ct_forward, #{nowhere => [{motors, setvel}]}}.\n"),
+    {1, Out} = cmd(Config, Dir, "bin/" ++ ?REL ++ " wiring " ++ Bad, 60),
+    match(Out, "^\\{error, .*nowhere"),
+    {0, "ok\n"} = cmd(Config, Dir, "bin/" ++ ?REL ++ " eval 'toroco:remove_behavior(ct_forward).'", 30).
 
 stop_stops_the_node() ->
     [{doc, "bin/torobot stop returns once the node is gone; ping then says so."}].
