@@ -21,8 +21,8 @@
 %% <b>Keeping the old code.</b> Loading back needs the old object code, and
 %% by the time `reload/1' runs the file on disk is already the new one. So
 %% the object code of a module is kept in memory (`persistent_term', one
-%% binary per module): by {@link remember/1}, which the engine calls when a
-%% behavior starts, and after each successful reload. If the old code was
+%% binary per module): by {@link remember/1}, which the wiring server calls
+%% when it starts a behavior or device, and after each successful reload. If the old code was
 %% not kept (the module was loaded some other way and nothing remembered
 %% it), a reload still goes ahead, but a failing `code_change' cannot be
 %% undone: the new code stays, the behaviors whose `code_change' failed keep
@@ -62,8 +62,9 @@ reload(Other) ->
     {error, {bad_module, Other}}.
 
 %% @doc Keeps the object code of `Module' as it is loaded now, if the file
-%% on the code path still holds it; called when a behavior starts, so that
-%% a later failed reload can load it back. Cheap when already kept.
+%% on the code path still holds it; called when a behavior or device is
+%% started, so that a later failed reload can load it back. Cheap when
+%% already kept.
 -spec remember(module()) -> ok.
 remember(Module) when is_atom(Module) ->
     case loaded_md5(Module) of

@@ -120,7 +120,7 @@ code_kept_when_behavior_starts(Config) ->
     ok = toroco:add_behavior(b, Mod, #{layer => 0, params => #{fail => true}}),
     case toroco_reload:kept(Mod) of
         false ->
-            {skip, "toroco_behavior:init/1 does not call toroco_reload:remember/1 (yet)"};
+            {skip, "the wiring server does not call toroco_reload:remember/1 when it starts a node"};
         true ->
             V1 = Mod:module_info(md5),
             compile(Config, 3),
