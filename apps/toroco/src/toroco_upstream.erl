@@ -71,7 +71,7 @@ hello(Tag, Src, Pid, Links = #{ups := Ups}) ->
     end.
 
 %% @doc An answer to a subscription that came after the wait gave up on it.
--spec late_state(emitter | gate, source(), pid(), toroco_router_core:latch(), links()) ->
+-spec late_state(emitter | gate, source(), pid(), toroco_router_core:latch() | inhibited, links()) ->
           {ok, links()} | ignore.
 late_state(Tag, Src, Pid, _State, Links = #{ups := Ups, pids := Pids}) ->
     case {Ups, Pids} of
