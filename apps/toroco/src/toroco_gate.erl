@@ -75,16 +75,10 @@ init(Key) ->
 
 -spec handle_event(gen_statem:event_type(), term(), gating, #g{}) ->
           gen_statem:event_handler_result(gating).
-handle_event(info, {'$toroco', Src, Op}, _, D = #g{links = #{ups := Ups}}) ->
-    case Ups of
-        #{Src := {emitter, _}} -> step({op, Src, Op}, D);
-        #{} -> keep_state_and_data
-    end;
-handle_event(info, {'$toroco_gate', Src, Op}, _, D = #g{links = #{ups := Ups}}) ->
-    case Ups of
-        #{Src := {gate, _}} -> step({op, Src, Op}, D);
-        #{} -> keep_state_and_data
-    end;
+handle_event(info, {'$toroco', Src, Op}, _, D) ->
+    op(emitter, Src, Op, D);
+handle_event(info, {'$toroco_gate', Src, Op}, _, D) ->
+    op(gate, Src, Op, D);
 handle_event(info, {'$toroco_sub', Src, Reg}, _, D = #g{core = C, subs = Subs}) ->
     case lists:member(Src, toroco_gate_core:members(C)) of
         true ->
@@ -144,6 +138,12 @@ configure(#{members := Members, entries := Entries, upstreams := Ups, subs := Su
     D1 = run({rewire, Members, Entries, Synced, Reset}, D#g{links = L1, subs = Subs1}),
     timer(D1).
 
+op(Tag, Src, Op, D = #g{links = L}) ->
+    case toroco_upstream:carries(Tag, Src, L) of
+        true -> step({op, Src, Op}, D);
+        false -> keep_state_and_data
+    end.
+
 step(Event, D) ->
     steps([Event], D).
 
@@ -161,10 +161,7 @@ run(Event, D = #g{core = C, subs = Subs}) ->
     D#g{core = C1}.
 
 timer(D = #g{core = C, timer = T}) ->
-    case toroco_gate_core:next_deadline(C) of
-        T -> {D, []};
-        infinity -> {D#g{timer = infinity}, [{{timeout, hold}, cancel}]};
-        Next -> {D#g{timer = Next}, [{{timeout, hold}, Next, expire, [{abs, true}]}]}
-    end.
+    {T1, Actions} = toroco_upstream:hold_timer(toroco_gate_core:next_deadline(C), T),
+    {D#g{timer = T1}, Actions}.
 
 now_ms() -> erlang:monotonic_time(millisecond).

@@ -92,16 +92,10 @@ init(Key = {R, I}) ->
 
 -spec handle_event(gen_statem:event_type(), term(), routing, #r{}) ->
           gen_statem:event_handler_result(routing).
-handle_event(info, {'$toroco', Src, Op}, _, D = #r{links = #{ups := Ups}}) ->
-    case Ups of
-        #{Src := {emitter, _}} -> step({op, Src, Op}, D);
-        #{} -> keep_state_and_data
-    end;
-handle_event(info, {'$toroco_gate', Src, Op}, _, D = #r{links = #{ups := Ups}}) ->
-    case Ups of
-        #{Src := {gate, _}} -> step({op, Src, Op}, D);
-        #{} -> keep_state_and_data
-    end;
+handle_event(info, {'$toroco', Src, Op}, _, D) ->
+    op(emitter, Src, Op, D);
+handle_event(info, {'$toroco_gate', Src, Op}, _, D) ->
+    op(gate, Src, Op, D);
 handle_event(info, {'$toroco_ack', _Input}, _, D = #r{pending = {value, V}, rx = Rx})
   when is_pid(Rx) ->
     Rx ! {'$toroco_in', D#r.input, V, self()},
@@ -159,6 +153,12 @@ configure(#{sources := Srcs, upstreams := Ups, buffer := B, idle := Idle},
     D1 = D#r{links = L1, buffer = B},
     timer(run({rewire, Srcs, #{idle => Idle}, Synced, Reset}, D1)).
 
+op(Tag, Src, Op, D = #r{links = L}) ->
+    case toroco_upstream:carries(Tag, Src, L) of
+        true -> step({op, Src, Op}, D);
+        false -> keep_state_and_data
+    end.
+
 step(Event, D) ->
     steps([Event], D).
 
@@ -176,11 +176,8 @@ run(Event, D = #r{core = C}) ->
 
 %% Moves the one timer only if the earliest deadline changed.
 timer(D = #r{core = C, timer = T}) ->
-    case toroco_router_core:next_deadline(C) of
-        T -> {D, []};
-        infinity -> {D#r{timer = infinity}, [{{timeout, hold}, cancel}]};
-        Next -> {D#r{timer = Next}, [{{timeout, hold}, Next, expire, [{abs, true}]}]}
-    end.
+    {T1, Actions} = toroco_upstream:hold_timer(toroco_router_core:next_deadline(C), T),
+    {D#r{timer = T1}, Actions}.
 
 deliver([], D) ->
     D;

@@ -11,7 +11,8 @@
 -module(toroco_upstream).
 
 -export([subscribe/3, unsubscribe/3, send/2, sync_timeout/0, start_opts/0]).
--export([new_links/0, rewire/3, detach_all/2, hello/4, late_state/5, down/2, upstream_pids/1]).
+-export([new_links/0, rewire/3, detach_all/2, hello/4, late_state/5, down/2, upstream_pids/1,
+         carries/3, hold_timer/2]).
 -export_type([entry/0, synced/0, links/0]).
 
 -type source() :: {atom(), atom()}.
@@ -86,6 +87,25 @@ late_state(Tag, Src, Pid, _State, Links = #{ups := Ups, pids := Pids}) ->
 down(Pid, Links = #{pids := Pids, mons := Mons}) ->
     Srcs = [S || {S, P} <- maps:to_list(Pids), P =:= Pid],
     {Srcs, Links#{pids := maps:without(Srcs, Pids), mons := maps:remove(Pid, Mons)}}.
+
+%% @doc Whether an event tagged `Tag' (`emitter' for `{'$toroco', ..}',
+%% `gate' for `{'$toroco_gate', ..}') for `Src' is one this consumer listens
+%% to; while a source moves between its emitter and a gate, events from the
+%% side it left are ignored.
+-spec carries(emitter | gate, source(), links()) -> boolean().
+carries(Tag, Src, #{ups := Ups}) ->
+    case Ups of
+        #{Src := {Tag, _}} -> true;
+        #{} -> false
+    end.
+
+%% @doc The consumer's one hold timer (the gen_statem timeout `{timeout,
+%% hold}'), moved only when the earliest deadline changed.
+-spec hold_timer(infinity | integer(), infinity | integer()) ->
+          {infinity | integer(), [gen_statem:action()]}.
+hold_timer(Same, Same) -> {Same, []};
+hold_timer(infinity, _) -> {infinity, [{{timeout, hold}, cancel}]};
+hold_timer(Next, _) -> {Next, [{{timeout, hold}, Next, expire, [{abs, true}]}]}.
 
 %% @doc The pids currently listened to, by source.
 -spec upstream_pids(links()) -> #{source() => pid()}.
