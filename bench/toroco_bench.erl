@@ -19,6 +19,12 @@ main([Dir]) ->
               [<<"# Torocó benchmark"/utf8>>, machine(), erlang:system_info(otp_release),
                erlang:system_info(schedulers_online)]),
     warm_up(),
+    case os:getenv("TOROCO_BENCH_ONLY") of
+        "internal" ->
+            table("Internal test", [internal(I, N, Dir) || I <- [closed, 10]], Dir, "internal"),
+            halt(0);
+        _ -> ok
+    end,
     Internal = [internal(I, N, Dir) || I <- [closed, 1, 2, 5, 10]],
     table("Internal test: behavior → router → behavior → router → actuator, " ++
               integer_to_list(N) ++ " events", Internal, Dir, "internal"),
