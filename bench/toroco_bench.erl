@@ -64,7 +64,7 @@ restart() ->
     {ok, _} = application:ensure_all_started(toroco_hw),
     ok.
 
-pid(Name) -> whereis(toroco_names:node(Name)).
+pid(Name) -> whereis(toroco_names:process(Name)).
 
 %% source (layer 1) → relay (layer 0) → sink
 chain(Mode, N) ->

@@ -9,7 +9,7 @@
 
 %% @doc Makes behavior `Name' return `Actions' from a callback.
 emit(Name, Actions) ->
-    gen_statem:call(toroco_names:node(Name), {prop_emit, Actions}, 5000).
+    gen_statem:call(toroco_names:process(Name), {prop_emit, Actions}, 5000).
 
 interface() -> #{inputs => [], outputs => [out]}.
 

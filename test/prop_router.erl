@@ -678,10 +678,10 @@ inject(E, Op, Via) ->
     {Ret, observe()}.
 
 kill(E) ->
-    {restart(toroco_names:node(E), fun() -> toroco_behavior:info(E) end), observe()}.
+    {restart(toroco_names:process(E), fun() -> toroco_behavior:info(E) end), observe()}.
 
 kill_receiver() ->
-    {restart(toroco_names:node(?ACT), fun() -> toroco_fake_actuator:history(?ACT) end),
+    {restart(toroco_names:process(?ACT), fun() -> toroco_fake_actuator:history(?ACT) end),
      observe()}.
 
 %% Kills a process and waits until its successor has finished its init.

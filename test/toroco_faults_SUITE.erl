@@ -113,11 +113,11 @@ fault(I, Port) ->
     {Kind, erlang:monotonic_time(millisecond) - T0}.
 
 inject_fault(kill_behavior, _) ->
-    kill(toroco_names:node(pick(?PRIORITY)));
+    kill(toroco_names:process(pick(?PRIORITY)));
 inject_fault(kill_router, _) ->
     kill(pick([toroco_names:router(motors, in), toroco_names:router(noisy, in)]));
 inject_fault(kill_device, _) ->
-    kill(toroco_names:node(pick([ir, motors])));
+    kill(toroco_names:process(pick([ir, motors])));
 inject_fault(suspend_resume, _) ->
     B = pick([forward, mid1, mid2, top]),
     ok = toroco:suspend_behavior(B),
@@ -186,7 +186,7 @@ latches_intact() ->
               end, [B || B <- Live, B =/= noisy]).
 
 mailboxes_bounded(Label) ->
-    Names = [toroco_names:node(N) || N <- [ir, motors | ?PRIORITY]]
+    Names = [toroco_names:process(N) || N <- [ir, motors | ?PRIORITY]]
         ++ [toroco_names:router(motors, in), toroco_names:router(noisy, in)],
     Max = lists:max([case whereis(N) of
                          undefined -> 0;

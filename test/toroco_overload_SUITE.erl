@@ -31,7 +31,7 @@ run(Buffer) ->
     ok = toroco:add_device(a, toroco_fake_actuator, #{inputs => [in]}),
     ok = toroco:set_inputs(slow, #{in => #{sources => [{s, v}], buffer => Buffer}}),
     ok = toroco:set_inputs(a, #{in => [{slow, out}]}),
-    Slow = whereis(toroco_names:node(slow)),
+    Slow = whereis(toroco_names:process(slow)),
     Period = ?WORK_MS * 1000 div 10,                    % µs between events
     T0 = erlang:monotonic_time(microsecond),
     Max = lists:foldl(fun(I, M) ->

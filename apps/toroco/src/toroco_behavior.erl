@@ -94,7 +94,7 @@
 
 -spec start_link(spec()) -> gen_statem:start_ret().
 start_link(Spec = #{name := Name}) ->
-    gen_statem:start_link({local, toroco_names:node(Name)}, ?MODULE, Spec, toroco_upstream:start_opts()).
+    gen_statem:start_link({local, toroco_names:process(Name)}, ?MODULE, Spec, toroco_upstream:start_opts()).
 
 %% @doc Behaviors are `transient': one that stops with reason `normal' is done.
 -spec child_spec(spec()) -> supervisor:child_spec().
@@ -139,7 +139,7 @@ suspend(Name) -> call(Name, '$toroco_suspend').
 resume(Name) -> call(Name, '$toroco_resume').
 
 call(Name, Req) ->
-    try gen_statem:call(toroco_names:node(Name), Req, 5000)
+    try gen_statem:call(toroco_names:process(Name), Req, 5000)
     catch exit:{noproc, _} -> {error, {not_running, Name}};
           exit:{timeout, _} -> {error, {timeout, Name}};
           exit:{Reason, _} -> {error, {Reason, Name}}

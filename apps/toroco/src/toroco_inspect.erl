@@ -151,7 +151,7 @@ row(N) ->
                #{} = I -> I;
                {error, _} -> #{}
            end,
-    Pid = whereis(toroco_names:node(N)),
+    Pid = whereis(toroco_names:process(N)),
     #{name => N, info => Info,
       kind => maps:get(kind, Info, '?'), layer => maps:get(layer, Info, '?'),
       module => maps:get(module, Info, '?'), status => maps:get(status, Info, down),

@@ -7,12 +7,11 @@
 %% `~w' quotes any atom that needs it, which keeps the names unambiguous.
 -module(toroco_names).
 
--export([node/1, router/2, gate/1]).
--compile({no_auto_import, [node/1]}).
+-export([process/1, router/2, gate/1]).
 
 %% @doc The registered name of a behavior or device.
--spec node(atom()) -> atom().
-node(Name) -> name("toroco:~w", [Name]).
+-spec process(atom()) -> atom().
+process(Name) -> name("toroco:~w", [Name]).
 
 %% @doc The registered name of the router of input `Input' of `Receiver'.
 -spec router(atom(), atom()) -> atom().

@@ -117,7 +117,7 @@ reload(Module, File, NewBin) ->
 running(Module) ->
     {W, _} = toroco_wiring:call(wiring),
     [{N, P} || {N, #{module := M}} <- lists:sort(maps:to_list(toroco_wiring_core:nodes(W))),
-               M =:= Module, P <- [whereis(toroco_names:node(N))], is_pid(P)].
+               M =:= Module, P <- [whereis(toroco_names:process(N))], is_pid(P)].
 
 with_suspended(Running, Module, File, NewBin, Old) ->
     case suspend(Running, []) of

@@ -80,7 +80,7 @@ init(Key = {R, I}) ->
     case toroco_wiring:lookup({router, Key}) of
         {ok, Cfg} ->
             D0 = #r{key = Key, reg = toroco_names:router(R, I), input = I},
-            D1 = case whereis(toroco_names:node(R)) of
+            D1 = case whereis(toroco_names:process(R)) of
                      undefined -> D0;
                      Pid -> attach_receiver(Pid, D0)
                  end,

@@ -61,7 +61,7 @@
 start(What, Opts) when is_map(Opts) ->
     case {target(What), options(Opts)} of
         {{ok, Name, Input}, {ok, O}} ->
-            case whereis(toroco_names:node(Name)) of
+            case whereis(toroco_names:process(Name)) of
                 undefined -> {error, {not_running, Name}};
                 Pid -> launch(Name, Input, Pid, O)
             end;
@@ -182,7 +182,7 @@ loop(S = #w{pid = Pid, mon = Mon, io = Io}) ->
     end.
 
 reattach(S = #w{name = Name}) ->
-    case whereis(toroco_names:node(Name)) of
+    case whereis(toroco_names:process(Name)) of
         undefined ->
             erlang:send_after(?REATTACH_MS, self(), {?NAME, reattach}),
             loop(S);

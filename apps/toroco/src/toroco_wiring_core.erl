@@ -316,13 +316,13 @@ plan(#{inputs := Inputs, inhibitors := Inhs}) ->
     Upstream = fun(Src = {E, _}, Self) ->
                        case GateOf of
                            #{Src := Key} when Key =/= Self -> {gate, toroco_names:gate(Key)};
-                           #{} -> {emitter, toroco_names:node(E)}
+                           #{} -> {emitter, toroco_names:process(E)}
                        end
                end,
     Routers = maps:map(
                 fun({R, I}, #{sources := Srcs, buffer := B, idle := Idle}) ->
                         #{reg => toroco_names:router(R, I), receiver => R, input => I,
-                          receiver_reg => toroco_names:node(R), sources => Srcs,
+                          receiver_reg => toroco_names:process(R), sources => Srcs,
                           upstreams => maps:from_list([{S, Upstream(S, none)} || {S, _} <- Srcs]),
                           buffer => B, idle => Idle}
                 end, Inputs),

@@ -138,7 +138,7 @@ malformed_wiring_files_are_refused_whole(Config) ->
            [length(Files), length(Wrong), Wrong]),
     [] = Wrong,
     Before = snapshot(),
-    undefined = whereis(toroco_names:node(extra)).
+    undefined = whereis(toroco_names:process(extra)).
 
 refused_as(bad_interface, {error, {bad_interface, _}}) -> true;
 refused_as(syntax, {error, {wiring_file, _, {_Line, erl_parse, _}}}) -> true;

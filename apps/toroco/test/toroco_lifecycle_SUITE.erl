@@ -31,9 +31,9 @@ end_per_testcase(_TC, _Config) ->
     application:unset_env(toroco, layer_restart_intensity).
 
 kill(Name) ->
-    Pid = whereis(toroco_names:node(Name)),
+    Pid = whereis(toroco_names:process(Name)),
     exit(Pid, kill),
-    wait_until(fun() -> case whereis(toroco_names:node(Name)) of
+    wait_until(fun() -> case whereis(toroco_names:process(Name)) of
                             undefined -> false;
                             P -> P =/= Pid
                         end end, 3000).
@@ -200,9 +200,9 @@ undeclared_output_is_logged_and_dropped() ->
     [{doc, "An emission on an undeclared output is dropped with a log; the behavior keeps running."}].
 undeclared_output_is_logged_and_dropped(_) ->
     ok = toroco:add_behavior(b, tb_self_wirer, #{}),
-    Pid = whereis(toroco_names:node(b)),
+    Pid = whereis(toroco_names:process(b)),
     ok = toroco:set_inputs(b, #{in => [{b, out}]}),
     ok = toroco:inject({b, out}, bogus),
     _ = toroco:inspect(b),
-    Pid = whereis(toroco_names:node(b)),
+    Pid = whereis(toroco_names:process(b)),
     #{status := running} = toroco:inspect(b).

@@ -71,7 +71,7 @@ reload_under_1khz_stream_loses_nothing(Config) ->
     true = V1 =/= [] andalso V2 =/= [],
     true = lists:all(fun({Tag, _}) -> Tag =:= v2 end, V2),
     %% The state came across: v2 counts on from v1 and knows where it came from.
-    #{count := N, version := 2, from := OldVsn} = gen_statem:call(toroco_names:node(b), state),
+    #{count := N, version := 2, from := OldVsn} = gen_statem:call(toroco_names:process(b), state),
     %% Latches and holds.
     #{outputs := #{mark := #{latch := {value, armed}}},
       inputs := #{latch := #{holds := [{{s, l}, InHold}], winner := {s, l}}}} = toroco:inspect(b),
@@ -108,8 +108,8 @@ failing_code_change_rolls_everything_back(Config) ->
     Seq = [I || {out, {v2, I}, _} <- H],
     Seq = [I || {out2, {v2, I}, _} <- H],
     %% `good' converted to v3 before `bad' failed; it has its v2 state back.
-    #{version := 2, count := 200} = gen_statem:call(toroco_names:node(good), state),
-    #{version := 2, count := 200} = gen_statem:call(toroco_names:node(bad), state).
+    #{version := 2, count := 200} = gen_statem:call(toroco_names:process(good), state),
+    #{version := 2, count := 200} = gen_statem:call(toroco_names:process(bad), state).
 
 code_kept_when_behavior_starts() ->
     [{doc, "The code a behavior starts with is kept, so even the first reload of its module can "
@@ -126,7 +126,7 @@ code_kept_when_behavior_starts(Config) ->
             compile(Config, 3),
             {error, {code_change_failed, [{b, refused_by_test}]}} = toroco:reload(Mod),
             V1 = Mod:module_info(md5),
-            #{count := 0} = gen_statem:call(toroco_names:node(b), state),
+            #{count := 0} = gen_statem:call(toroco_names:process(b), state),
             ok
     end.
 
@@ -145,8 +145,8 @@ failure_without_old_code_is_reported(Config) ->
     {error, {code_change_failed, [{bad, refused_by_test}], old_code_not_kept}} = toroco:reload(Mod),
     {ok, {Mod, V3}} = beam_lib:md5(code:which(Mod)),
     V3 = Mod:module_info(md5),
-    #{version := 3} = gen_statem:call(toroco_names:node(good), state),
-    #{version := 1} = gen_statem:call(toroco_names:node(bad), state).
+    #{version := 3} = gen_statem:call(toroco_names:process(good), state),
+    #{version := 1} = gen_statem:call(toroco_names:process(bad), state).
 
 refusals_change_nothing() ->
     [{doc, "A module that is not a module, has no object code, or whose object code is the one "
@@ -159,7 +159,7 @@ refusals_change_nothing(Config) ->
     {error, {no_object_code, tb_reload_nowhere}} = toroco:reload(tb_reload_nowhere),
     {error, {unchanged, Mod}} = toroco:reload(Mod),
     #{status := running} = toroco:inspect(b),
-    {status, _, _, [_, running | _]} = sys:get_status(toroco_names:node(b)).
+    {status, _, _, [_, running | _]} = sys:get_status(toroco_names:process(b)).
 
 idle_module_and_several_behaviors_reload() ->
     [{doc, "A module nobody runs reloads without pausing anything; a loaded module is reloaded "
@@ -172,12 +172,12 @@ idle_module_and_several_behaviors_reload(Config) ->
     #{} = Mod:interface(),
     ok = toroco:add_behavior(b1, Mod, #{layer => 0}),
     ok = toroco:add_behavior(b2, Mod, #{layer => 2}),
-    #{version := 2} = gen_statem:call(toroco_names:node(b1), state),
+    #{version := 2} = gen_statem:call(toroco_names:process(b1), state),
     compile(Config, 1),
     ok = toroco:reload(Mod),
     [#{version := 1}, #{version := 1}] =
-        [gen_statem:call(toroco_names:node(B), state) || B <- [b1, b2]],
-    {status, _, _, [_, running | _]} = sys:get_status(toroco_names:node(b2)).
+        [gen_statem:call(toroco_names:process(B), state) || B <- [b1, b2]],
+    {status, _, _, [_, running | _]} = sys:get_status(toroco_names:process(b2)).
 
 %%====================================================================
 %% The behavior, in three versions

@@ -205,7 +205,7 @@ buffer_latest_keeps_mailbox_bounded(_) ->
     actuator(a, [in]),
     ok = toroco:set_inputs(slow, #{in => #{sources => [{s, v}], buffer => latest}}),
     ok = toroco:set_inputs(a, #{in => [{slow, out}]}),
-    Slow = whereis(toroco_names:node(slow)),
+    Slow = whereis(toroco_names:process(slow)),
     N = 200,
     MaxQ = lists:max([begin
                           ok = toroco:inject({s, v}, {sleep, 20, I}),

@@ -99,10 +99,10 @@ follows_a_restart() ->
 follows_a_restart(_Config) ->
     Io = capture(),
     ok = toroco:watch(b, #{max => 2, io => Io, notify => self()}),
-    Old = whereis(toroco_names:node(b)),
+    Old = whereis(toroco_names:process(b)),
     ok = toroco:inject({s, v}, crash),
     wait_until(fun() -> lists:member("watch: b is back", lines(Io)) end, 3000),
-    true = whereis(toroco_names:node(b)) =/= Old,
+    true = whereis(toroco_names:process(b)) =/= Old,
     ok = toroco:inject({s, v}, after_restart),
     {max, 2} = stopped(),
     ["b.in <- crash", "b.in <- after_restart"] = deliveries(lines(Io)).
@@ -126,7 +126,7 @@ refuses_bad_requests(_Config) ->
     {error, {bad_option, {max, 0}}} = toroco:watch(b, #{max => 0}),
     {error, {bad_option, {rate, fast}}} = toroco:watch(b, #{rate => fast}),
     {error, {bad_option, {colour, red}}} = toroco:watch(b, #{colour => red}),
-    Pid = whereis(toroco_names:node(b)),
+    Pid = whereis(toroco_names:process(b)),
     Tracer = spawn_link(fun() -> receive stop -> ok end end),
     1 = erlang:trace(Pid, true, ['receive', {tracer, Tracer}]),
     {error, {already_traced, b}} = toroco:watch(b, #{}),
@@ -194,9 +194,9 @@ top_counts_restarts(_Config) ->
     ok = toroco_restarts:install(),
     Before = toroco_restarts:count(b),
     [begin
-         Pid = whereis(toroco_names:node(b)),
+         Pid = whereis(toroco_names:process(b)),
          ok = toroco:inject({s, v}, crash),
-         wait_until(fun() -> not lists:member(whereis(toroco_names:node(b)), [undefined, Pid]) end,
+         wait_until(fun() -> not lists:member(whereis(toroco_names:process(b)), [undefined, Pid]) end,
                     3000)
      end || _ <- [1, 2]],
     Expected = integer_to_list(Before + 2),
@@ -262,7 +262,7 @@ stopped() ->
     end.
 
 untraced(Name) ->
-    {flags, []} = erlang:trace_info(whereis(toroco_names:node(Name)), flags),
+    {flags, []} = erlang:trace_info(whereis(toroco_names:process(Name)), flags),
     ok.
 
 %% The delivery lines of a watch, without their time stamps.

@@ -20,16 +20,16 @@
 
 -spec history(atom()) -> history().
 history(A) ->
-    gen_statem:call(toroco_names:node(A), history).
+    gen_statem:call(toroco_names:process(A), history).
 
 -spec clear(atom()) -> ok.
 clear(A) ->
-    gen_statem:call(toroco_names:node(A), clear).
+    gen_statem:call(toroco_names:process(A), clear).
 
 %% @doc Waits until `Pred(History)' is true; `{error, timeout}' otherwise.
 -spec await(atom(), fun((history()) -> boolean()), timeout()) -> ok | {error, timeout}.
 await(A, Pred, Timeout) ->
-    try gen_statem:call(toroco_names:node(A), {await, Pred, deadline(Timeout)}, Timeout)
+    try gen_statem:call(toroco_names:process(A), {await, Pred, deadline(Timeout)}, Timeout)
     catch exit:{timeout, _} -> {error, timeout}
     end.
 

@@ -32,7 +32,7 @@
 %% default `active_low', 0 is pressed.
 -spec sim_button(atom(), 0 | 1) -> ok | {error, term()}.
 sim_button(Device, Level) ->
-    try gen_statem:call(toroco_names:node(Device), ?SIM_CALL, 5000) of
+    try gen_statem:call(toroco_names:process(Device), ?SIM_CALL, 5000) of
         {ok, Port} ->
             try toroco_pru_port:sim_button(Port, Level)
             catch exit:{Reason, _} -> {error, {port_call, Reason}}

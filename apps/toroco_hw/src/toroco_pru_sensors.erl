@@ -45,7 +45,7 @@
 %% event it causes is on its way to the device when this returns.
 -spec sim_adc(atom(), atom(), 0..4095) -> ok | {error, term()}.
 sim_adc(Device, Sensor, Raw) ->
-    try gen_statem:call(toroco_names:node(Device), {?SIM_CALL, Sensor}, 5000) of
+    try gen_statem:call(toroco_names:process(Device), {?SIM_CALL, Sensor}, 5000) of
         {ok, Port, Channel} ->
             try toroco_pru_port:sim_adc(Port, Channel, Raw)
             catch exit:{Reason, _} -> {error, {port_call, Reason}}

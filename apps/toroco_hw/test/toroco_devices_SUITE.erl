@@ -270,7 +270,7 @@ keepalive_and_stall(Config) ->
     ?assertEqual("1700000", pwm(Root, 0, "duty_cycle")),
     #{watchdogs := 0, keepalive_ms := 50} = dev(motors),
     %% this side stalls: the program's watchdog takes the servos to neutral
-    Pid = whereis(toroco_names:node(motors)),
+    Pid = whereis(toroco_names:process(motors)),
     ok = sys:suspend(Pid),
     try
         ok = wait_until(fun() -> pwm(Root, 0, "duty_cycle") =:= ?NEUTRAL end, ?WAIT)
@@ -422,14 +422,14 @@ poll_crashes(_Config) ->
     ok = toroco:set_inputs(rec, #{level => [{gauge, level}]}),
     %% latched: wiring delivers the current value
     await_input(rec, level, [1]),
-    Pid = whereis(toroco_names:node(gauge)),
+    Pid = whereis(toroco_names:process(gauge)),
     true = ets:insert(Tab, {v, crash}),
     ok = wait_until(fun() -> maps:get(crashes, dev(gauge)) >= 3 end, ?WAIT),
     true = ets:insert(Tab, {v, throw}),
     ok = wait_until(fun() -> maps:get(crashes, dev(gauge)) >= 6 end, ?WAIT),
     true = ets:insert(Tab, {v, 2}),
     await_input(rec, level, [1, 2]),
-    ?assertEqual(Pid, whereis(toroco_names:node(gauge))).
+    ?assertEqual(Pid, whereis(toroco_names:process(gauge))).
 
 fun_actuator_calls(doc) ->
     ["A function actuator is called with each delivered value, in order; crashes are counted"];

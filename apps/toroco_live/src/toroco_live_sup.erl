@@ -1,0 +1,21 @@
+%% @doc The root of `toroco_live'.
+%%
+%% ```
+%% toroco_live_sup (one_for_one)
+%% '''
+%%
+%% one_for_one: the dashboard, the bridge and the recorders are independent
+%% views of the robot; one crashing takes none of the others with it.
+-module(toroco_live_sup).
+-behaviour(supervisor).
+
+-export([start_link/0, init/1]).
+
+-spec start_link() -> {ok, pid()} | {error, term()}.
+start_link() ->
+    supervisor:start_link({local, ?MODULE}, ?MODULE, []).
+
+-spec init([]) -> {ok, {supervisor:sup_flags(), [supervisor:child_spec()]}}.
+init([]) ->
+    Flags = #{strategy => one_for_one, intensity => 5, period => 10},
+    {ok, {Flags, []}}.
