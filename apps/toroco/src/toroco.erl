@@ -28,6 +28,10 @@
               hold/0, error_reason/0]).
 
 -type name() :: atom().
+
+%% Whether the caller is the process of behavior or device `Name': a
+%% callback that injects into its own output would wait on itself.
+-define(IS_SELF(Name), (whereis(toroco_names:process(Name)) =:= self())).
 -type source() :: {Emitter :: name(), Output :: atom()}.
 -type hold() :: non_neg_integer() | infinity.
 -type source_spec() :: source() | {Emitter :: name(), Output :: atom(), #{hold => hold()}}.
@@ -125,13 +129,20 @@ inject(Src, Value) ->
 -spec inject(source(), term(), #{latch => boolean(), hold => hold()}) ->
           ok | {error, error_reason()}.
 inject({E, Out} = Src, Value, Opts) when is_atom(E), is_atom(Out), is_map(Opts) ->
-    case inject_op(Src, Value, Opts) of
-        {ok, Op} ->
-            case toroco_wiring:call({node, E}) of
-                {ok, _} -> toroco_behavior:inject(E, Out, Op);
-                Err -> Err
+    %% Straight to the emitter; the wiring table tells an unknown name from
+    %% one that is not running.
+    case {inject_op(Src, Value, Opts), ?IS_SELF(E)} of
+        {{ok, _}, true} -> {error, {self_call, E}};
+        {{ok, Op}, false} ->
+            case toroco_behavior:inject(E, Out, Op) of
+                {error, {not_running, E}} = NotRunning ->
+                    case toroco_wiring:known(E) of
+                        true -> NotRunning;
+                        false -> {error, {unknown_name, E}}
+                    end;
+                Other -> Other
             end;
-        Err -> Err
+        {Err, _} -> Err
     end;
 inject(Src, _Value, Opts) when is_map(Opts) ->
     {error, {bad_source, Src}};
