@@ -327,11 +327,12 @@ apply_plan(#{routers := OldR, gates := OldG, subs := OldSubs},
 ensure(Kind, Key, Changed, Caller) ->
     Mod = consumer_module(Kind),
     case supervisor:start_child(toroco_routers_sup, Mod:child_spec(Key, Caller)) of
-        {ok, _} -> ok;
+        {ok, _} -> _ = Mod:ready(Key), ok;
         {error, {already_started, _}} when Changed -> Mod:rewire(Key, Caller);
         {error, {already_started, _}} -> ok;
         {error, already_present} ->
             _ = supervisor:restart_child(toroco_routers_sup, {Kind, Key}),
+            _ = Mod:ready(Key),
             ok;
         {error, Reason} ->
             logger:error("toroco: could not start ~p ~p: ~p", [Kind, Key, Reason])

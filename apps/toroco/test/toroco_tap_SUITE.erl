@@ -36,9 +36,10 @@ chain() ->
     ok = toroco:set_inputs(b, #{in => [{s, v}]}),
     ok = toroco:set_inputs(a, #{in => [{b, out}]}).
 
-events(Ref, Timeout) ->
-    receive {toroco_event, Ref, E} -> [E | events(Ref, 0)]
-    after Timeout -> []
+%% Every event that comes until none has come for `Gap' ms.
+events(Ref, Gap) ->
+    receive {toroco_event, Ref, E} -> [E | events(Ref, Gap)]
+    after Gap -> []
     end.
 
 await_event(Ref, Pred, Timeout) ->
