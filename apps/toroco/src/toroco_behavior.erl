@@ -153,11 +153,7 @@ suspend(Name) -> call(Name, '$toroco_suspend').
 resume(Name) -> call(Name, '$toroco_resume').
 
 call(Name, Req) ->
-    try gen_statem:call(toroco_names:process(Name), Req, 5000)
-    catch exit:{noproc, _} -> {error, {not_running, Name}};
-          exit:{timeout, _} -> {error, {timeout, Name}};
-          exit:{Reason, _} -> {error, {Reason, Name}}
-    end.
+    toroco_wire:call(toroco_names:process(Name), Req, 5000, Name).
 
 %%====================================================================
 %% gen_statem

@@ -24,7 +24,7 @@
 
 -include("toroco_wire.hrl").
 
--export([start_link/3, child_spec/3, rewire/3, ready/2, call/4]).
+-export([start_link/3, child_spec/3, rewire/3, ready/2, info/2, call/4]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3]).
 
 -type key() :: {atom(), atom()}.
@@ -83,21 +83,28 @@ child_spec(Mod, Key, Caller) ->
 %% @doc Takes the configuration now in the wiring table; returns once the
 %% change is in the core (every new upstream answered, died, or was waited
 %% for `sync_timeout_ms').
--spec rewire(module(), key(), pid() | none) -> ok.
+-spec rewire(module(), key(), pid() | none) -> ok | {error, term()}.
 rewire(Mod, Key, Caller) ->
     call(Mod, Key, {rewire, Caller}, infinity).
 
 %% @doc Returns once a just-started consumer has taken its sources in.
--spec ready(module(), key()) -> ok.
+-spec ready(module(), key()) -> ok | {error, term()}.
 ready(Mod, Key) ->
     call(Mod, Key, ready, infinity).
 
-%% @doc A call to the consumer; `{error, not_running}' if it is not there.
+%% @doc The consumer's inspection view, or `none' if it is not running.
+-spec info(module(), key()) -> term() | none.
+info(Mod, Key) ->
+    case call(Mod, Key, info, 1000) of
+        {error, _} -> none;
+        Info -> Info
+    end.
+
+%% @doc A call to the consumer; an error naming it if it is not there or
+%% does not answer.
 -spec call(module(), key(), term(), timeout()) -> term().
 call(Mod, Key, Req, Timeout) ->
-    try gen_statem:call(Mod:reg(Key), Req, Timeout)
-    catch exit:_ -> {error, not_running}
-    end.
+    toroco_wire:call(Mod:reg(Key), Req, Timeout, Key).
 
 %%====================================================================
 %% gen_statem

@@ -16,7 +16,7 @@
 
 -include("toroco_wire.hrl").
 
--export([start_link/2, child_spec/2, rewire/2, ready/1, info/1]).
+-export([info/1]).
 -export([kind/0, reg/1, init/2, run/3, settled/1, deadline/1, rewired/5, late/2, handle/3,
          info/2]).
 
@@ -28,30 +28,11 @@
 %% API
 %%====================================================================
 
--spec start_link({atom(), atom()}, pid() | none) -> gen_statem:start_ret().
-start_link(Key, Caller) ->
-    toroco_consumer:start_link(?MODULE, Key, Caller).
-
--spec child_spec({atom(), atom()}, pid() | none) -> supervisor:child_spec().
-child_spec(Key, Caller) ->
-    toroco_consumer:child_spec(?MODULE, Key, Caller).
-
--spec rewire({atom(), atom()}, pid() | none) -> ok | {error, not_running}.
-rewire(Key, Caller) ->
-    toroco_consumer:rewire(?MODULE, Key, Caller).
-
--spec ready({atom(), atom()}) -> ok | {error, not_running}.
-ready(Key) ->
-    toroco_consumer:ready(?MODULE, Key).
-
 %% @doc Per member: inhibited, inhibitors, latch, inhibitor holds; `none' if the
 %% gate is not running.
 -spec info({atom(), atom()}) -> #{{atom(), atom()} => map()} | none.
 info(Key) ->
-    case toroco_consumer:call(?MODULE, Key, info, 1000) of
-        {error, not_running} -> none;
-        Info -> Info
-    end.
+    toroco_consumer:info(?MODULE, Key).
 
 %%====================================================================
 %% toroco_consumer

@@ -18,7 +18,7 @@
 
 -include("toroco_wire.hrl").
 
--export([start_link/2, child_spec/2, rewire/2, ready/1, unwire/1, info/1]).
+-export([unwire/1, info/1]).
 -export([kind/0, reg/1, init/2, run/3, settled/1, deadline/1, rewired/5, late/2, handle/3,
          info/2]).
 
@@ -39,27 +39,6 @@
 %% API
 %%====================================================================
 
-%% @doc `Caller' is the process whose wiring call starts the router (not
-%% waited for, see `toroco_wire'), or `none'.
--spec start_link({atom(), atom()}, pid() | none) -> gen_statem:start_ret().
-start_link(Key, Caller) ->
-    toroco_consumer:start_link(?MODULE, Key, Caller).
-
--spec child_spec({atom(), atom()}, pid() | none) -> supervisor:child_spec().
-child_spec(Key, Caller) ->
-    toroco_consumer:child_spec(?MODULE, Key, Caller).
-
-%% @doc Takes the configuration now in the wiring table; returns once the
-%% new sources' latches are in and the winner is delivered.
--spec rewire({atom(), atom()}, pid() | none) -> ok | {error, not_running}.
-rewire(Key, Caller) ->
-    toroco_consumer:rewire(?MODULE, Key, Caller).
-
-%% @doc Returns once a just-started router has taken its sources in.
--spec ready({atom(), atom()}) -> ok | {error, not_running}.
-ready(Key) ->
-    toroco_consumer:ready(?MODULE, Key).
-
 %% @doc The input is being unwired as a whole: drop every source (delivering
 %% `idle' if one held) before the router is stopped.
 -spec unwire({atom(), atom()}) -> ok.
@@ -71,10 +50,7 @@ unwire(Key) ->
 %% not running.
 -spec info({atom(), atom()}) -> map() | none.
 info(Key) ->
-    case toroco_consumer:call(?MODULE, Key, info, 1000) of
-        #{} = Info -> Info;
-        {error, _} -> none
-    end.
+    toroco_consumer:info(?MODULE, Key).
 
 %%====================================================================
 %% toroco_consumer

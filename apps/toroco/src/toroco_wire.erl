@@ -50,7 +50,7 @@
 
 -include("toroco_wire.hrl").
 
--export([address/1, send/2, start_opts/0]).
+-export([address/1, send/2, call/4, start_opts/0]).
 -export([new_links/0, start_sync/4, sync_answer/5, sync_down/2, sync_expire/1, sync_done/1,
          sync_fresh/3, finish_sync/2, detach_all/2, hello/4, late_state/4, down/3, carries/3,
          hold_timer/2]).
@@ -91,6 +91,18 @@ send(To, Msg) ->
         _ -> ok
     catch
         error:badarg -> ok
+    end.
+
+%% @doc A call to a process of the network, with a time limit; what goes
+%% wrong comes back as an error naming `Name': `{not_running, Name}',
+%% `{timeout, Name}', or the exit reason.
+-spec call(atom() | address(), term(), timeout(), term()) -> term().
+call(To, Req, Timeout, Name) ->
+    try gen_statem:call(To, Req, Timeout)
+    catch exit:{noproc, _} -> {error, {not_running, Name}};
+          exit:{{nodedown, _}, _} -> {error, {not_running, Name}};
+          exit:{timeout, _} -> {error, {timeout, Name}};
+          exit:{Reason, _} -> {error, {Reason, Name}}
     end.
 
 %%====================================================================
