@@ -145,7 +145,7 @@ top_shows_the_whole_network(_Config) ->
     ok = toroco:inject({s, v}, {hold, stop, 60000}),
     await_values(a, [fwd, stop]),
     ok = toroco:suspend_behavior(inh),
-    Text = unicode:characters_to_list(toroco_inspect:top_iodata()),
+    Text = unicode:characters_to_list(toroco_top:iodata()),
     ct:pal("~ts", [Text]),
     Lines = string:split(Text, "\n", all),
     ["toroco top" ++ _, "layers     2: inh  1: b  0: lo", "taken out  none", "" | _] = Lines,
@@ -194,7 +194,7 @@ top_counts_restarts(_Config) ->
                     3000)
      end || _ <- [1, 2]],
     Expected = integer_to_list(Before + 2),
-    Text = unicode:characters_to_list(toroco_inspect:top_iodata()),
+    Text = unicode:characters_to_list(toroco_top:iodata()),
     ["b", "behavior", "1", "running", "relaying", "0", Expected, "tb_relay"] =
         row(string:split(Text, "\n", all), "^b "),
     0 = toroco_restarts:count(s).
