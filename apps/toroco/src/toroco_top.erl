@@ -36,7 +36,6 @@ print() ->
 %% and the devices' own counters.
 -spec iodata() -> iodata().
 iodata() ->
-    _ = toroco_restarts:install(),
     #{behaviors := Bs, devices := Ds, layers := Layers, removed_layers := Removed} =
         toroco_inspect:overview(),
     Nodes = [row(N) || N <- Bs ++ Ds],

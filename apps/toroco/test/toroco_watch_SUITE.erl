@@ -185,7 +185,6 @@ row(Lines, Re) ->
 top_counts_restarts() ->
     [{doc, "The RESTARTS column counts the restarts of each behavior by its supervisor."}].
 top_counts_restarts(_Config) ->
-    ok = toroco_restarts:install(),
     Before = toroco_restarts:count(b),
     [begin
          Pid = whereis(toroco_names:process(b)),
