@@ -1,5 +1,6 @@
-%% The event path: the observer tap (SPEC §10), and the runtime's own resilience around the
-%% event path: the wiring server's crashes, self-calls, fast inject.
+%% The event path: the observer tap (SPEC §10), and the runtime's own
+%% resilience around it: the wiring server's crashes, self-calls, inject's
+%% errors, reset and the engine's defaults.
 -module(toroco_event_path_SUITE).
 -include_lib("common_test/include/ct.hrl").
 -compile([export_all, nowarn_export_all]).
