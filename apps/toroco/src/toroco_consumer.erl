@@ -84,12 +84,12 @@ child_spec(Mod, Key, Caller) ->
 %% for `sync_timeout_ms').
 -spec rewire(module(), key(), pid() | none) -> ok | {error, term()}.
 rewire(Mod, Key, Caller) ->
-    call(Mod, Key, {rewire, Caller}, infinity).
+    call(Mod, Key, {rewire, Caller}, answer_timeout()).
 
 %% @doc Returns once a just-started consumer has taken its sources in.
 -spec ready(module(), key()) -> ok | {error, term()}.
 ready(Mod, Key) ->
-    call(Mod, Key, ready, infinity).
+    call(Mod, Key, ready, answer_timeout()).
 
 %% @doc The consumer's inspection view, or `none' if it is not running.
 -spec info(module(), key()) -> term() | none.
@@ -276,6 +276,11 @@ finish(C = #c{sync = {Sync, From, Cfg}, links = L, mod = Mod, data = D}) ->
                 _ -> [{reply, From, ok}]
             end,
     {ready, C1, [{{timeout, sync}, cancel} | Reply ++ Actions]}.
+
+%% A consumer answers once its own wait is over, so the wiring server waits
+%% a little longer than that, and never forever.
+answer_timeout() ->
+    sync_timeout() + 5000.
 
 %% The consumer's own address, as its upstreams know it.
 me(#c{mod = Mod, key = Key}) ->

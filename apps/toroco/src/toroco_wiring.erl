@@ -336,17 +336,23 @@ apply_plan(#{routers := OldR, gates := OldG, subs := OldSubs},
 ensure(Kind, Key, Changed, Caller) ->
     Mod = consumer_module(Kind),
     case supervisor:start_child(toroco_routers_sup, toroco_consumer:child_spec(Mod, Key, Caller)) of
-        {ok, _} -> _ = toroco_consumer:ready(Mod, Key), ok;
-        {error, {already_started, _}} when Changed -> _ = toroco_consumer:rewire(Mod, Key, Caller), ok;
+        {ok, _} -> answered(toroco_consumer:ready(Mod, Key));
+        {error, {already_started, _}} when Changed -> answered(toroco_consumer:rewire(Mod, Key, Caller));
         {error, {already_started, _}} -> ok;
         {error, already_present} ->
             _ = supervisor:restart_child(toroco_routers_sup, {Kind, Key}),
-            _ = toroco_consumer:ready(Mod, Key),
-            ok;
+            answered(toroco_consumer:ready(Mod, Key));
         {error, Reason} ->
             logger:error("toroco: could not start ~p ~p: ~p", [Kind, Key, Reason],
                          #{domain => [toroco, wiring]})
     end.
+
+%% A consumer that did not take its change in is logged; the change goes on
+%% (the consumer's supervisor or its own late answers bring it right).
+answered(ok) -> ok;
+answered({error, Reason}) ->
+    logger:error("toroco: a router or gate did not take a wiring change in: ~p", [Reason],
+                 #{domain => [toroco, wiring]}).
 
 stop(Kind, Key) ->
     _ = Kind =:= router andalso toroco_router:unwire(Key),
