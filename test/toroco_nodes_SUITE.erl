@@ -1,0 +1,322 @@
+%% A robot spanning several nodes (SPEC §13): real nodes started with OTP's
+%% `peer' on loopback, each running `toroco'; the cases spread emitters,
+%% gates, routers and receivers over two or three of them.
+-module(toroco_nodes_SUITE).
+-include_lib("common_test/include/ct.hrl").
+-compile([export_all, nowarn_export_all]).
+
+suite() -> [{timetrap, {seconds, 60}}].
+
+all() ->
+    [placement_and_names, top_and_watch_cover_nodes, suppression_across_nodes, inhibition_gate_on_third_node,
+     hierarchy_uses_remote_layers, reset_from_another_node, remote_emitter_restart_caught_up,
+     stale_source_dropped_and_back, node_killed_and_restarted, clash_after_partition_reported].
+
+init_per_suite(Config) ->
+    _ = application:stop(toroco_hw),
+    _ = application:stop(toroco),
+    _ = os:cmd("epmd -daemon"),
+    Started = case node() of
+                  nonode@nohost ->
+                      Name = list_to_atom("toroco_ct" ++ integer_to_list(erlang:unique_integer([positive]))
+                                          ++ "@127.0.0.1"),
+                      {ok, _} = net_kernel:start([Name, longnames]),
+                      true;
+                  _ -> false
+              end,
+    [{stop_dist, Started} | Config].
+
+end_per_suite(Config) ->
+    _ = ?config(stop_dist, Config) andalso net_kernel:stop(),
+    ok.
+
+init_per_testcase(_TC, Config) ->
+    Config.
+
+end_per_testcase(_TC, Config) ->
+    _ = [catch peer:stop(P) || P <- peers_of(Config)],
+    ok.
+
+peers_of(Config) ->
+    case ?config(peers, Config) of
+        undefined -> [];
+        Ps -> Ps
+    end.
+
+%%====================================================================
+%% Nodes
+%%====================================================================
+
+%% Starts a peer on loopback with this node's code path and toroco running.
+start_peer(Name) ->
+    Paths = [P || P <- code:get_path(), string:find(P, "_build") =/= nomatch],
+    {ok, Peer, Node} = peer:start_link(#{name => Name, host => "127.0.0.1", longnames => true,
+                                         args => ["-setcookie", atom_to_list(erlang:get_cookie()),
+                                                  "-connect_all", "false",
+                                                  "-pa" | Paths]}),
+    {ok, _} = erpc:call(Node, application, ensure_all_started, [toroco_hw]),
+    {Peer, Node}.
+
+peer_name(Tag) ->
+    list_to_atom(atom_to_list(Tag) ++ integer_to_list(erlang:unique_integer([positive]))).
+
+%% Three peers, connected to each other.
+nodes3() ->
+    [{PA, A}, {PB, B}, {PC, C}] = [start_peer(peer_name(T)) || T <- [a, b, c]],
+    pong = erpc:call(A, net_adm, ping, [B]),
+    pong = erpc:call(A, net_adm, ping, [C]),
+    pong = erpc:call(B, net_adm, ping, [C]),
+    await_peers([A, B, C]),
+    {[PA, PB, PC], A, B, C}.
+
+%% Until each node's wiring server knows the others'.
+await_peers(Nodes) ->
+    wait(fun() ->
+                 lists:all(fun(N) -> erpc:call(N, toroco_wiring, peers, []) =:= lists:sort(Nodes) end,
+                           Nodes)
+         end, 5000).
+
+t(Node, F, Args) -> erpc:call(Node, toroco, F, Args).
+
+sensor(At, Name) ->
+    ok = t(At, add_device, [Name, toroco_fake_sensor, #{outputs => [out]}]).
+
+values(Node, A) ->
+    [V || {_, V, _} <- erpc:call(Node, toroco_fake_actuator, history, [A])].
+
+await_values(Node, A, Expected) ->
+    wait(fun() -> values(Node, A) =:= Expected end, 3000, {expected, Expected}),
+    ok.
+
+wait(Fun, Timeout) -> wait(Fun, Timeout, condition).
+
+wait(Fun, Timeout, What) when Timeout =< 0 ->
+    case Fun() of
+        true -> ok;
+        _ -> ct:fail({not_met, What})
+    end;
+wait(Fun, Timeout, What) ->
+    case Fun() of
+        true -> ok;
+        _ -> timer:sleep(10), wait(Fun, Timeout - 10, What)
+    end.
+
+%%====================================================================
+%% Cases
+%%====================================================================
+
+placement_and_names() -> [{doc, "node => N places a thing there; names are unique across nodes; every call works from any node and inspect says where"}].
+placement_and_names(Config) ->
+    {Ps, A, B, C} = nodes3(),
+    Config1 = [{peers, Ps} | Config],
+    ok = t(A, add_device, [s, toroco_fake_sensor, #{outputs => [out], node => B}]),
+    #{node := B, kind := device} = t(A, inspect, [s]),
+    #{node := B} = t(B, inspect, [s]),
+    {error, {name_taken, s, B}} = t(A, add_device, [s, toroco_fake_sensor, #{outputs => [out]}]),
+    ok = t(A, add_device, [act, toroco_fake_actuator, #{inputs => [in]}]),
+    #{devices := [act, s], nodes := #{act := A, s := B}} = t(B, inspect, []),
+    %% Wired from a third node, acted on where the receiver lives.
+    ok = t(C, set_inputs, [act, #{in => [{s, out}]}]),
+    ok = t(C, inject, [{s, out}, 7, #{latch => true}]),
+    await_values(A, act, [7]),
+    ok = t(C, remove_device, [s]),
+    {error, {unknown_name, s}} = t(A, inspect, [s]),
+    #{in := #{sources := []}} = maps:get(inputs, t(A, inspect, [act])),
+    end_per_testcase(x, Config1).
+
+suppression_across_nodes() -> [{doc, "holds, latches, suppression and idle across three nodes: the higher source's hold suppresses the lower, whose latch comes back when it ends"}].
+suppression_across_nodes(Config) ->
+    {Ps, A, B, C} = nodes3(),
+    sensor(A, hi),
+    sensor(B, lo),
+    ok = t(C, add_device, [act, toroco_fake_actuator, #{inputs => [in]}]),
+    ok = t(C, set_inputs, [act, #{in => #{sources => [{hi, out}, {lo, out}], idle => stop}}]),
+    ok = t(B, inject, [{lo, out}, 1, #{latch => true}]),
+    await_values(C, act, [1]),
+    ok = t(A, inject, [{hi, out}, 2, #{hold => 300}]),
+    await_values(C, act, [1, 2]),
+    ok = t(B, inject, [{lo, out}, 3, #{latch => true}]),
+    timer:sleep(100),
+    [1, 2] = values(C, act),                      % suppressed while hi holds
+    await_values(C, act, [1, 2, 3]),              % the hold ends: lo's latch
+    ok = t(A, inject, [{hi, out}, 4, #{latch => true}]),
+    ok = t(B, inject, [{lo, out}, 5, #{}]),       % a send clears lo's latch
+    ok = t(A, inject, [{hi, out}, 6, #{hold => 0}]),
+    await_values(C, act, [1, 2, 3, 4, 6, stop]),
+    end_per_testcase(x, [{peers, Ps} | Config]).
+
+inhibition_gate_on_third_node() -> [{doc, "an output on node A inhibited by a source on node B (its gate on A) feeding a receiver on node C: silenced, then its latch re-enters"}].
+inhibition_gate_on_third_node(Config) ->
+    {Ps, A, B, C} = nodes3(),
+    sensor(A, e),
+    sensor(B, i),
+    ok = t(C, add_device, [act, toroco_fake_actuator, #{inputs => [in]}]),
+    ok = t(C, set_inputs, [act, #{in => #{sources => [{e, out}], idle => stop}}]),
+    ok = t(B, set_inhibitors, [e, #{out => [{i, out}]}]),
+    #{outputs := #{out := #{inhibitors := [{i, out}], inhibited := false}}} = t(C, inspect, [e]),
+    ok = t(A, inject, [{e, out}, go, #{latch => true}]),
+    await_values(C, act, [go]),
+    timer:sleep(600),                       % quiet past max_age, but the gate lives
+    [go] = values(C, act),
+    ok = t(B, inject, [{i, out}, on, #{latch => true}]),
+    await_values(C, act, [go, stop]),
+    #{outputs := #{out := #{inhibited := true}}} = t(B, inspect, [e]),
+    ok = t(A, inject, [{e, out}, go2, #{latch => true}]),   % latched while inhibited
+    timer:sleep(100),
+    [go, stop] = values(C, act),
+    ok = t(B, inject, [{i, out}, off, #{hold => 0}]),       % a send clears i's latch
+    await_values(C, act, [go, stop, go2]),
+    end_per_testcase(x, [{peers, Ps} | Config]).
+
+hierarchy_uses_remote_layers() -> [{doc, "wiring is refused when a source sits above one of a higher layer on another node, and an inhibitor of a lower layer on another node"}].
+hierarchy_uses_remote_layers(Config) ->
+    {Ps, A, B, C} = nodes3(),
+    ok = t(A, add_behavior, [high, tb_relay, #{layer => 2}]),
+    ok = t(B, add_behavior, [low, tb_relay, #{layer => 1}]),
+    ok = t(C, add_device, [act, toroco_fake_actuator, #{inputs => [in]}]),
+    {error, {hierarchy, _}} = t(C, set_inputs, [act, #{in => [{low, out}, {high, out}]}]),
+    ok = t(C, set_inputs, [act, #{in => [{high, out}, {low, out}]}]),
+    {error, {hierarchy, _}} = t(C, set_inhibitors, [high, #{out => [{low, out}]}]),
+    end_per_testcase(x, [{peers, Ps} | Config]).
+
+reset_from_another_node() -> [{doc, "a reset source on another node restarts the behavior from init/1, clearing its latch"}].
+reset_from_another_node(Config) ->
+    {Ps, A, B, _C} = nodes3(),
+    sensor(A, kick),
+    ok = t(B, add_behavior, [r, tb_relay, #{layer => 1, params => #{latch => fresh}}]),
+    sensor(A, feed),
+    ok = t(B, add_device, [act, toroco_fake_actuator, #{inputs => [in]}]),
+    ok = t(B, set_inputs, [r, #{in => [{feed, out}]}]),
+    ok = t(B, set_inputs, [act, #{in => [{r, out}]}]),
+    await_values(B, act, [fresh]),
+    ok = t(A, inject, [{feed, out}, {set, other}, #{}]),
+    await_values(B, act, [fresh, other]),
+    ok = t(A, set_reset, [r, [{kick, out}]]),
+    ok = t(A, inject, [{kick, out}, now, #{}]),
+    await_values(B, act, [fresh, other, fresh]),
+    end_per_testcase(x, [{peers, Ps} | Config]).
+
+remote_emitter_restart_caught_up() -> [{doc, "a remote emitter that crashes ends its holds at once, and its new incarnation is heard again (the router subscribes again)"}].
+remote_emitter_restart_caught_up(Config) ->
+    {Ps, A, B, _C} = nodes3(),
+    sensor(A, hi),
+    sensor(B, lo),
+    ok = t(B, add_device, [act, toroco_fake_actuator, #{inputs => [in]}]),
+    ok = t(B, set_inputs, [act, #{in => [{hi, out}, {lo, out}]}]),
+    ok = t(B, inject, [{lo, out}, low, #{latch => true}]),
+    ok = t(A, inject, [{hi, out}, high, #{latch => true}]),
+    await_values(B, act, [low, high]),
+    Old = erpc:call(A, erlang, whereis, [toroco_names:process(hi)]),
+    true = erpc:call(A, erlang, exit, [Old, kill]),
+    await_values(B, act, [low, high, low]),
+    wait(fun() -> case erpc:call(A, erlang, whereis, [toroco_names:process(hi)]) of
+                      P when is_pid(P) -> P =/= Old;
+                      _ -> false
+                  end
+         end, 3000),
+    ok = t(A, inject, [{hi, out}, again, #{latch => true}]),
+    await_values(B, act, [low, high, low, again]),
+    end_per_testcase(x, [{peers, Ps} | Config]).
+
+stale_source_dropped_and_back() -> [{doc, "a frozen node's latched source is let go within max_age + 50 ms (the lower source takes over) and comes back when the node thaws; a quiet live one is kept"}].
+stale_source_dropped_and_back(Config) ->
+    {Ps, A, B, _C} = nodes3(),
+    sensor(A, hi),
+    sensor(B, lo),
+    ok = t(B, add_device, [act, toroco_fake_actuator, #{inputs => [in]}]),
+    ok = t(B, set_inputs, [act, #{in => [{hi, out, #{max_age => 200}}, {lo, out}]}]),
+    ok = t(B, inject, [{lo, out}, low, #{latch => true}]),
+    ok = t(A, inject, [{hi, out}, high, #{latch => true}]),
+    await_values(B, act, [low, high]),
+    timer:sleep(600),                       % quiet, but alive: kept
+    [low, high] = values(B, act),
+    OsPid = erpc:call(A, os, getpid, []),
+    T0 = erpc:call(B, erlang, monotonic_time, [millisecond]),
+    _ = os:cmd("kill -STOP " ++ OsPid),
+    try
+        await_values(B, act, [low, high, low]),
+        [_, _, {in, low, T1}] = erpc:call(B, toroco_fake_actuator, history, [act]),
+        ct:pal("let go after ~b ms (max_age 200)", [T1 - T0]),
+        true = T1 - T0 =< 250
+    after
+        os:cmd("kill -CONT " ++ OsPid)
+    end,
+    await_values(B, act, [low, high, low, high]),
+    end_per_testcase(x, [{peers, Ps} | Config]).
+
+node_killed_and_restarted() -> [{doc, "a node that dies lets the lower layers take over at once; restarted with its part, the wiring is as before and its latch is delivered again"}].
+node_killed_and_restarted(Config) ->
+    {[PA | Ps], A, B, _C} = nodes3(),
+    sensor(A, hi),
+    sensor(B, lo),
+    ok = t(B, add_device, [act, toroco_fake_actuator, #{inputs => [in]}]),
+    ok = t(B, set_inputs, [act, #{in => #{sources => [{hi, out}, {lo, out}], idle => stop}}]),
+    ok = t(B, inject, [{lo, out}, low, #{latch => true}]),
+    ok = t(A, inject, [{hi, out}, high, #{latch => true}]),
+    await_values(B, act, [low, high]),
+    Before = maps:get(inputs, t(B, inspect, [act])),
+    peer:stop(PA),
+    await_values(B, act, [low, high, low]),
+    #{in := #{sources := [{hi, out}, {lo, out}]}} = maps:get(inputs, t(B, inspect, [act])),
+    %% The same node again, running its part.
+    [_, Host] = string:split(atom_to_list(A), "@"),
+    {PA2, A} = start_peer(list_to_atom(hd(string:split(atom_to_list(A), "@")))),
+    "127.0.0.1" = Host,
+    pong = erpc:call(A, net_adm, ping, [B]),
+    sensor(A, hi),
+    ok = t(A, inject, [{hi, out}, high, #{latch => true}]),
+    await_values(B, act, [low, high, low, high]),
+    Before = maps:get(inputs, t(B, inspect, [act])),
+    end_per_testcase(x, [{peers, [PA2 | Ps]} | Config]).
+
+clash_after_partition_reported() -> [{doc, "a name added on both sides of a partition is reported when the nodes meet again, not merged"}].
+clash_after_partition_reported(Config) ->
+    {Ps, A, B, C} = nodes3(),
+    %% Only A and B: the test node and C would carry the partition over.
+    _ = [true = erpc:call(X, erlang, disconnect_node, [C]) || X <- [A, B]],
+    true = erpc:call(A, erlang, disconnect_node, [B]),
+    wait(fun() -> erpc:call(A, toroco_wiring, peers, []) =:= [A] end, 3000),
+    sensor(A, twin),
+    sensor(B, twin),
+    pong = erpc:call(A, net_adm, ping, [B]),
+    wait(fun() -> maps:get(name_clashes, t(A, inspect, []), []) =/= [] end, 3000),
+    #{name_clashes := Clashes} = t(B, inspect, []),
+    true = lists:member({twin, A}, Clashes) orelse lists:member({twin, B}, Clashes),
+    end_per_testcase(x, [{peers, Ps} | Config]).
+
+top_and_watch_cover_nodes() -> [{doc, "top on one node lists the whole robot with the node of each thing; watch/2 of a receiver on another node prints here"}].
+top_and_watch_cover_nodes(Config) ->
+    {Ps, A, B, _C} = nodes3(),
+    sensor(A, s),
+    ok = t(B, add_device, [act, toroco_fake_actuator, #{inputs => [in]}]),
+    ok = t(A, set_inputs, [act, #{in => [{s, out}]}]),
+    Top = lists:flatten(io_lib:format("~ts", [erpc:call(A, toroco_top, iodata, [])])),
+    [_ | _] = [L || L <- string:split(Top, "\n", all), string:find(L, "act") =/= nomatch,
+                    string:find(L, atom_to_list(B)) =/= nomatch],
+    [_ | _] = [L || L <- string:split(Top, "\n", all), string:find(L, "ON") =/= nomatch],
+    Io = capture(),
+    ok = t(A, watch, [act, #{max => 1, io => Io, notify => self()}]),
+    ok = t(A, inject, [{s, out}, 42, #{}]),
+    receive {toroco_watch, stopped, {max, 1}} -> ok after 3000 -> ct:fail(no_watch) end,
+    Io ! {get, self()},
+    receive {Io, Out} -> true = nomatch =/= string:find(Out, "act.in <- 42") after 1000 -> ct:fail(no_output) end,
+    end_per_testcase(x, [{peers, Ps} | Config]).
+
+capture() ->
+    spawn(fun() -> capture([]) end).
+
+capture(Acc) ->
+    receive
+        {io_request, From, Ref, {put_chars, _Enc, Chars}} ->
+            From ! {io_reply, Ref, ok},
+            capture([Acc, Chars]);
+        {io_request, From, Ref, {put_chars, _Enc, M, F, Args}} ->
+            From ! {io_reply, Ref, ok},
+            capture([Acc, apply(M, F, Args)]);
+        {io_request, From, Ref, _} ->
+            From ! {io_reply, Ref, ok},
+            capture(Acc);
+        {get, Pid} ->
+            Pid ! {self(), unicode:characters_to_list(Acc)},
+            capture(Acc)
+    end.
