@@ -10,7 +10,8 @@ suite() -> [{timetrap, {seconds, 60}}].
 all() ->
     [placement_and_names, top_and_watch_cover_nodes, suppression_across_nodes, inhibition_gate_on_third_node,
      hierarchy_uses_remote_layers, reset_from_another_node, remote_emitter_restart_caught_up,
-     stale_source_dropped_and_back, node_killed_and_restarted, clash_after_partition_reported].
+     stale_source_dropped_and_back, node_killed_and_restarted, partition_heals_with_wiring_as_before,
+     wiring_file_places_on_nodes, clash_after_partition_reported].
 
 init_per_suite(Config) ->
     _ = application:stop(toroco_hw),
@@ -77,6 +78,10 @@ await_peers(Nodes) ->
          end, 5000).
 
 t(Node, F, Args) -> erpc:call(Node, toroco, F, Args).
+
+%% The wiring of a receiver's inputs as inspect shows it.
+wiring_of(Node, R) ->
+    maps:map(fun(_, #{sources := Srcs}) -> Srcs end, maps:get(inputs, t(Node, inspect, [R]))).
 
 sensor(At, Name) ->
     ok = t(At, add_device, [Name, toroco_fake_sensor, #{outputs => [out]}]).
@@ -254,7 +259,7 @@ node_killed_and_restarted(Config) ->
     ok = t(B, inject, [{lo, out}, low, #{latch => true}]),
     ok = t(A, inject, [{hi, out}, high, #{latch => true}]),
     await_values(B, act, [low, high]),
-    Before = maps:get(inputs, t(B, inspect, [act])),
+    Before = wiring_of(B, act),
     peer:stop(PA),
     await_values(B, act, [low, high, low]),
     #{in := #{sources := [{hi, out}, {lo, out}]}} = maps:get(inputs, t(B, inspect, [act])),
@@ -266,7 +271,7 @@ node_killed_and_restarted(Config) ->
     sensor(A, hi),
     ok = t(A, inject, [{hi, out}, high, #{latch => true}]),
     await_values(B, act, [low, high, low, high]),
-    Before = maps:get(inputs, t(B, inspect, [act])),
+    Before = wiring_of(B, act),
     end_per_testcase(x, [{peers, [PA2 | Ps]} | Config]).
 
 clash_after_partition_reported() -> [{doc, "a name added on both sides of a partition is reported when the nodes meet again, not merged"}].
@@ -320,3 +325,49 @@ capture(Acc) ->
             Pid ! {self(), unicode:characters_to_list(Acc)},
             capture(Acc)
     end.
+
+partition_heals_with_wiring_as_before() -> [{doc, "a partition wedges nothing: each side runs on, the board side takes over at once; when the nodes meet again the wiring is as it was and the remote latch is delivered again"}].
+partition_heals_with_wiring_as_before(Config) ->
+    {Ps, A, B, C} = nodes3(),
+    sensor(A, laptop),
+    sensor(B, board),
+    ok = t(B, add_device, [motors, toroco_fake_actuator, #{inputs => [setvel]}]),
+    ok = t(A, add_device, [screen, toroco_fake_actuator, #{inputs => [in]}]),
+    ok = t(B, set_inputs, [motors, #{setvel => #{sources => [{laptop, out}, {board, out}],
+                                                 idle => {0, 0}}}]),
+    ok = t(A, set_inputs, [screen, #{in => [{laptop, out}]}]),
+    ok = t(B, inject, [{board, out}, wander, #{latch => true}]),
+    ok = t(A, inject, [{laptop, out}, follow_red, #{latch => true}]),
+    await_values(B, motors, [wander, follow_red]),
+    Before = wiring_of(B, motors),
+    T0 = erpc:call(B, erlang, monotonic_time, [millisecond]),
+    %% The partition: only A and B, the test node keeps talking to both.
+    _ = [true = erpc:call(X, erlang, disconnect_node, [C]) || X <- [A, B]],
+    true = erpc:call(A, erlang, disconnect_node, [B]),
+    await_values(B, motors, [wander, follow_red, wander]),
+    %% Each side keeps running its own behaviors.
+    ok = t(A, inject, [{laptop, out}, follow_red2, #{latch => true}]),
+    await_values(A, screen, [follow_red, follow_red2]),
+    ok = t(B, inject, [{board, out}, wander2, #{latch => true}]),
+    await_values(B, motors, [wander, follow_red, wander, wander2]),
+    pong = erpc:call(A, net_adm, ping, [B]),
+    await_values(B, motors, [wander, follow_red, wander, wander2, follow_red2]),
+    Before = wiring_of(B, motors),
+    History = erpc:call(B, toroco_fake_actuator, history, [motors]),
+    ct:pal("board motors: ~p", [[{V, T - T0} || {_, V, T} <- History]]),
+    end_per_testcase(x, [{peers, Ps} | Config]).
+
+wiring_file_places_on_nodes() -> [{doc, "a wiring file with node options, loaded on one node, places things on others and wires them where they live"}].
+wiring_file_places_on_nodes(Config) ->
+    {Ps, A, B, _C} = nodes3(),
+    File = filename:join(?config(priv_dir, Config), "split.wiring"),
+    Terms = [{device, far, toroco_fake_sensor, #{outputs => [out], node => A}},
+             {device, near, toroco_fake_sensor, #{outputs => [out], node => B}},
+             {device, act, toroco_fake_actuator, #{inputs => [in], node => B}},
+             {inputs, act, #{in => [{far, out}, {near, out}]}}],
+    ok = file:write_file(File, [io_lib:format("~p.~n", [T]) || T <- Terms]),
+    ok = t(A, load_wiring, [File]),
+    #{nodes := #{far := A, near := B, act := B}} = t(A, inspect, []),
+    ok = t(A, inject, [{far, out}, 1, #{latch => true}]),
+    await_values(B, act, [1]),
+    end_per_testcase(x, [{peers, Ps} | Config]).
