@@ -2,6 +2,9 @@
 %%
 %% ```
 %% toroco_live_sup (one_for_one)
+%%   toroco_live_flight      the flight recorder, always on
+%%   toroco_live_recorder    MCAP recording, idle until asked
+%%   toroco_live_foxglove    the Foxglove bridge, when started
 %% '''
 %%
 %% one_for_one: the dashboard, the bridge and the recorders are independent
@@ -18,4 +21,7 @@ start_link() ->
 -spec init([]) -> {ok, {supervisor:sup_flags(), [supervisor:child_spec()]}}.
 init([]) ->
     Flags = #{strategy => one_for_one, intensity => 5, period => 10},
-    {ok, {Flags, []}}.
+    Children = [#{id => toroco_live_flight, start => {toroco_live_flight, start_link, []}},
+                #{id => toroco_live_recorder, start => {toroco_live_recorder, start_link, []},
+                  shutdown => 30000}],
+    {ok, {Flags, Children}}.
