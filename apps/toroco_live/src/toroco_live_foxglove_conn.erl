@@ -34,6 +34,8 @@
 -define(MAX_MESSAGE, 1048576).
 -define(MAX_FAULTS, 20).
 -define(SEND_TIMEOUT_MS, 5000).
+%% After our close frame, how long the client has to close its side.
+-define(CLOSING_MS, 2000).
 
 -record(conn, {socket :: mochiweb_socket:socket(),
                decoder :: toroco_live_ws:decoder(),
@@ -44,7 +46,8 @@
                client_channels = #{} :: #{non_neg_integer() => toroco_live_channels:key()},
                graph = none :: none | {list(), list()},
                graph_subscribed = false :: boolean(),
-               faults = 0 :: non_neg_integer()}).
+               faults = 0 :: non_neg_integer(),
+               closing = false :: boolean()}).
 
 %% @doc The mochiweb loop of the bridge's port: a WebSocket upgrade to
 %% `Subprotocol' becomes a connection, anything else gets a 400.
@@ -100,7 +103,17 @@ handle_call(_, _From, C) ->
 handle_cast(_, C) ->
     {noreply, C}.
 
--spec handle_info(term(), #conn{}) -> {noreply, #conn{}} | {stop, term(), #conn{}}.
+-spec handle_info(term(), #conn{}) -> {noreply, #conn{}} | {noreply, #conn{}, timeout()}
+                                          | {stop, term(), #conn{}}.
+handle_info({Tcp, _, _}, C = #conn{socket = S, closing = true}) when Tcp =:= tcp; Tcp =:= ssl ->
+    %% Read on until the client closes: closing with unread bytes would
+    %% reset the connection and lose our close frame.
+    ok = mochiweb_socket:setopts(S, [{active, once}]),
+    {noreply, C, ?CLOSING_MS};
+handle_info(timeout, C = #conn{closing = true}) ->
+    {stop, normal, C};
+handle_info(_, C = #conn{closing = true}) ->
+    {noreply, C, ?CLOSING_MS};
 handle_info({Tcp, _, Bytes}, C = #conn{socket = S, decoder = D}) when Tcp =:= tcp; Tcp =:= ssl ->
     case toroco_live_ws:decode(Bytes, D) of
         {ok, Messages, D1} ->
@@ -108,8 +121,8 @@ handle_info({Tcp, _, Bytes}, C = #conn{socket = S, decoder = D}) when Tcp =:= tc
                 {ok, C1} ->
                     ok = mochiweb_socket:setopts(S, [{active, once}]),
                     {noreply, C1};
-                {stop, Why, C1} ->
-                    {stop, Why, C1}
+                Stop ->
+                    Stop
             end;
         {error, Why} ->
             Code = case Why of too_big -> 1009; _ -> 1002 end,
@@ -180,6 +193,8 @@ graph_update({OldPub, _}, {Pub, Sub}) ->
 
 client_message(_, Stop = {stop, _, _}) ->
     Stop;
+client_message(_, Closing = {noreply, #conn{closing = true}, _}) ->
+    Closing;
 client_message({text, Text}, {ok, C}) ->
     try jiffy:decode(Text, [return_maps]) of
         #{<<"op">> := Op} = M when is_binary(Op) -> op(Op, M, C);
@@ -321,5 +336,10 @@ send(C = #conn{socket = S}, Frame) ->
     end.
 
 close(C = #conn{socket = S}, Code, Why) ->
-    _ = mochiweb_socket:send(S, toroco_live_ws:close_frame(Code, iolist_to_binary(io_lib:format("~0p", [Why])))),
-    {stop, normal, C}.
+    case mochiweb_socket:send(S, toroco_live_ws:close_frame(Code, iolist_to_binary(io_lib:format("~0p", [Why])))) of
+        ok ->
+            ok = mochiweb_socket:setopts(S, [{active, once}]),
+            {noreply, C#conn{closing = true}, ?CLOSING_MS};
+        {error, _} ->
+            {stop, normal, C}
+    end.
