@@ -100,14 +100,16 @@ port() ->
     catch exit:{noproc, _} -> off
     end.
 
-%% @doc A snapshot of the simulated world for the 3D panel (see
-%% `toroco_live_channels:world/2'); dropped when the bridge does not run.
+%% @doc A snapshot of the simulated world (see
+%% `toroco_live_channels:world/2') for the bridge's 3D panel channels, the
+%% recording and the flight recorder; whichever of them does not run
+%% misses it.
 -spec world(map()) -> ok.
 world(Snapshot) ->
-    case whereis(?MODULE) of
-        undefined -> ok;
-        Pid -> Pid ! {world, erlang:system_time(nanosecond), Snapshot}, ok
-    end.
+    Msg = {world, erlang:system_time(nanosecond), Snapshot},
+    _ = [Pid ! Msg || Name <- [?MODULE, toroco_live_recorder, toroco_live_flight],
+                      Pid <- [whereis(Name)], is_pid(Pid)],
+    ok.
 
 %%====================================================================
 %% The connections' side of the protocol

@@ -8,7 +8,7 @@
 all() ->
     [server_info_and_channels, values_in_order, channels_follow_wiring, connection_graph,
      publish_refused_when_off, publish_injects_when_on, misbehaving_client,
-     client_that_never_reads, not_a_websocket].
+     client_that_never_reads, not_a_websocket, simulated_world].
 
 suite() -> [{timetrap, {seconds, 60}}].
 
@@ -208,6 +208,31 @@ not_a_websocket(Config) ->
     {ok, <<"HTTP/1.1 400", _/binary>> = R} = gen_tcp:recv(S, 0, 5000),
     true = nomatch =/= binary:match(R, <<"foxglove.websocket.v1">>),
     gen_tcp:close(S).
+
+simulated_world() ->
+    [{doc, "World snapshots appear as foxglove.FrameTransform and foxglove.SceneUpdate "
+      "channels, so the 3D panel draws the robot in its arena"}].
+simulated_world(Config) ->
+    C = connect(Config),
+    await_topics(C, [<<"/toroco/lifecycle">>]),
+    Snapshot = #{arena => {6.0, 4.0}, walls => [{{1.0, 1.0}, {1.0, 2.5}}],
+                 objects => [{red, {4.5, 2.0}, 0.1}], pose => {1.5, 2.0, 90.0}},
+    ok = toroco_live_foxglove:world(Snapshot),
+    Chs = await_topics(C, [<<"/toroco/sim/pose">>, <<"/toroco/sim/scene">>]),
+    #{<<"schemaName">> := <<"foxglove.FrameTransform">>} = maps:get(<<"/toroco/sim/pose">>, Chs),
+    #{<<"schemaName">> := <<"foxglove.SceneUpdate">>} = maps:get(<<"/toroco/sim/scene">>, Chs),
+    subscribe(C, <<"/toroco/sim/pose">>),
+    subscribe(C, <<"/toroco/sim/scene">>),
+    ok = toroco_live_foxglove:world(Snapshot),
+    Ms = messages(C, [<<"/toroco/sim/pose">>, <<"/toroco/sim/scene">>], 2),
+    [#{<<"data">> := #{<<"translation">> := #{<<"x">> := 1.5, <<"y">> := Y},
+                       <<"rotation">> := #{<<"w">> := W}}}] =
+        [M || M = #{<<"topic">> := <<"/toroco/sim/pose">>} <- Ms],
+    true = Y == 2 andalso abs(W - math:cos(math:pi() / 4)) < 1.0e-9,
+    [#{<<"data">> := #{<<"entities">> := [#{<<"cubes">> := Walls, <<"cylinders">> := [_]}]}}] =
+        [M || M = #{<<"topic">> := <<"/toroco/sim/scene">>} <- Ms],
+    5 = length(Walls),
+    ok.
 
 %%====================================================================
 %% Helpers

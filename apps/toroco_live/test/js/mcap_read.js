@@ -1,6 +1,7 @@
 // Reads an MCAP file with @mcap/core's indexed reader (the format's
 // reference reader) and prints what it found as one JSON line:
-// {"ok":true,"channels":[...],"schemas":[...],"statistics":N,"messages":N,"perTopic":{...}}
+// {"ok":true,"channels":[...],"schemas":[...],"statistics":N,"messages":N,"perTopic":{...},
+//  "first":{topic: [first 50 messages]},"last":{topic: [last 50]}}
 // or {"ok":false,"error":"..."}. Message CRCs are checked as chunks are read.
 "use strict";
 const fs = require("fs/promises");
@@ -28,7 +29,7 @@ async function main(path) {
     }));
     const perTopic = {};
     let messages = 0, lastTime = 0n, ordered = true;
-    const first = {};
+    const first = {}, last = {};
     for await (const m of reader.readMessages()) {
       const topic = reader.channelsById.get(m.channelId).topic;
       perTopic[topic] = (perTopic[topic] ?? 0) + 1;
@@ -36,12 +37,14 @@ async function main(path) {
       lastTime = m.logTime;
       const body = JSON.parse(new TextDecoder().decode(m.data));
       (first[topic] ??= []).length < 50 && first[topic].push(body);
+      (last[topic] ??= []).push(body);
+      last[topic].length > 50 && last[topic].shift();
       messages++;
     }
     console.log(JSON.stringify({
       ok: true, header: reader.header, channels, schemas, ordered,
       statistics: Number(reader.statistics?.messageCount ?? -1),
-      chunks: reader.chunkIndexes.length, messages, perTopic, first,
+      chunks: reader.chunkIndexes.length, messages, perTopic, first, last,
     }));
   } catch (e) {
     console.log(JSON.stringify({ ok: false, error: String(e && e.message || e) }));
