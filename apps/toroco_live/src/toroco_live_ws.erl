@@ -98,7 +98,7 @@ length_of(127, <<0:1, N:63, R/binary>>) -> {N, R};
 length_of(N, R) when N < 126 -> {N, R};
 length_of(_, _) -> more.
 
-message(_, Op, _, _) when Op >= 8, Op =/= 8, Op =/= 9, Op =/= 10 -> {error, {opcode, Op}};
+message(_, Op, _, _) when Op >= 3, Op =< 7; Op >= 11 -> {error, {opcode, Op}};
 message(Fin, Op, P, _) when Op >= 8, (Fin =:= 0 orelse byte_size(P) > 125) -> {error, bad_control_frame};
 message(1, 8, <<Code:16, Reason/binary>>, D) -> {ok, {close, Code, Reason}, D};
 message(1, 8, _, D) -> {ok, {close, none, <<>>}, D};
