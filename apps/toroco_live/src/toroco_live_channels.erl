@@ -18,7 +18,7 @@
 %% simulated world runs; their messages come from {@link world/2}.
 -module(toroco_live_channels).
 
--export([topic/1, key/1, schema/1, of_event/1, from_wiring/0, graph/1, world/2,
+-export([topic/1, key/1, schema/1, of_event/1, event_key/1, from_wiring/0, graph/1, world/2,
          event_names/1, event_time/1]).
 
 -export_type([key/0, wiring/0]).
@@ -160,6 +160,15 @@ source(Other) -> toroco_live_json:term_text(Other).
 %% are encoded as they are.
 json(Map) -> toroco_live_json:encode(Map).
 
+%% @doc The channel of a tap event without making its message (cheap);
+%% `none' for `{dropped, N}'.
+-spec event_key(tuple()) -> key() | none.
+event_key({emit, _, {E, O}, _, _}) -> {out, E, O};
+event_key({deliver, _, {R, I}, _}) -> {in, R, I};
+event_key({router, _, {R, I}, _}) -> {router, R, I};
+event_key({lifecycle, _, _, _}) -> lifecycle;
+event_key(_) -> none.
+
 %% @doc The names an event is about (for `names' filters).
 -spec event_names(tuple()) -> [atom()].
 event_names({emit, _, {E, _}, _, _}) -> [E];
@@ -213,34 +222,35 @@ graph(#{keys := Keys, receivers := Receivers}) ->
 %% The simulated world
 %%====================================================================
 
-%% @doc The pose and scene messages of a world snapshot at `T' (ns):
-%% `#{arena => {W, H}, walls => [{P1, P2}], objects => [{Colour, {X, Y}, R}],
-%% pose => {X, Y, HeadingDeg}}', metres and degrees.
--spec world(map(), integer()) -> [{key(), integer(), binary()}].
+%% @doc The pose and scene messages of a world snapshot at `T' (ns), a
+%% snapshot as `toroco_live_world' keeps it (`arena', `walls', `objects',
+%% `robots' with each robot's `name' and `pose' `{X, Y, HeadingDeg}';
+%% metres and degrees; `none' before any): one `foxglove.FrameTransform'
+%% per robot (frame `arena' to the robot's name) and one
+%% `foxglove.SceneUpdate' with the walls as cubes, the objects as
+%% cylinders and each robot as an arrow along its heading.
+-spec world(map() | none, integer()) -> [{key(), integer(), binary()}].
+world(none, _T) ->
+    [];
 world(Snapshot, T) ->
     Stamp = #{sec => T div 1000000000, nsec => T rem 1000000000},
-    Pose = case Snapshot of
-               #{pose := {X, Y, H}} ->
-                   [{pose, T, json(#{timestamp => Stamp, parent_frame_id => <<"arena">>,
-                                     child_frame_id => <<"robot">>,
-                                     translation => #{x => X, y => Y, z => 0.0},
-                                     rotation => yaw(H)})}];
-               #{} -> []
-           end,
+    Robots = [{Name, Pose} || #{name := Name, pose := Pose} <- maps:get(robots, Snapshot, [])],
+    Poses = [{pose, T, json(#{timestamp => Stamp, parent_frame_id => <<"arena">>,
+                              child_frame_id => Name,
+                              translation => #{x => X, y => Y, z => 0.0},
+                              rotation => yaw(H)})}
+             || {Name, {X, Y, H}} <- Robots],
     Walls = [wall(P1, P2) || {P1, P2} <- arena_walls(Snapshot) ++ maps:get(walls, Snapshot, [])],
     Objects = [cylinder(At, R, colour(C)) || {C, At, R} <- maps:get(objects, Snapshot, [])],
-    Robot = case Snapshot of
-                #{pose := {RX, RY, RH}} ->
-                    [#{pose => #{position => #{x => RX, y => RY, z => 0.05}, orientation => yaw(RH)},
-                       color => #{r => 0.2, g => 0.8, b => 0.2, a => 1.0},
-                       shaft_length => 0.15, shaft_diameter => 0.04,
-                       head_length => 0.06, head_diameter => 0.08}];
-                #{} -> []
-            end,
+    Arrows = [#{pose => #{position => #{x => X, y => Y, z => 0.05}, orientation => yaw(H)},
+                color => #{r => 0.2, g => 0.8, b => 0.2, a => 1.0},
+                shaft_length => 0.15, shaft_diameter => 0.04,
+                head_length => 0.06, head_diameter => 0.08}
+              || {_, {X, Y, H}} <- Robots],
     Entity = #{timestamp => Stamp, frame_id => <<"arena">>, id => <<"arena">>,
                lifetime => #{sec => 0, nsec => 0}, frame_locked => false,
-               cubes => Walls, cylinders => Objects, arrows => Robot},
-    Pose ++ [{scene, T, json(#{deletions => [], entities => [Entity]})}].
+               cubes => Walls, cylinders => Objects, arrows => Arrows},
+    Poses ++ [{scene, T, json(#{deletions => [], entities => [Entity]})}].
 
 arena_walls(#{arena := {W, H}}) ->
     [{{0.0, 0.0}, {W, 0.0}}, {{W, 0.0}, {W, H}}, {{W, H}, {0.0, H}}, {{0.0, H}, {0.0, 0.0}}];

@@ -49,6 +49,8 @@ init([]) ->
                   logger:warning("flight recorder off: ~0p", [Why], #{domain => [toroco, live]}),
                   none
           end,
+    %% toroco_live_world starts before this process (toroco_live_sup).
+    _ = (catch toroco_live_world:subscribe()),
     {ok, #flight{tap = Tap, window_ns = Seconds * 1000000000, max = Max}}.
 
 -spec handle_call(term(), gen_server:from(), #flight{}) -> {reply, term(), #flight{}}.
@@ -75,9 +77,10 @@ handle_info({toroco_event, Tap, Event}, F = #flight{tap = Tap}) ->
         _ -> ok
     end,
     {noreply, F1};
-handle_info({world, T, Snapshot}, F) ->
-    {noreply, lists:foldl(fun({K, T1, J}, Acc) -> keep({T1, {message, K, J}}, Acc) end,
-                          F, toroco_live_channels:world(Snapshot, T))};
+handle_info({toroco_live_world, changed}, F) ->
+    Msgs = toroco_live_channels:world(toroco_live_world:latest(), erlang:system_time(nanosecond)),
+    {noreply, lists:foldl(fun({K, T1, J}, Acc) -> keep({T1, {message, K, J}}, Acc) end, F, Msgs)};
+
 handle_info(_, F) ->
     {noreply, F}.
 

@@ -27,12 +27,14 @@
 %% | hub  | conn| `{fox, graph, Graph}'           | the wiring changed             | none |
 %% | hub  | conn| `{fox, message, Id, T, Json}'   | an event on a subscribed channel | none |
 %% | hub  | conn| `{fox, dropped, N}'             | N messages were not sent to it | none |
+%% The world's snapshots come from `toroco_live_world' (its protocol) while
+%% a client is connected, and become the `/toroco/sim/...' channels.
 %% A connection whose mailbox holds more than `?CONN_QUEUE' messages gets
 %% no more until it drains; the hub counts what it skipped and tells it.
 -module(toroco_live_foxglove).
 -behaviour(gen_server).
 
--export([start/1, stop/0, port/0, world/1]).
+-export([child_spec/1, port/0]).
 -export([start_link/1, join/0, subscribe/2, unsubscribe/2, receive_fox/1]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2, terminate/2]).
 
@@ -41,6 +43,9 @@
 -define(SUBPROTOCOL, <<"foxglove.websocket.v1">>).
 -define(REFRESH_MS, 2000).
 -define(CONN_QUEUE, 2000).
+%% A live view needs no long backlog: past this many pending events the
+%% tap drops (and counts) rather than let clients, joins among them, wait.
+-define(TAP_BUFFER, 1000).
 
 -type channel() :: #{id := pos_integer(), key := toroco_live_channels:key(), topic := binary(),
                      schema_name := binary(), schema := binary()}.
@@ -63,35 +68,14 @@
 %% API
 %%====================================================================
 
-%% @doc Starts the bridge under `toroco_live_sup' with SPEC §11's keys:
-%% `ip' (default `{127,0,0,1}') and `foxglove' (default 8765, 0 for any
-%% free port, `off' for none). Returns the port it listens on.
--spec start(#{ip => inet:ip_address(), foxglove => inet:port_number() | off, atom() => term()}) ->
-          {ok, inet:port_number() | off} | {error, term()}.
-start(Opts) ->
-    case maps:get(foxglove, Opts, 8765) of
-        off -> {ok, off};
-        Port when is_integer(Port), Port >= 0, Port < 65536 ->
-            Spec = #{id => ?MODULE, start => {?MODULE, start_link, [Opts#{foxglove => Port}]},
-                     restart => transient},
-            case supervisor:start_child(toroco_live_sup, Spec) of
-                {ok, _} -> {ok, port()};
-                {error, {already_started, _}} -> {error, {already_started, foxglove}};
-                {error, already_present} ->
-                    _ = supervisor:delete_child(toroco_live_sup, ?MODULE),
-                    start(Opts);
-                {error, {{listen, Why}, _}} -> {error, {foxglove, {listen, Port, Why}}};
-                {error, Why} -> {error, {foxglove, Why}}
-            end;
-        Bad -> {error, {bad_option, {foxglove, Bad}}}
-    end.
-
-%% @doc Stops the bridge and disconnects its clients.
--spec stop() -> ok.
-stop() ->
-    _ = supervisor:terminate_child(toroco_live_sup, ?MODULE),
-    _ = supervisor:delete_child(toroco_live_sup, ?MODULE),
-    ok.
+%% @doc The bridge as a child of `toroco_live_sup', for `toroco_live:start/1'
+%% (SPEC §11's keys: `ip', default `{127,0,0,1}', and `foxglove', the port,
+%% 0 for any free one). Whether clients may publish is the app env
+%% `client_publish' (default `false').
+-spec child_spec(#{foxglove := inet:port_number(), ip => inet:ip_address(), atom() => term()}) ->
+          supervisor:child_spec().
+child_spec(Config) ->
+    #{id => ?MODULE, start => {?MODULE, start_link, [Config]}, restart => permanent}.
 
 %% @doc The port the bridge listens on, `off' when it does not run.
 -spec port() -> inet:port_number() | off.
@@ -100,17 +84,6 @@ port() ->
     catch exit:{noproc, _} -> off
     end.
 
-%% @doc A snapshot of the simulated world (see
-%% `toroco_live_channels:world/2') for the bridge's 3D panel channels, the
-%% recording and the flight recorder; whichever of them does not run
-%% misses it.
--spec world(map()) -> ok.
-world(Snapshot) ->
-    Msg = {world, erlang:system_time(nanosecond), Snapshot},
-    _ = [Pid ! Msg || Name <- [?MODULE, toroco_live_recorder, toroco_live_flight],
-                      Pid <- [whereis(Name)], is_pid(Pid)],
-    ok.
-
 %%====================================================================
 %% The connections' side of the protocol
 %%====================================================================
@@ -118,7 +91,7 @@ world(Snapshot) ->
 %% @doc A connection joins: the channels to advertise and the graph.
 -spec join() -> {ok, [channel()], {list(), list()}} | {error, term()}.
 join() ->
-    try gen_server:call(?MODULE, {join, self()})
+    try gen_server:call(?MODULE, {join, self()}, 15000)
     catch exit:_ -> {error, bridge_down}
     end.
 
@@ -188,8 +161,10 @@ handle_info({toroco_event, Ref, Event}, H = #hub{tap = Ref}) ->
     {noreply, event(Event, H)};
 handle_info({toroco_event, _, _}, H) ->
     {noreply, H};
-handle_info({world, T, Snapshot}, H) ->
-    Msgs = toroco_live_channels:world(Snapshot, T),
+handle_info({toroco_live_world, changed}, H = #hub{tap = none}) ->
+    {noreply, H};
+handle_info({toroco_live_world, changed}, H) ->
+    Msgs = toroco_live_channels:world(toroco_live_world:latest(), erlang:system_time(nanosecond)),
     H1 = case H#hub.world of
              [] -> advertise(H#hub{world = [K || {K, _, _} <- Msgs]}, [K || {K, _, _} <- Msgs]);
              _ -> H
@@ -220,8 +195,11 @@ terminate(_, #hub{listener = L, tap = Tap}) ->
 %%====================================================================
 
 tap_on(H = #hub{tap = none}) ->
-    case toroco:subscribe_events(#{}) of
-        {ok, Ref} -> erlang:send_after(?REFRESH_MS, self(), refresh), H#hub{tap = Ref};
+    case toroco:subscribe_events(#{buffer => ?TAP_BUFFER}) of
+        {ok, Ref} ->
+            erlang:send_after(?REFRESH_MS, self(), refresh),
+            world_subscribe(subscribe),
+            H#hub{tap = Ref};
         {error, Why} ->
             logger:warning("Foxglove bridge: no events from the runtime: ~0p", [Why],
                            #{domain => [toroco, live]}),
@@ -231,8 +209,16 @@ tap_on(H) -> H.
 
 tap_off(H = #hub{tap = Ref, conns = Conns}) when Ref =/= none, map_size(Conns) =:= 0 ->
     toroco:unsubscribe_events(Ref),
+    world_subscribe(unsubscribe),
     H#hub{tap = none, subs = #{}};
 tap_off(H) -> H.
+
+%% The simulated world's snapshots (`toroco_live_world'), when a world runs.
+world_subscribe(How) ->
+    case whereis(toroco_live_world) of
+        undefined -> ok;
+        _ -> catch toroco_live_world:How()
+    end.
 
 event(Event = {lifecycle, _, _, _}, H) ->
     send_event(Event, refresh(H));
@@ -242,15 +228,19 @@ event({dropped, N}, H = #hub{conns = Conns}) ->
 event(Event, H) ->
     send_event(Event, H).
 
+%% An event's JSON is made only when a client subscribed to its channel.
 send_event(Event, H) ->
-    case toroco_live_channels:of_event(Event) of
+    case toroco_live_channels:event_key(Event) of
         none -> H;
-        {Key, _, _} = Msg ->
+        Key ->
             H1 = case maps:is_key(Key, H#hub.ids) of
                      true -> H;
                      false -> refresh(H)
                  end,
-            deliver(Msg, H1)
+            case maps:get(maps:get(Key, H1#hub.ids, none), H1#hub.subs, []) of
+                [] -> H1;
+                _ -> deliver(toroco_live_channels:of_event(Event), H1)
+            end
     end.
 
 deliver({Key, T, Json}, H = #hub{ids = Ids, subs = Subs}) ->

@@ -38,7 +38,7 @@
 -define(CLOSING_MS, 2000).
 
 -record(conn, {socket :: mochiweb_socket:socket(),
-               decoder :: toroco_live_ws:decoder(),
+               decoder :: toroco_live_ws_frame:decoder(),
                publish :: boolean(),
                channels = #{} :: #{pos_integer() => toroco_live_foxglove:channel()},
                subs = #{} :: #{non_neg_integer() => pos_integer()},      % sub id => channel
@@ -54,12 +54,12 @@
 -spec serve(mochiweb_request:request(), binary(), #{client_publish := boolean(),
                                                     session := binary()}) -> ok.
 serve(Req, Subprotocol, Opts) ->
-    case toroco_live_ws:accept(Req, Subprotocol) of
+    case toroco_live_ws_frame:accept(Req, Subprotocol) of
         ok ->
             Socket = mochiweb_request:get(socket, Req),
             case toroco_live_foxglove:join() of
                 {ok, Channels, Graph} ->
-                    C = #conn{socket = Socket, decoder = toroco_live_ws:decoder(?MAX_MESSAGE),
+                    C = #conn{socket = Socket, decoder = toroco_live_ws_frame:decoder(?MAX_MESSAGE),
                               publish = maps:get(client_publish, Opts), graph = Graph},
                     ok = mochiweb_socket:setopts(Socket, [{packet, raw}, {active, once},
                                                            {send_timeout, ?SEND_TIMEOUT_MS},
@@ -68,7 +68,7 @@ serve(Req, Subprotocol, Opts) ->
                     C2 = advertise(C1, Channels),
                     gen_server:enter_loop(?MODULE, [], C2);
                 {error, _} ->
-                    mochiweb_socket:send(Socket, toroco_live_ws:close_frame(1011, <<"bridge down">>)),
+                    mochiweb_socket:send(Socket, toroco_live_ws_frame:close_frame(1011, <<"bridge down">>)),
                     exit(normal)
             end;
         {error, Why} ->
@@ -115,7 +115,7 @@ handle_info(timeout, C = #conn{closing = true}) ->
 handle_info(_, C = #conn{closing = true}) ->
     {noreply, C, ?CLOSING_MS};
 handle_info({Tcp, _, Bytes}, C = #conn{socket = S, decoder = D}) when Tcp =:= tcp; Tcp =:= ssl ->
-    case toroco_live_ws:decode(Bytes, D) of
+    case toroco_live_ws_frame:decode(Bytes, D) of
         {ok, Messages, D1} ->
             case lists:foldl(fun client_message/2, {ok, C#conn{decoder = D1}}, Messages) of
                 {ok, C1} ->
@@ -148,7 +148,7 @@ terminate(_, #conn{socket = S}) ->
 
 hub({message, Id, T, Json}, C = #conn{by_channel = By}) ->
     case By of
-        #{Id := Sub} -> send(C, toroco_live_ws:frame(binary, [<<1, Sub:32/little, T:64/little>>, Json]));
+        #{Id := Sub} -> send(C, toroco_live_ws_frame:frame(binary, [<<1, Sub:32/little, T:64/little>>, Json]));
         #{} -> {noreply, C}
     end;
 hub({advertise, Channels}, C) ->
@@ -208,7 +208,7 @@ client_message({binary, <<Op, _/binary>>}, {ok, C}) ->
 client_message({binary, <<>>}, {ok, C}) ->
     fault(C, <<"empty binary message">>);
 client_message({ping, P}, {ok, C}) ->
-    case send(C, toroco_live_ws:frame(pong, P)) of
+    case send(C, toroco_live_ws_frame:frame(pong, P)) of
         {noreply, C1} -> {ok, C1};
         Stop -> Stop
     end;
@@ -324,7 +324,7 @@ status(C, Level, Msg) ->
     send_json(C, #{op => status, level => Level, message => iolist_to_binary(Msg)}).
 
 send_json(C, Map) ->
-    case send(C, toroco_live_ws:frame(text, jiffy:encode(Map))) of
+    case send(C, toroco_live_ws_frame:frame(text, jiffy:encode(Map))) of
         {noreply, C1} -> C1;
         {stop, _, _} -> exit(normal)
     end.
@@ -336,7 +336,7 @@ send(C = #conn{socket = S}, Frame) ->
     end.
 
 close(C = #conn{socket = S}, Code, Why) ->
-    case mochiweb_socket:send(S, toroco_live_ws:close_frame(Code, iolist_to_binary(io_lib:format("~0p", [Why])))) of
+    case mochiweb_socket:send(S, toroco_live_ws_frame:close_frame(Code, iolist_to_binary(io_lib:format("~0p", [Why])))) of
         ok ->
             ok = mochiweb_socket:setopts(S, [{active, once}]),
             {noreply, C#conn{closing = true}, ?CLOSING_MS};

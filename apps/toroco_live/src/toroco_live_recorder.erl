@@ -24,6 +24,9 @@
 
 -define(BUFFER, 20000).
 -define(KINDS, [emit, deliver, router, lifecycle]).
+%% Stopping waits for the tap to be quiet this long, and at most the next.
+-define(QUIET_MS, 30).
+-define(MAX_DRAIN_MS, 2000).
 
 -record(log, {writer :: toroco_live_mcap:writer(),
               channels = #{} :: #{toroco_live_channels:key() => non_neg_integer()},
@@ -145,10 +148,11 @@ handle_info({toroco_event, Tap, Event}, R = #rec{tap = Tap}) ->
         none -> {noreply, R};
         {Key, T, Json} -> {noreply, write(R, Key, T, Json)}
     end;
-handle_info({world, T, Snapshot}, R = #rec{}) ->
+handle_info({toroco_live_world, changed}, R = #rec{}) ->
+    Msgs = toroco_live_channels:world(toroco_live_world:latest(), erlang:system_time(nanosecond)),
     {noreply, lists:foldl(fun({K, T1, J}, Acc = #rec{}) -> write(Acc, K, T1, J);
                              (_, Acc) -> Acc
-                          end, R, toroco_live_channels:world(Snapshot, T))};
+                          end, R, Msgs)};
 handle_info(_, S) ->
     {noreply, S}.
 
@@ -185,7 +189,9 @@ start(Path, Fd, Kinds, Names) ->
     case file:write(Fd, Head) of
         ok ->
             case toroco:subscribe_events(#{kinds => Kinds, names => Names, buffer => ?BUFFER}) of
-                {ok, Tap} -> {ok, #rec{path = Path, fd = Fd, tap = Tap, log = Log}};
+                {ok, Tap} ->
+                    world(subscribe),
+                    {ok, #rec{path = Path, fd = Fd, tap = Tap, log = Log}};
                 Err -> _ = file:close(Fd), Err
             end;
         {error, Why} ->
@@ -206,14 +212,22 @@ write(R = #rec{fd = Fd, log = L}, Key, T, Json) ->
 
 fail(#rec{path = Path, fd = Fd, tap = Tap}, Why) ->
     toroco:unsubscribe_events(Tap),
+    world(unsubscribe),
     _ = file:close(Fd),
     logger:error("recording to ~ts stopped: ~0p", [Path, Why], #{domain => [toroco, live]}),
     {failed, Path, Why}.
 
-finish(R = #rec{path = Path, fd = Fd, tap = Tap, log = L, dropped = D}) ->
+finish(R0 = #rec{path = Path, fd = Fd, tap = Tap, log = L, dropped = D}) ->
+    %% Events on their way (the tap's relay forwards them a little later)
+    %% belong to the recording: take them until the tap is quiet, then
+    %% what is left in the mailbox once unsubscribed.
+    R = drain(R0, ?QUIET_MS, erlang:monotonic_time(millisecond) + ?MAX_DRAIN_MS),
     toroco:unsubscribe_events(Tap),
-    %% Events already in the mailbox belong to the recording.
-    R1 = drain(R),
+    world(unsubscribe),
+    R1 = case R of
+             #rec{} -> drain(R, 0, 0);
+             Failed -> Failed
+         end,
     case R1 of
         #rec{log = L1, dropped = D1} ->
             case file:write(Fd, log_end(L1)) of
@@ -229,17 +243,25 @@ finish(R = #rec{path = Path, fd = Fd, tap = Tap, log = L, dropped = D}) ->
             {error, {write_failed, Path, Why}}
     end.
 
-drain(R = #rec{tap = Tap}) ->
+drain(R = #rec{tap = Tap}, Quiet, Until) ->
+    Wait = min(Quiet, max(0, Until - erlang:monotonic_time(millisecond))),
     receive
-        {toroco_event, Tap, {dropped, N}} -> drain(R#rec{dropped = R#rec.dropped + N});
+        {toroco_event, Tap, {dropped, N}} -> drain(R#rec{dropped = R#rec.dropped + N}, Quiet, Until);
         {toroco_event, Tap, Event} ->
             case toroco_live_channels:of_event(Event) of
-                none -> drain(R);
+                none -> drain(R, Quiet, Until);
                 {Key, T, Json} ->
                     case write(R, Key, T, Json) of
-                        R1 = #rec{} -> drain(R1);
+                        R1 = #rec{} -> drain(R1, Quiet, Until);
                         Failed -> Failed
                     end
             end
-    after 0 -> R
+    after Wait -> R
+    end.
+
+%% The simulated world's snapshots (`toroco_live_world'), while recording.
+world(How) ->
+    case whereis(toroco_live_world) of
+        undefined -> ok;
+        _ -> catch toroco_live_world:How()
     end.

@@ -1,152 +1,112 @@
-%% @doc WebSocket (RFC 6455) for the Foxglove bridge: the opening handshake
-%% answered through mochiweb, and the frame codec as pure code.
+%% @doc One browser's WebSocket: the page's live state goes out, controls
+%% come in.
 %%
-%% mochiweb parses the HTTP request and writes the 101 answer; the frames
-%% are ours because `mochiweb_websocket' (3.1) only sends text frames, does
-%% not answer a subprotocol, and ends its loop on any message that is not
-%% from the socket, while the Foxglove protocol needs binary frames, the
-%% `foxglove.websocket.v1' subprotocol, and a connection process that also
-%% receives the robot's events.
+%% Two processes per client. The connection process (mochiweb's, running
+%% `mochiweb_websocket''s loop) reads the client's frames, each a control
+%% request (`toroco_live_control', answered on the socket with
+%% `{"type": "reply", "id": Id, "ok": true}' or `{"type": "error", "id": Id,
+%% "error": Reason, "message": Why}'). The sender, linked to it, joins
+%% `toroco_live_hub' and writes what the hub pushes; the hub pushes one
+%% message at a time and waits for the sender's ack, so a client that does
+%% not read blocks only its own sender, whose mailbox holds at most one
+%% push. A write that stays blocked past 5 seconds closes
+%% the socket, which ends both processes.
 %%
-%% {@link decode/2} takes bytes and a decoder state and returns whole
-%% messages (`{text, Bin}', `{binary, Bin}', `{ping, Bin}', `{pong, Bin}',
-%% `{close, Code, Reason}'), reassembling fragments, or an error naming the
-%% fault (unmasked client frame, reserved bits, a message over the size
-%% limit, a control frame fragmented or too long).
+%% Refusals at connection time are HTTP answers: 400 when the request is
+%% not a WebSocket upgrade, 503 `too_many_clients' past `max_clients'.
+%% Controls need the token on the URL (`/ws?token=T') or the bearer
+%% header; without it every control is refused (read-only). A frame larger
+%% than `max_body' is refused with `too_large' and the connection stays.
 -module(toroco_live_ws).
 
--export([accept/2, decoder/1, decode/2, frame/2, close_frame/2]).
+-export([upgrade/2, frames/3]).
 
--export_type([decoder/0, message/0]).
+-define(SEND_TIMEOUT, 5000).
 
--define(GUID, <<"258EAFA5-E914-47DA-95CA-C5AB0DC85B11">>).
-
--record(dec, {buffer = <<>> :: binary(),
-              max :: pos_integer(),
-              fragments = none :: none | {text | binary, [binary()], non_neg_integer()}}).
-
--opaque decoder() :: #dec{}.
--type message() :: {text | binary | ping | pong, binary()} | {close, non_neg_integer() | none, binary()}.
-
-%% @doc Answers a WebSocket upgrade that asks for `Subprotocol' (mochiweb
-%% request in, 101 written); `{error, Why}' when the request is not one.
--spec accept(mochiweb_request:request(), binary()) -> ok | {error, term()}.
-accept(Req, Subprotocol) ->
-    Header = fun(H) -> case mochiweb_request:get_header_value(H, Req) of
-                           undefined -> <<>>;
-                           V -> list_to_binary(V)
-                       end
-             end,
-    Upgrade = string:lowercase(Header("upgrade")),
-    Key = Header("sec-websocket-key"),
-    Protocols = [string:trim(P) || P <- binary:split(Header("sec-websocket-protocol"), <<",">>, [global])],
-    if
-        Upgrade =/= <<"websocket">> -> {error, not_websocket};
-        Key =:= <<>> -> {error, no_key};
-        true ->
-            case lists:member(Subprotocol, Protocols) of
-                false -> {error, {subprotocol, Protocols}};
-                true ->
-                    Accept = base64:encode(crypto:hash(sha, <<Key/binary, ?GUID/binary>>)),
-                    mochiweb_request:respond(
-                      {101, [{"Upgrade", "websocket"}, {"Connection", "Upgrade"},
-                             {"Sec-WebSocket-Accept", binary_to_list(Accept)},
-                             {"Sec-WebSocket-Protocol", binary_to_list(Subprotocol)}], ""}, Req),
-                    ok
-            end
+%% @doc Turns an HTTP request on `/ws' into a client (never returns after
+%% the upgrade), or answers why not.
+-spec upgrade(term(), boolean()) -> term().
+upgrade(Req, Authorized) ->
+    case string:lowercase(mochiweb_request:get_header_value("upgrade", Req) ++ "") of
+        "websocket" -> join(Req, Authorized);
+        _ -> refuse(Req, 400, not_websocket, <<"/ws is a WebSocket: send Upgrade: websocket">>)
     end.
 
-%% @doc A decoder for messages of at most `MaxBytes'.
--spec decoder(pos_integer()) -> decoder().
-decoder(MaxBytes) ->
-    #dec{max = MaxBytes}.
-
-%% @doc Whole messages from `Bytes' and what came before them.
--spec decode(binary(), decoder()) -> {ok, [message()], decoder()} | {error, term()}.
-decode(Bytes, D = #dec{buffer = Buf}) ->
-    messages(D#dec{buffer = <<Buf/binary, Bytes/binary>>}, []).
-
-messages(D = #dec{buffer = Buf, max = Max}, Acc) ->
-    case frame_of(Buf, Max) of
-        more -> {ok, lists:reverse(Acc), D};
-        {error, _} = E -> E;
-        {ok, Fin, Op, Payload, Rest} ->
-            case message(Fin, Op, Payload, D#dec{buffer = Rest}) of
-                {ok, none, D1} -> messages(D1, Acc);
-                {ok, M, D1} -> messages(D1, [M | Acc]);
-                {error, _} = E -> E
-            end
+join(Req, Authorized) ->
+    Sender = proc_lib:spawn_link(fun() -> sender_wait() end),
+    case toroco_live_hub:join(Sender) of
+        {ok, Hello} ->
+            Socket = mochiweb_request:get(socket, Req),
+            {Reentry, Reply} = mochiweb_websocket:upgrade_connection(Req, {?MODULE, frames}),
+            _ = mochiweb_socket:setopts(Socket, [{send_timeout, ?SEND_TIMEOUT},
+                                                 {send_timeout_close, true}]),
+            Sender ! {go, Reply, Hello},
+            Reentry(#{authorized => Authorized, max => toroco_live_config:get(max_body, 16384),
+                      reply => Reply});
+        {error, Reason} ->
+            unlink(Sender),
+            exit(Sender, kill),
+            refuse(Req, 503, Reason, case Reason of
+                                         too_many_clients ->
+                                             <<"the dashboard has as many clients as it takes">>;
+                                         _ -> <<"the dashboard is not running">>
+                                     end)
     end.
 
-frame_of(<<_:1, Rsv:3, _/bits>>, _) when Rsv =/= 0 -> {error, reserved_bits};
-frame_of(<<_:8, 0:1, _/bits>>, _) -> {error, unmasked_frame};
-frame_of(<<Fin:1, 0:3, Op:4, 1:1, Len:7, Rest/binary>>, Max) ->
-    case length_of(Len, Rest) of
-        more -> more;
-        {N, _} when N > Max -> {error, too_big};
-        {N, R} ->
-            case R of
-                <<Mask:4/binary, Payload:N/binary, After/binary>> ->
-                    {ok, Fin, Op, unmask(Payload, Mask), After};
-                _ -> more
-            end
-    end;
-frame_of(_, _) -> more.
+refuse(Req, Status, Reason, Message) ->
+    mochiweb_request:respond({Status, [{"Content-Type", "application/json"}],
+                              toroco_live_json:encode(#{<<"error">> => toroco_live_json:value(Reason),
+                                                        <<"message">> => Message})}, Req).
 
-length_of(126, <<N:16, R/binary>>) -> {N, R};
-length_of(127, <<0:1, N:63, R/binary>>) -> {N, R};
-length_of(N, R) when N < 126 -> {N, R};
-length_of(_, _) -> more.
+%% @doc mochiweb's callback with the frames that came in one read.
+-spec frames([binary()], map(), fun((iodata()) -> term())) -> map().
+frames(Payloads, State, Reply) when is_list(Payloads) ->
+    lists:foldl(fun(P, S) -> frame(P, S, Reply) end, State, Payloads);
+frames(Payload, State, Reply) ->
+    frame(Payload, State, Reply).
 
-message(_, Op, _, _) when Op >= 3, Op =< 7; Op >= 11 -> {error, {opcode, Op}};
-message(Fin, Op, P, _) when Op >= 8, (Fin =:= 0 orelse byte_size(P) > 125) -> {error, bad_control_frame};
-message(1, 8, <<Code:16, Reason/binary>>, D) -> {ok, {close, Code, Reason}, D};
-message(1, 8, _, D) -> {ok, {close, none, <<>>}, D};
-message(1, 9, P, D) -> {ok, {ping, P}, D};
-message(1, 10, P, D) -> {ok, {pong, P}, D};
-message(Fin, Op, P, D = #dec{fragments = none}) when Op =:= 1; Op =:= 2 ->
-    Kind = case Op of 1 -> text; 2 -> binary end,
-    case Fin of
-        1 -> {ok, {Kind, P}, D};
-        0 -> {ok, none, D#dec{fragments = {Kind, [P], byte_size(P)}}}
-    end;
-message(Fin, 0, P, D = #dec{fragments = {Kind, Ps, Size}, max = Max}) ->
-    Size1 = Size + byte_size(P),
-    if
-        Size1 > Max -> {error, too_big};
-        Fin =:= 1 -> {ok, {Kind, iolist_to_binary(lists:reverse([P | Ps]))}, D#dec{fragments = none}};
-        true -> {ok, none, D#dec{fragments = {Kind, [P | Ps], Size1}}}
-    end;
-message(_, Op, _, _) -> {error, {unexpected_frame, Op}}.
-
-unmask(Payload, <<M:32>>) ->
-    Words = byte_size(Payload) div 4,
-    <<Body:Words/binary-unit:32, Tail/binary>> = Payload,
-    Tail1 = case Tail of
-                <<>> -> <<>>;
-                _ ->
-                    Bits = bit_size(Tail),
-                    <<T:Bits>> = Tail,
-                    <<Mt:Bits, _/bits>> = <<M:32>>,
-                    <<(T bxor Mt):Bits>>
-            end,
-    <<(<< <<(W bxor M):32>> || <<W:32>> <= Body >>)/binary, Tail1/binary>>.
-
-%% @doc A server frame (unmasked, unfragmented).
--spec frame(text | binary | ping | pong, iodata()) -> iodata().
-frame(Kind, Payload) ->
-    Op = case Kind of text -> 1; binary -> 2; ping -> 9; pong -> 10 end,
-    Len = iolist_size(Payload),
-    Head = if
-               Len < 126 -> <<1:1, 0:3, Op:4, 0:1, Len:7>>;
-               Len < 65536 -> <<1:1, 0:3, Op:4, 0:1, 126:7, Len:16>>;
-               true -> <<1:1, 0:3, Op:4, 0:1, 127:7, Len:64>>
+frame(<<>>, State, _Reply) ->
+    State;
+frame(Payload, State = #{authorized := Auth, max := Max}, Reply) ->
+    {Id, Answer} = case toroco_live_control:decode(Payload, Max) of
+                       {ok, Req} -> {request_id(Req), toroco_live_control:run(Auth, Req, Max)};
+                       Refused -> {null, Refused}
+                   end,
+    Json = case Answer of
+               {ok, Ok} -> Ok#{<<"type">> => <<"reply">>, <<"id">> => Id};
+               {error, _Status, Reason, Message} ->
+                   #{<<"type">> => <<"error">>, <<"id">> => Id,
+                     <<"error">> => toroco_live_json:value(Reason), <<"message">> => Message}
            end,
-    [Head, Payload].
+    _ = Reply(toroco_live_json:encode(Json)),
+    State.
 
-%% @doc A close frame with a status code (1000 normal, 1002 protocol error,
-%% 1008 policy, 1009 too big, 1011 server error).
--spec close_frame(non_neg_integer(), binary()) -> iodata().
-close_frame(Code, Reason) ->
-    R = binary:part(Reason, 0, min(byte_size(Reason), 120)),
-    [<<1:1, 0:3, 8:4, 0:1, (2 + byte_size(R)):7, Code:16>>, R].
+request_id(#{<<"id">> := Id}) when is_integer(Id); is_binary(Id) -> Id;
+request_id(#{}) -> null.
+
+%%====================================================================
+%% The sender
+%%====================================================================
+
+sender_wait() ->
+    receive
+        {go, Reply, Hello} ->
+            write(Reply, [Hello]),
+            sender(Reply)
+    end.
+
+sender(Reply) ->
+    receive
+        {toroco_live_hub, frames, Frames} ->
+            write(Reply, Frames),
+            toroco_live_hub:ack(self()),
+            sender(Reply)
+    end.
+
+write(Reply, Frames) ->
+    lists:foreach(fun(F) ->
+                          case Reply(F) of
+                              ok -> ok;
+                              {error, Why} -> exit({shutdown, {send, Why}})
+                          end
+                  end, Frames).

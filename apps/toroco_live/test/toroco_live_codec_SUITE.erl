@@ -25,21 +25,21 @@ ws_fragments_and_control(_Config) ->
                               client_frame(0, 0, <<"lo ">>), client_frame(0, 1, <<"world">>),
                               client_frame(8, 1, <<1000:16, "bye">>)]),
     {ok, [{ping, <<"p">>}, {text, <<"hello world">>}, {close, 1000, <<"bye">>}], _} =
-        toroco_live_ws:decode(Bytes, toroco_live_ws:decoder(1000)),
+        toroco_live_ws_frame:decode(Bytes, toroco_live_ws_frame:decoder(1000)),
     ok.
 
 ws_faults() ->
     [{doc, "Unmasked frames, reserved bits, unknown opcodes, oversize messages and stray "
       "continuations are errors, never crashes"}].
 ws_faults(_Config) ->
-    D = toroco_live_ws:decoder(100),
-    {error, unmasked_frame} = toroco_live_ws:decode(<<1:1, 0:3, 1:4, 0:1, 1:7, "a">>, D),
-    {error, reserved_bits} = toroco_live_ws:decode(<<1:1, 1:3, 1:4, 1:1, 0:7, 0:32>>, D),
-    {error, {opcode, 3}} = toroco_live_ws:decode(iolist_to_binary(client_frame(3, 1, <<>>)), D),
-    {error, too_big} = toroco_live_ws:decode(iolist_to_binary(client_frame(2, 1, binary:copy(<<0>>, 101))), D),
-    {error, {unexpected_frame, 0}} = toroco_live_ws:decode(iolist_to_binary(client_frame(0, 1, <<"x">>)), D),
-    {error, bad_control_frame} = toroco_live_ws:decode(iolist_to_binary(client_frame(9, 0, <<>>)), D),
-    [case toroco_live_ws:decode(crypto:strong_rand_bytes(40), D) of
+    D = toroco_live_ws_frame:decoder(100),
+    {error, unmasked_frame} = toroco_live_ws_frame:decode(<<1:1, 0:3, 1:4, 0:1, 1:7, "a">>, D),
+    {error, reserved_bits} = toroco_live_ws_frame:decode(<<1:1, 1:3, 1:4, 1:1, 0:7, 0:32>>, D),
+    {error, {opcode, 3}} = toroco_live_ws_frame:decode(iolist_to_binary(client_frame(3, 1, <<>>)), D),
+    {error, too_big} = toroco_live_ws_frame:decode(iolist_to_binary(client_frame(2, 1, binary:copy(<<0>>, 101))), D),
+    {error, {unexpected_frame, 0}} = toroco_live_ws_frame:decode(iolist_to_binary(client_frame(0, 1, <<"x">>)), D),
+    {error, bad_control_frame} = toroco_live_ws_frame:decode(iolist_to_binary(client_frame(9, 0, <<>>)), D),
+    [case toroco_live_ws_frame:decode(crypto:strong_rand_bytes(40), D) of
          {ok, _, _} -> ok;
          {error, _} -> ok
      end || _ <- lists:seq(1, 500)],
@@ -105,13 +105,13 @@ mask(P, M) ->
     crypto:exor(P, binary:part(Ms, 0, byte_size(P))).
 
 decode_in_pieces(Bytes, Cut) ->
-    decode_in_pieces(Bytes, Cut, toroco_live_ws:decoder(1 bsl 20), []).
+    decode_in_pieces(Bytes, Cut, toroco_live_ws_frame:decoder(1 bsl 20), []).
 
 decode_in_pieces(<<>>, _, _, Acc) -> Acc;
 decode_in_pieces(Bytes, Cut, D, Acc) ->
     N = min(Cut, byte_size(Bytes)),
     <<Piece:N/binary, Rest/binary>> = Bytes,
-    {ok, Ms, D1} = toroco_live_ws:decode(Piece, D),
+    {ok, Ms, D1} = toroco_live_ws_frame:decode(Piece, D),
     decode_in_pieces(Rest, Cut, D1, Acc ++ Ms).
 
 flip(Bin, K) ->

@@ -14,6 +14,9 @@ suite() -> [{timetrap, {seconds, 60}}].
 
 init_per_suite(Config) ->
     ok = toroco_live_js:ensure_installed(),
+    %% Nothing on the default ports: each case starts on free ones.
+    _ = application:load(toroco_live),
+    ok = application:set_env(toroco_live, enabled, false),
     {ok, _} = application:ensure_all_started(toroco_hw),
     {ok, _} = application:ensure_all_started(toroco_live),
     Config.
@@ -26,15 +29,16 @@ init_per_testcase(Case, Config) ->
     ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [dist]}),
     ok = toroco:add_device(a, toroco_fake_actuator, #{inputs => [d]}),
     ok = toroco:set_inputs(a, #{d => [{s, dist}]}),
-    Publish = Case =:= publish_injects_when_on,
-    {ok, Port} = toroco_live_foxglove:start(#{foxglove => 0, client_publish => Publish}),
+    ok = application:set_env(toroco_live, client_publish, Case =:= publish_injects_when_on),
+    {ok, #{foxglove := Port}} = toroco_live:start(#{http => 0, foxglove => 0}),
     Transcript = filename:join(?config(priv_dir, Config), atom_to_list(Case) ++ ".jsonl"),
     toroco_live_js:transcript(Transcript),
     [{port, Port}, {url, iolist_to_binary(io_lib:format("ws://127.0.0.1:~b/", [Port]))} | Config].
 
 %% The Node clients end with the case's process (their stdin closes).
 end_per_testcase(_Case, _Config) ->
-    toroco_live_foxglove:stop(),
+    toroco_live:stop(),
+    application:set_env(toroco_live, client_publish, false),
     [toroco:remove_device(D) || D <- [s, a, b]],
     ok.
 
@@ -215,17 +219,20 @@ simulated_world() ->
 simulated_world(Config) ->
     C = connect(Config),
     await_topics(C, [<<"/toroco/lifecycle">>]),
-    Snapshot = #{arena => {6.0, 4.0}, walls => [{{1.0, 1.0}, {1.0, 2.5}}],
-                 objects => [{red, {4.5, 2.0}, 0.1}], pose => {1.5, 2.0, 90.0}},
-    ok = toroco_live_foxglove:world(Snapshot),
+    Snapshot = #{run => test, t_ms => 0, arena => {6.0, 4.0}, walls => [{{1.0, 1.0}, {1.0, 2.5}}],
+                 objects => [{red, {4.5, 2.0}, 0.1}],
+                 robots => [#{name => torobot, pose => {1.5, 2.0, 90.0}, radius => 0.1}]},
+    %% As torobot_sim tells toroco_live_world about each step.
+    toroco_live_world ! {toroco_live_world, snapshot, Snapshot},
     Chs = await_topics(C, [<<"/toroco/sim/pose">>, <<"/toroco/sim/scene">>]),
     #{<<"schemaName">> := <<"foxglove.FrameTransform">>} = maps:get(<<"/toroco/sim/pose">>, Chs),
     #{<<"schemaName">> := <<"foxglove.SceneUpdate">>} = maps:get(<<"/toroco/sim/scene">>, Chs),
     subscribe(C, <<"/toroco/sim/pose">>),
     subscribe(C, <<"/toroco/sim/scene">>),
-    ok = toroco_live_foxglove:world(Snapshot),
+    toroco_live_world ! {toroco_live_world, snapshot, Snapshot#{t_ms => 50}},
     Ms = messages(C, [<<"/toroco/sim/pose">>, <<"/toroco/sim/scene">>], 2),
-    [#{<<"data">> := #{<<"translation">> := #{<<"x">> := 1.5, <<"y">> := Y},
+    [#{<<"data">> := #{<<"child_frame_id">> := <<"torobot">>,
+                       <<"translation">> := #{<<"x">> := 1.5, <<"y">> := Y},
                        <<"rotation">> := #{<<"w">> := W}}}] =
         [M || M = #{<<"topic">> := <<"/toroco/sim/pose">>} <- Ms],
     true = Y == 2 andalso abs(W - math:cos(math:pi() / 4)) < 1.0e-9,

@@ -14,8 +14,9 @@ suite() -> [{timetrap, {seconds, 90}}].
 init_per_suite(Config) ->
     ok = toroco_live_js:ensure_installed(),
     LogDir = filename:join(?config(priv_dir, Config), "log"),
-    application:load(toroco_live),
-    application:set_env(toroco_live, log_dir, LogDir),
+    _ = application:load(toroco_live),
+    ok = application:set_env(toroco_live, log_dir, LogDir),
+    ok = application:set_env(toroco_live, enabled, false),
     {ok, _} = application:ensure_all_started(toroco_hw),
     {ok, _} = application:ensure_all_started(toroco_live),
     [{log_dir, LogDir} | Config].
