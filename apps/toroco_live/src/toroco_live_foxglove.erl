@@ -258,10 +258,10 @@ send_to(C, Msg, H = #hub{dropped = D}) ->
         {message_queue_len, N} when N > ?CONN_QUEUE ->
             H#hub{dropped = maps:update_with(C, fun(K) -> K + 1 end, 1, D)};
         {message_queue_len, _} ->
-            case D of
-                #{C := Missed} -> C ! {fox, dropped, Missed};
-                #{} -> ok
-            end,
+            _ = case D of
+                    #{C := Missed} -> C ! {fox, dropped, Missed};
+                    #{} -> ok
+                end,
             C ! Msg,
             H#hub{dropped = maps:remove(C, D)};
         undefined -> H

@@ -68,13 +68,13 @@ serve(Req, Subprotocol, Opts) ->
                     C2 = advertise(C1, Channels),
                     gen_server:enter_loop(?MODULE, [], C2);
                 {error, _} ->
-                    mochiweb_socket:send(Socket, toroco_live_ws_frame:close_frame(1011, <<"bridge down">>)),
+                    _ = mochiweb_socket:send(Socket, toroco_live_ws_frame:close_frame(1011, <<"bridge down">>)),
                     exit(normal)
             end;
         {error, Why} ->
             Text = io_lib:format("a Foxglove WebSocket endpoint (subprotocol ~s): ~0p~n",
                                  [Subprotocol, Why]),
-            mochiweb_request:respond({400, [{"Content-Type", "text/plain"}], Text}, Req),
+            _ = mochiweb_request:respond({400, [{"Content-Type", "text/plain"}], Text}, Req),
             ok
     end.
 

@@ -48,7 +48,7 @@ accept(Req, Subprotocol) ->
                 false -> {error, {subprotocol, Protocols}};
                 true ->
                     Accept = base64:encode(crypto:hash(sha, <<Key/binary, ?GUID/binary>>)),
-                    mochiweb_request:respond(
+                    _ = mochiweb_request:respond(
                       {101, [{"Upgrade", "websocket"}, {"Connection", "Upgrade"},
                              {"Sec-WebSocket-Accept", binary_to_list(Accept)},
                              {"Sec-WebSocket-Protocol", binary_to_list(Subprotocol)}], ""}, Req),
