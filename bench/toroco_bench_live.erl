@@ -18,9 +18,10 @@ main([Dir]) ->
     Window = case Quick of true -> 50000; false -> 300000 end,
     File = filename:join(Dir, "recording.mcap"),
     Closed = [closed(Rec, N, Dir, File) || Rec <- [false, true, false, true]],
+    Flight = closed(flight, N, Dir, File),
     toroco_bench:table("Recording: closed loop, not recording and recording every event "
                        "(alternating, same run), " ++ integer_to_list(N) ++ " events",
-                       [R || {R, _} <- Closed], Dir, "recording_closed"),
+                       [R || {R, _} <- Closed ++ [Flight]], Dir, "recording_closed"),
     Pace = [paced(Rec, Paced, Dir, File) || Rec <- [false, true]],
     toroco_bench:table("Recording at the thesis' 10 ms pacing, " ++ integer_to_list(Paced) ++ " events",
                        [R || {R, _} <- Pace], Dir, "recording_paced"),
@@ -62,16 +63,28 @@ window(Rec, N, File) ->
                    end).
 
 label(false, What) -> What ++ ", not recording";
+label(flight, What) -> What ++ ", flight recorder only";
 label(true, What) -> What ++ ", recording".
 
 with_recording(false, _File, _Label, Run) ->
     _ = application:stop(toroco_live),
     {Run(), none};
+with_recording(flight, _File, _Label, Run) ->
+    start_live(),
+    Row = Run(),
+    _ = application:stop(toroco_live),
+    {Row, none};
 with_recording(true, File, Label, Run) ->
-    {ok, _} = application:ensure_all_started(toroco_live),
+    start_live(),
     ok = toroco_live:record(File, #{}),
     Row = Run(),
     {ok, #{messages := M, dropped := D}} = toroco_live:stop_recording(),
     _ = application:stop(toroco_live),
     {Row#{lost => maps:get(lost, Row) + D},
      #{label => Label, messages => M, dropped => D, bytes => filelib:file_size(File)}}.
+
+%% The recorders only: no dashboard or bridge listening.
+start_live() ->
+    _ = application:load(toroco_live),
+    ok = application:set_env(toroco_live, enabled, false),
+    {ok, _} = application:ensure_all_started(toroco_live).

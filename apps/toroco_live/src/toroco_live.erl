@@ -97,13 +97,13 @@ url() ->
 -spec record(file:filename_all(), #{kinds => [emit | deliver | router | lifecycle],
                                     names => all | [atom()]}) -> ok | {error, term()}.
 record(Path, Opts) ->
-    toroco_live_recorder:record(Path, Opts).
+    toroco_live_flight:record(Path, Opts).
 
 %% @doc Ends the recording and completes the file.
 -spec stop_recording() -> {ok, #{path := file:filename_all(), messages := non_neg_integer(),
                                  dropped := non_neg_integer()}} | {error, term()}.
 stop_recording() ->
-    toroco_live_recorder:stop_recording().
+    toroco_live_flight:stop_recording().
 
 %% @doc Writes the flight recorder's last `flight_seconds' to `Path'.
 -spec dump(file:filename_all()) -> {ok, #{messages := non_neg_integer(), path := file:filename_all()}}

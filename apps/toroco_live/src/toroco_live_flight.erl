@@ -1,24 +1,36 @@
-%% @doc The flight recorder (SPEC §12): always on, it keeps the last
-%% `flight_seconds' (app env, default 30) of the robot's events in memory
-%% and writes them as MCAP on demand (`toroco_live:dump/1') and by itself,
-%% into the log directory, when a layer is taken out (the lifecycle event
-%% `{layer_removed, L}'): the log line names the file.
+%% @doc The recorders' process: the flight recorder (SPEC §12), always on,
+%% and the recording when one is asked for (`toroco_live_recorder').
 %%
-%% Memory is bounded twice: by time (older events are let go as new ones
-%% come) and by count (`flight_max_events', default 200000, the oldest go
-%% first). The tap's buffer bounds what waits in its mailbox; what the tap
-%% drops is counted and said in the dump's log line.
+%% The flight recorder keeps the last `flight_seconds' (app env, default
+%% 30) of the robot's events in memory and writes them as MCAP on demand
+%% (`toroco_live:dump/1') and by itself, into the log directory, when a
+%% layer is taken out (the lifecycle event `{layer_removed, L}'): the log
+%% line names the file. Events are kept as they came; their JSON is made
+%% only for a dump.
 %%
-%% The log directory is the app env `log_dir' of `toroco_live', else
-%% `log' in the node's working directory (the release's log directory when
-%% run from a release root).
+%% One tap subscription (SPEC §10) serves the flight recorder and the
+%% recording, and the process runs at low priority: the robot first. Memory
+%% is bounded by time (older events go as new ones come), by count
+%% (`flight_max_events', default 200000, the oldest go first) and by the
+%% tap's buffer for what waits in the mailbox; what the tap drops is
+%% counted, said in a dump's log line and in a recording's result.
+%%
+%% The log directory is the app env `log_dir' of `toroco_live', else `log'
+%% in the node's working directory (the release's log directory when run
+%% from a release root).
 -module(toroco_live_flight).
 -behaviour(gen_server).
 
--export([start_link/0, dump/1]).
--export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
+-export([start_link/0, dump/1, record/2, stop_recording/0]).
+-export([init/1, handle_call/3, handle_cast/2, handle_info/2, terminate/2]).
 
 -define(MAX_EVENTS, 200000).
+-define(BUFFER, 20000).
+%% A dump, and stopping a recording, take the events still on their way (the tap's
+%% relay forwards them a little later) until the tap is quiet this long,
+%% and waits at most the next.
+-define(QUIET_MS, 30).
+-define(MAX_DRAIN_MS, 2000).
 
 -type item() :: {event, tuple()} | {message, toroco_live_channels:key(), binary()}.
 
@@ -27,7 +39,8 @@
                  count = 0 :: non_neg_integer(),
                  dropped = 0 :: non_neg_integer(),
                  window_ns :: pos_integer(),
-                 max :: pos_integer()}).
+                 max :: pos_integer(),
+                 recording = none :: none | toroco_live_recorder:recording()}).
 
 -spec start_link() -> {ok, pid()} | {error, term()}.
 start_link() ->
@@ -39,11 +52,24 @@ start_link() ->
 dump(Path) ->
     gen_server:call(?MODULE, {dump, Path}, 60000).
 
+%% @doc Starts a recording (see `toroco_live:record/2').
+-spec record(file:filename_all(), map()) -> ok | {error, term()}.
+record(Path, Opts) ->
+    gen_server:call(?MODULE, {record, Path, Opts}, 30000).
+
+%% @doc Ends the recording (see `toroco_live:stop_recording/0').
+-spec stop_recording() -> {ok, #{path := file:filename_all(), messages := non_neg_integer(),
+                                 dropped := non_neg_integer()}} | {error, term()}.
+stop_recording() ->
+    gen_server:call(?MODULE, stop_recording, 60000).
+
 -spec init([]) -> {ok, #flight{}}.
 init([]) ->
+    process_flag(trap_exit, true),
+    process_flag(priority, low),
     Seconds = application:get_env(toroco_live, flight_seconds, 30),
     Max = application:get_env(toroco_live, flight_max_events, ?MAX_EVENTS),
-    Tap = case toroco:subscribe_events(#{}) of
+    Tap = case toroco:subscribe_events(#{buffer => ?BUFFER}) of
               {ok, Ref} -> Ref;
               {error, Why} ->
                   logger:warning("flight recorder off: ~0p", [Why], #{domain => [toroco, live]}),
@@ -54,8 +80,23 @@ init([]) ->
     {ok, #flight{tap = Tap, window_ns = Seconds * 1000000000, max = Max}}.
 
 -spec handle_call(term(), gen_server:from(), #flight{}) -> {reply, term(), #flight{}}.
-handle_call({dump, Path}, _From, F) ->
+handle_call({dump, Path}, _From, F0) ->
+    F = drain(F0, erlang:monotonic_time(millisecond) + ?MAX_DRAIN_MS),
     {reply, write(Path, F), F};
+handle_call({record, Path, _}, _From, F = #flight{recording = R}) when R =/= none ->
+    {reply, {error, {already_recording, toroco_live_recorder:path(R), Path}}, F};
+handle_call({record, _, _}, _From, F = #flight{tap = none}) ->
+    {reply, {error, no_events}, F};
+handle_call({record, Path, Opts}, _From, F) ->
+    case toroco_live_recorder:open(Path, Opts) of
+        {ok, R} -> {reply, ok, F#flight{recording = R}};
+        Err -> {reply, Err, F}
+    end;
+handle_call(stop_recording, _From, F = #flight{recording = none}) ->
+    {reply, {error, not_recording}, F};
+handle_call(stop_recording, _From, F0) ->
+    F = #flight{recording = R} = drain(F0, erlang:monotonic_time(millisecond) + ?MAX_DRAIN_MS),
+    {reply, toroco_live_recorder:close(R), F#flight{recording = none}};
 handle_call(_, _From, F) ->
     {reply, {error, unknown_call}, F}.
 
@@ -64,10 +105,38 @@ handle_cast(_, F) ->
     {noreply, F}.
 
 -spec handle_info(term(), #flight{}) -> {noreply, #flight{}}.
-handle_info({toroco_event, Tap, {dropped, N}}, F = #flight{tap = Tap, dropped = D}) ->
-    {noreply, F#flight{dropped = D + N}};
 handle_info({toroco_event, Tap, Event}, F = #flight{tap = Tap}) ->
-    %% Kept as it came: JSON is made only if a dump is asked for.
+    {noreply, event(Event, F)};
+handle_info({toroco_live_world, changed}, F) ->
+    Msgs = toroco_live_channels:world(toroco_live_world:latest(), erlang:system_time(nanosecond)),
+    {noreply, lists:foldl(fun({K, T, J}, Acc = #flight{recording = R}) ->
+                                  keep({T, {message, K, J}},
+                                       Acc#flight{recording = record_message(K, T, J, R)})
+                          end, F, Msgs)};
+handle_info(_, F) ->
+    {noreply, F}.
+
+-spec terminate(term(), #flight{}) -> ok.
+terminate(_, #flight{recording = none}) ->
+    ok;
+terminate(_, #flight{recording = R}) ->
+    _ = toroco_live_recorder:close(R),
+    ok.
+
+%%====================================================================
+%% Inside
+%%====================================================================
+
+event({dropped, N}, F = #flight{dropped = D, recording = R}) ->
+    F#flight{dropped = D + N, recording = case R of
+                                             none -> none;
+                                             _ -> toroco_live_recorder:dropped(N, R)
+                                         end};
+event(Event, F0 = #flight{recording = R}) ->
+    F = case R of
+            none -> F0;
+            _ -> F0#flight{recording = toroco_live_recorder:event(Event, R)}
+        end,
     F1 = case toroco_live_channels:event_time(Event) of
              none -> F;
              T -> trim(T, keep({T, {event, Event}}, F))
@@ -76,13 +145,17 @@ handle_info({toroco_event, Tap, Event}, F = #flight{tap = Tap}) ->
         {lifecycle, _, _, {layer_removed, L}} -> layer_removed(L, F1);
         _ -> ok
     end,
-    {noreply, F1};
-handle_info({toroco_live_world, changed}, F) ->
-    Msgs = toroco_live_channels:world(toroco_live_world:latest(), erlang:system_time(nanosecond)),
-    {noreply, lists:foldl(fun({K, T1, J}, Acc) -> keep({T1, {message, K, J}}, Acc) end, F, Msgs)};
+    F1.
 
-handle_info(_, F) ->
-    {noreply, F}.
+record_message(_, _, _, none) -> none;
+record_message(K, T, J, R) -> toroco_live_recorder:message(K, T, J, R).
+
+drain(F = #flight{tap = Tap}, Until) ->
+    Wait = min(?QUIET_MS, max(0, Until - erlang:monotonic_time(millisecond))),
+    receive
+        {toroco_event, Tap, Event} -> drain(event(Event, F), Until)
+    after Wait -> F
+    end.
 
 keep(Msg, F = #flight{events = Q, count = N, max = Max}) when N >= Max ->
     keep(Msg, F#flight{events = queue:drop(Q), count = N - 1});

@@ -3,8 +3,7 @@
 %% ```
 %% toroco_live_sup (one_for_one)
 %%   toroco_live_world            the simulated world's latest snapshot (always there)
-%%   toroco_live_flight           the flight recorder (always on)
-%%   toroco_live_recorder         MCAP recording (idle until asked)
+%%   toroco_live_flight           the flight recorder (always on) and the recording
 %%   toroco_live_dashboard_sup    the dashboard, added by toroco_live:start/1
 %%   toroco_live_foxglove         the Foxglove bridge, added by toroco_live:start/1
 %% '''
@@ -24,7 +23,6 @@ start_link() ->
 init([]) ->
     Flags = #{strategy => one_for_one, intensity => 5, period => 10},
     World = #{id => toroco_live_world, start => {toroco_live_world, start_link, []}},
-    Flight = #{id => toroco_live_flight, start => {toroco_live_flight, start_link, []}},
-    Recorder = #{id => toroco_live_recorder, start => {toroco_live_recorder, start_link, []},
-                 shutdown => 30000},
-    {ok, {Flags, [World, Flight, Recorder]}}.
+    Flight = #{id => toroco_live_flight, start => {toroco_live_flight, start_link, []},
+               shutdown => 30000},
+    {ok, {Flags, [World, Flight]}}.
