@@ -115,7 +115,7 @@ handle_call({join, Pid}, _From, H = #h{clients = Cs, max_clients = Max}) ->
                                               <<"node">> => toroco_live_json:value(node()),
                                               <<"clients">> => map_size(Cs) + 1}),
             %% The newcomer gets the latest state at once, not at the next change.
-            H1 = H#h{clients = Cs#{Pid => C}, dirty = true, world_dirty = H#h.world =/= none},
+            H1 = H#h{clients = Cs#{Pid => C}, dirty = true, world_dirty = true},
             {reply, {ok, Hello}, H1}
     end;
 handle_call(stats, _From, H) ->
