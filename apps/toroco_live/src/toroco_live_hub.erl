@@ -56,7 +56,7 @@
             %% How many state and world frames were built: a client is sent
             %% only what it has not seen.
             versions = {0, 0} :: {non_neg_integer(), non_neg_integer()},
-            last_world = 0 :: integer(),
+            last_world :: integer(),
             tap_dropped = 0 :: non_neg_integer(),
             skipped = 0 :: non_neg_integer(),
             pushed = 0 :: non_neg_integer()}).
@@ -100,8 +100,9 @@ init(Config) ->
     _ = toroco_restarts:install(),
     ok = toroco_live_world:subscribe(),
     erlang:send_after(?TICK_MS, self(), tick),
+    Now = erlang:monotonic_time(millisecond),
     {ok, subscribe(#h{max_clients = maps:get(max_clients, Config, 64),
-                      last_rate = erlang:monotonic_time(millisecond)})}.
+                      last_rate = Now, last_world = Now - ?WORLD_MS})}.
 
 -spec handle_call(term(), gen_server:from(), #h{}) -> {reply, term(), #h{}}.
 handle_call({join, Pid}, _From, H = #h{clients = Cs, max_clients = Max}) ->
@@ -114,7 +115,7 @@ handle_call({join, Pid}, _From, H = #h{clients = Cs, max_clients = Max}) ->
                                               <<"node">> => toroco_live_json:value(node()),
                                               <<"clients">> => map_size(Cs) + 1}),
             %% The newcomer gets the latest state at once, not at the next change.
-            H1 = H#h{clients = Cs#{Pid => C}, dirty = true, world_dirty = H#h.world =/= none},
+            H1 = H#h{clients = Cs#{Pid => C}, dirty = true, world_dirty = true},
             {reply, {ok, Hello}, H1}
     end;
 handle_call(stats, _From, H) ->

@@ -27,9 +27,15 @@
 %% the upgrade), or answers why not.
 -spec upgrade(term(), boolean()) -> term().
 upgrade(Req, Authorized) ->
-    case string:lowercase(mochiweb_request:get_header_value("upgrade", Req) ++ "") of
+    case string:lowercase(header(Req, "upgrade")) of
         "websocket" -> join(Req, Authorized);
         _ -> refuse(Req, 400, not_websocket, <<"/ws is a WebSocket: send Upgrade: websocket">>)
+    end.
+
+header(Req, Name) ->
+    case mochiweb_request:get_header_value(Name, Req) of
+        undefined -> "";
+        V -> V
     end.
 
 join(Req, Authorized) ->
