@@ -1,7 +1,7 @@
-%% The Node side of the toroco_live suites: `npm ci' when the lockfile is
-%% newer than what is installed (so the test path installs the reference
-%% clients itself, and only once), and a line-by-line JSON conversation with
-%% a script of test/js.
+%% The Node side of the toroco_live suites: the reference clients installed
+%% (web/build's `npm ci', only when the lockfile changed, so the test path
+%% installs them itself), and a line-by-line JSON conversation with a
+%% script of test/js.
 -module(toroco_live_js).
 -export([ensure_installed/0, start/1, send/2, await/3, stop/1, run/2, transcript/1]).
 
@@ -11,23 +11,18 @@ app_dir() ->
     Src = proplists:get_value(source, ?MODULE:module_info(compile)),
     filename:dirname(filename:dirname(Src)).
 
+%% The clients are pinned in web/package.json with the dashboard's page;
+%% web/build installs them (npm ci, only when the lockfile changed).
 ensure_installed() ->
-    App = app_dir(),
-    Lock = filename:join(App, "package-lock.json"),
-    Installed = filename:join([App, "node_modules", ".package-lock.json"]),
-    case filelib:last_modified(Installed) >= filelib:last_modified(Lock) of
-        true -> ok;
-        false ->
-            Out = os:cmd("cd '" ++ App ++ "' && npm ci --no-audit --no-fund 2>&1; echo \"exit=$?\""),
-            case string:find(Out, "exit=0") of
-                nomatch -> {error, {npm_ci, Out}};
-                _ -> ok
-            end
+    Out = os:cmd("sh '" ++ filename:join([app_dir(), "web", "build"]) ++ "' 2>&1; echo \"exit=$?\""),
+    case string:find(Out, "exit=0") of
+        nomatch -> {error, {web_build, Out}};
+        _ -> ok
     end.
 
 script(Name) -> filename:join([app_dir(), "test", "js", Name]).
 
-env() -> [{"NODE_PATH", filename:join(app_dir(), "node_modules")}].
+env() -> [{"NODE_PATH", filename:join([app_dir(), "web", "node_modules"])}].
 
 %% A driver script: JSON commands in, JSON events out.
 start(Name) ->
