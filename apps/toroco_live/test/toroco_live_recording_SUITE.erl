@@ -170,8 +170,9 @@ foreign_files_refused(Config) ->
     ok.
 
 simulated_run_replays() ->
-    [{doc, "A recording of a short simulated run replays onto the same wiring with fake "
-      "sensors and motors, and the motors' deliveries match the recording"}].
+    [{doc, "A recording of a short simulated run has the robot's pose and arena, and "
+      "replays onto the same wiring with fake sensors and motors, the motors' deliveries "
+      "matching the recording"}].
 simulated_run_replays(Config) ->
     World = filename:join(?config(data_dir, Config), "short.world"),
     Wiring = filename:join(code:lib_dir(torobot), "../../../../config/torobot.wiring"),
@@ -186,6 +187,9 @@ simulated_run_replays(Config) ->
     ct:log("run ~p, ~b messages, ~b bytes", [Summary, M, filelib:file_size(Path)]),
     #{<<"ok">> := true, <<"messages">> := M, <<"perTopic">> := P} = read(Path),
     true = maps:get(<<"/toroco/in/motors/setvel">>, P) > 0,
+    %% The world's snapshots, for the 3D panel.
+    true = maps:get(<<"/toroco/sim/pose">>, P, 0) > 0,
+    true = maps:get(<<"/toroco/sim/scene">>, P, 0) > 0,
     %% The same wiring, with fake sensors and motors standing for the devices.
     #{behaviors := Bs, devices := Ds} = toroco:inspect(),
     _ = [toroco:remove_behavior(B) || B <- Bs],
