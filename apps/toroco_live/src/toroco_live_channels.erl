@@ -18,11 +18,16 @@
 %% simulated world runs; their messages come from {@link world/2}.
 -module(toroco_live_channels).
 
--export([topic/1, key/1, schema/1, of_event/1, event_key/1, from_wiring/0, graph/1, world/2,
+-export([topic/1, key/1, schema/1, of_event/1, event_key/1, from_wiring/0, graph/1, world/3,
          event_names/1, event_time/1]).
 
--export_type([key/0, wiring/0]).
+-export_type([key/0, wiring/0, scene_sent/0]).
 
+%% The arena changes seldom; its scene is sent again at least this often.
+-define(SCENE_EVERY_NS, 1000000000).
+
+%% The last scene sent and when, for {@link world/3}.
+-type scene_sent() :: none | {term(), integer()}.
 -type key() :: {out | in | router, atom(), atom()} | lifecycle | pose | scene.
 %% The channels a wiring has, and who emits to and receives from each output.
 -type wiring() :: #{keys := [key()],
@@ -226,31 +231,48 @@ graph(#{keys := Keys, receivers := Receivers}) ->
 %% snapshot as `toroco_live_world' keeps it (`arena', `walls', `objects',
 %% `robots' with each robot's `name' and `pose' `{X, Y, HeadingDeg}';
 %% metres and degrees; `none' before any): one `foxglove.FrameTransform'
-%% per robot (frame `arena' to the robot's name) and one
-%% `foxglove.SceneUpdate' with the walls as cubes, the objects as
-%% cylinders and each robot as an arrow along its heading.
--spec world(map() | none, integer()) -> [{key(), integer(), binary()}].
-world(none, _T) ->
-    [];
-world(Snapshot, T) ->
-    Stamp = #{sec => T div 1000000000, nsec => T rem 1000000000},
+%% per robot and step (frame `arena' to the robot's name), and a
+%% `foxglove.SceneUpdate' (the walls as cubes, the objects as cylinders,
+%% each robot as an arrow in its own frame, so it moves with its
+%% transform) when the scene changed or `?SCENE_EVERY_NS' after the last,
+%% for a viewer that comes late. `Last' is what the previous call returned
+%% (`none' at first).
+-spec world(map() | none, integer(), scene_sent()) -> {[{key(), integer(), binary()}], scene_sent()}.
+world(none, _T, Last) ->
+    {[], Last};
+world(Snapshot, T, Last) ->
+    Stamp = stamp(T),
     Robots = [{Name, Pose} || #{name := Name, pose := Pose} <- maps:get(robots, Snapshot, [])],
     Poses = [{pose, T, json(#{timestamp => Stamp, parent_frame_id => <<"arena">>,
                               child_frame_id => Name,
                               translation => #{x => X, y => Y, z => 0.0},
                               rotation => yaw(H)})}
              || {Name, {X, Y, H}} <- Robots],
-    Walls = [wall(P1, P2) || {P1, P2} <- arena_walls(Snapshot) ++ maps:get(walls, Snapshot, [])],
-    Objects = [cylinder(At, R, colour(C)) || {C, At, R} <- maps:get(objects, Snapshot, [])],
-    Arrows = [#{pose => #{position => #{x => X, y => Y, z => 0.05}, orientation => yaw(H)},
-                color => #{r => 0.2, g => 0.8, b => 0.2, a => 1.0},
-                shaft_length => 0.15, shaft_diameter => 0.04,
-                head_length => 0.06, head_diameter => 0.08}
-              || {_, {X, Y, H}} <- Robots],
-    Entity = #{timestamp => Stamp, frame_id => <<"arena">>, id => <<"arena">>,
-               lifetime => #{sec => 0, nsec => 0}, frame_locked => false,
-               cubes => Walls, cylinders => Objects, arrows => Arrows},
-    Poses ++ [{scene, T, json(#{deletions => [], entities => [Entity]})}].
+    Scene = {maps:get(arena, Snapshot, none), maps:get(walls, Snapshot, []),
+             maps:get(objects, Snapshot, []), [N || {N, _} <- Robots]},
+    case Last of
+        {Scene, Sent} when T - Sent < ?SCENE_EVERY_NS -> {Poses, Last};
+        _ -> {Poses ++ [{scene, T, scene(Snapshot, Scene, Stamp)}], {Scene, T}}
+    end.
+
+scene(Snapshot, {_, Walls0, Objects0, Names}, Stamp) ->
+    Walls = [wall(P1, P2) || {P1, P2} <- arena_walls(Snapshot) ++ Walls0],
+    Objects = [cylinder(At, R, colour(C)) || {C, At, R} <- Objects0],
+    Arena = #{timestamp => Stamp, frame_id => <<"arena">>, id => <<"arena">>,
+              lifetime => #{sec => 0, nsec => 0}, frame_locked => false,
+              cubes => Walls, cylinders => Objects, arrows => []},
+    Robots = [#{timestamp => Stamp, frame_id => Name, id => Name,
+                lifetime => #{sec => 0, nsec => 0}, frame_locked => true,
+                cubes => [], cylinders => [],
+                arrows => [#{pose => #{position => #{x => 0.0, y => 0.0, z => 0.05},
+                                       orientation => yaw(0)},
+                             color => #{r => 0.2, g => 0.8, b => 0.2, a => 1.0},
+                             shaft_length => 0.15, shaft_diameter => 0.04,
+                             head_length => 0.06, head_diameter => 0.08}]}
+              || Name <- Names],
+    json(#{deletions => [], entities => [Arena | Robots]}).
+
+stamp(T) -> #{sec => T div 1000000000, nsec => T rem 1000000000}.
 
 arena_walls(#{arena := {W, H}}) ->
     [{{0.0, 0.0}, {W, 0.0}}, {{W, 0.0}, {W, H}}, {{W, H}, {0.0, H}}, {{0.0, H}, {0.0, 0.0}}];

@@ -40,7 +40,8 @@
                  dropped = 0 :: non_neg_integer(),
                  window_ns :: pos_integer(),
                  max :: pos_integer(),
-                 recording = none :: none | toroco_live_recorder:recording()}).
+                 recording = none :: none | toroco_live_recorder:recording(),
+                 scene = none :: toroco_live_channels:scene_sent()}).
 
 -spec start_link() -> {ok, pid()} | {error, term()}.
 start_link() ->
@@ -108,11 +109,12 @@ handle_cast(_, F) ->
 handle_info({toroco_event, Tap, Event}, F = #flight{tap = Tap}) ->
     {noreply, event(Event, F)};
 handle_info({toroco_live_world, changed}, F) ->
-    Msgs = toroco_live_channels:world(toroco_live_world:latest(), erlang:system_time(nanosecond)),
+    {Msgs, Scene} = toroco_live_channels:world(toroco_live_world:latest(),
+                                               erlang:system_time(nanosecond), F#flight.scene),
     {noreply, lists:foldl(fun({K, T, J}, Acc = #flight{recording = R}) ->
                                   keep({T, {message, K, J}},
                                        Acc#flight{recording = record_message(K, T, J, R)})
-                          end, F, Msgs)};
+                          end, F#flight{scene = Scene}, Msgs)};
 handle_info(_, F) ->
     {noreply, F}.
 

@@ -59,6 +59,7 @@
               next_id = 1 :: pos_integer(),
               wiring = #{keys => [], receivers => #{}} :: toroco_live_channels:wiring(),
               world = [] :: [toroco_live_channels:key()],
+              scene = none :: toroco_live_channels:scene_sent(),
               conns = #{} :: #{pid() => reference()},
               subs = #{} :: #{pos_integer() => [pid()]},
               dropped = #{} :: #{pid() => pos_integer()},
@@ -164,12 +165,13 @@ handle_info({toroco_event, _, _}, H) ->
 handle_info({toroco_live_world, changed}, H = #hub{tap = none}) ->
     {noreply, H};
 handle_info({toroco_live_world, changed}, H) ->
-    Msgs = toroco_live_channels:world(toroco_live_world:latest(), erlang:system_time(nanosecond)),
+    {Msgs, Scene} = toroco_live_channels:world(toroco_live_world:latest(),
+                                               erlang:system_time(nanosecond), H#hub.scene),
     H1 = case H#hub.world of
              [] -> advertise(H#hub{world = [K || {K, _, _} <- Msgs]}, [K || {K, _, _} <- Msgs]);
              _ -> H
          end,
-    {noreply, lists:foldl(fun deliver/2, H1, Msgs)};
+    {noreply, lists:foldl(fun deliver/2, H1#hub{scene = Scene}, Msgs)};
 handle_info(refresh, H = #hub{tap = none}) ->
     {noreply, H};
 handle_info(refresh, H) ->

@@ -229,14 +229,19 @@ simulated_world(Config) ->
     #{<<"schemaName">> := <<"foxglove.SceneUpdate">>} = maps:get(<<"/toroco/sim/scene">>, Chs),
     subscribe(C, <<"/toroco/sim/pose">>),
     subscribe(C, <<"/toroco/sim/scene">>),
-    toroco_live_world ! {toroco_live_world, snapshot, Snapshot#{t_ms => 50}},
+    %% A ball more: the scene changed, so it comes again with the pose.
+    toroco_live_world ! {toroco_live_world, snapshot,
+                         Snapshot#{t_ms => 50, objects => [{blue, {3.0, 2.2}, 0.1} | maps:get(objects, Snapshot)]}},
     Ms = messages(C, [<<"/toroco/sim/pose">>, <<"/toroco/sim/scene">>], 2),
     [#{<<"data">> := #{<<"child_frame_id">> := <<"torobot">>,
                        <<"translation">> := #{<<"x">> := 1.5, <<"y">> := Y},
                        <<"rotation">> := #{<<"w">> := W}}}] =
         [M || M = #{<<"topic">> := <<"/toroco/sim/pose">>} <- Ms],
     true = Y == 2 andalso abs(W - math:cos(math:pi() / 4)) < 1.0e-9,
-    [#{<<"data">> := #{<<"entities">> := [#{<<"cubes">> := Walls, <<"cylinders">> := [_]}]}}] =
+    [#{<<"data">> := #{<<"entities">> := [#{<<"frame_id">> := <<"arena">>, <<"cubes">> := Walls,
+                                            <<"cylinders">> := [_, _]},
+                                          #{<<"frame_id">> := <<"torobot">>, <<"frame_locked">> := true,
+                                            <<"arrows">> := [_]}]}}] =
         [M || M = #{<<"topic">> := <<"/toroco/sim/scene">>} <- Ms],
     5 = length(Walls),
     ok.
