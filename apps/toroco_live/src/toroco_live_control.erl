@@ -149,6 +149,7 @@ done({error, Reason}) ->
 error(Status, Reason, Fmt, Args) ->
     {error, Status, Reason, unicode:characters_to_binary(io_lib:format(Fmt, Args))}.
 
+-spec refuse(400 | 401 | 404 | 409 | 413, atom(), io:format(), [term()]) -> no_return().
 refuse(Status, Reason, Fmt, Args) ->
     {error, Status, Reason, Message} = error(Status, Reason, Fmt, Args),
     throw({refused, Status, Reason, Message}).

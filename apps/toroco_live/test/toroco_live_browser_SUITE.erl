@@ -75,18 +75,6 @@ screenshot(Config, Name) ->
     do(Config, #{screenshot => list_to_binary(Path)}),
     ct:pal("screenshot: ~ts", [Path]).
 
-wait(Fun, Timeout) ->
-    Deadline = erlang:monotonic_time(millisecond) + Timeout,
-    wait_until(Fun, Deadline).
-wait_until(Fun, Deadline) ->
-    case Fun() of
-        true -> ok;
-        false ->
-            case erlang:monotonic_time(millisecond) > Deadline of
-                true -> ct:fail(condition_not_met);
-                false -> receive after 20 -> wait_until(Fun, Deadline) end
-            end
-    end.
 
 %%====================================================================
 
