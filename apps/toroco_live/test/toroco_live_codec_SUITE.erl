@@ -6,7 +6,7 @@
 
 all() ->
     [ws_frames_split_anywhere, ws_fragments_and_control, ws_faults, mcap_round_trip,
-     mcap_every_truncation_refused, topics_round_trip].
+     mcap_every_truncation_refused, topics_round_trip, json_text_as_jiffy].
 
 ws_frames_split_anywhere() ->
     [{doc, "Masked client frames of every length class decode whole, however the bytes are split"}].
@@ -88,6 +88,28 @@ topics_round_trip(_Config) ->
     [{ok, K} = toroco_live_channels:key(toroco_live_channels:topic(K)) || K <- Keys],
     error = toroco_live_channels:key(<<"/toroco/out/no_such_name_anywhere_42/x">>),
     error = toroco_live_channels:key(<<"/elsewhere">>),
+    ok.
+
+json_text_as_jiffy() ->
+    [{doc, "The event path's JSON writer says what jiffy says, escapes included, and an "
+      "event's message has the fields of SPEC 12"}].
+json_text_as_jiffy(_Config) ->
+    Terms = [1, -7, 1.5, 1.0e300, -0.0, true, false, null, ok, <<"plain">>, <<"q\"b\\s/\n\t\r\x01\x1f">>,
+             <<"é ☃"/utf8>>, <<255, 0>>, [], [[]], #{}, {}, {1, two, <<"3">>}, #{a => 1, <<"b">> => [x]},
+             #{{tuple, key} => 1}, [1 | 2], self(), make_ref(), fun() -> ok end, "string", 'quoted atom'],
+    [begin
+         J = toroco_live_json:value(T),
+         Want = jiffy:decode(jiffy:encode(J), [return_maps]),
+         Want = jiffy:decode(iolist_to_binary(toroco_live_json_text:encode(J)), [return_maps])
+     end || T <- Terms],
+    [begin
+         {{out, s, o}, 7, Out} = toroco_live_channels:of_event({emit, 7, {s, o}, set, T}),
+         #{<<"kind">> := <<"set">>, <<"value">> := V, <<"term">> := Tx} = jiffy:decode(Out, [return_maps]),
+         V = jiffy:decode(jiffy:encode(toroco_live_json:value(T)), [return_maps]),
+         Tx = toroco_live_json:term_text(T),
+         {{in, r, i}, 8, In} = toroco_live_channels:of_event({deliver, 8, {r, i}, T}),
+         #{<<"value">> := V, <<"term">> := Tx} = jiffy:decode(In, [return_maps])
+     end || T <- Terms],
     ok.
 
 %% Helpers
