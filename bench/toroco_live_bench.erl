@@ -1,7 +1,9 @@
 %% The dashboard's benchmark (a section of `make bench' of its own):
-%%   1. the closed loop of toroco_bench (source → relay → sink) with no page
-%%      open and with one browser-like WebSocket client subscribed, taken
-%%      alternately in the same run;
+%%   1. the closed loop of toroco_bench (source → relay → sink) without the
+%%      dashboard (no tap subscriber: the reference), with the dashboard and
+%%      no page open (its hub subscribes to the tap for /metrics and the
+%%      events per wire), and with one browser-like WebSocket client
+%%      subscribed, taken in turn in the same run;
 %%   2. the page's update rate while a fake sensor emits at 1 kHz;
 %%   3. the node's memory over time meanwhile (one sample a second).
 %% The client is the suites' WebSocket client: it reads and decodes every
@@ -25,7 +27,8 @@ main([Dir]) ->
               "comparable within one run, on a quiet machine~n",
               [erlang:system_info(otp_release), erlang:system_info(schedulers_online)]),
     Rounds = case Quick of true -> 2; false -> 3 end,
-    Loops = lists:append([[closed_loop(none, Port, N), closed_loop(client, Port, N)]
+    Loops = lists:append([[closed_loop(off, Port, N), closed_loop(none, Port, N),
+                           closed_loop(client, Port, N)]
                           || _ <- lists:seq(1, Rounds)]),
     loop_table(Loops, N, Dir),
     Secs = case Quick of true -> 20; false -> 300 end,
@@ -36,6 +39,11 @@ main([Dir]) ->
 %% 1. Closed loop, with and without a page
 %%====================================================================
 
+closed_loop(off, Port, N) ->
+    ok = toroco_live:stop(),
+    R = closed_loop(none, Port, N),
+    {ok, _} = toroco_live:start(#{http => Port, foxglove => off}),
+    R#{with := off};
 closed_loop(With, Port, N) ->
     Client = case With of
                  none -> none;
@@ -67,12 +75,13 @@ loop_table(Rows, N, Dir) ->
     Us = fun(X) -> X / 1000 end,
     Line = fun(#{with := W, lats := L, ns := Ns, frames := F}) ->
                    io_lib:format("| ~s | ~.1f | ~.1f | ~.1f | ~w | ~w |~n",
-                                 [case W of none -> "no page"; client -> "one WS client" end,
+                                 [case W of off -> "no dashboard"; none -> "dashboard, no page";
+                                      client -> "one WS client" end,
                                   Us(pct(L, 0.5)), Us(pct(L, 0.99)),
                                   Us(lists:sum(L) / max(1, length(L))),
                                   round(length(L) / (Ns / 1.0e9)), F])
            end,
-    Text = [io_lib:format("~n### Closed loop (~w events a run), runs alternating~n~n", [N]),
+    Text = [io_lib:format("~n### Closed loop (~w events a run), runs in turn~n~n", [N]),
             "| page | p50 µs | p99 µs | avg µs | events/s | state frames the client got |\n",
             "|---|---:|---:|---:|---:|---:|\n", [Line(R) || R <- Rows],
             ratio(Rows)],
@@ -83,9 +92,12 @@ ratio(Rows) ->
                        lists:sum(Xs) / max(1, length(Xs)) end,
     P50 = fun(#{lats := L}) -> pct(L, 0.5) end,
     Rate = fun(#{lats := L, ns := Ns}) -> length(L) / (Ns / 1.0e9) end,
-    io_lib:format("~nWith a client / without: p50 latency ×~.2f, throughput ×~.2f~n",
-                  [Avg(client, P50) / max(1, Avg(none, P50)),
-                   Avg(client, Rate) / max(1.0, Avg(none, Rate))]).
+    io_lib:format("~nAgainst no dashboard: with one client p50 latency ×~.2f, throughput ×~.2f; "
+                  "with the dashboard and no page p50 ×~.2f, throughput ×~.2f~n",
+                  [Avg(client, P50) / max(1, Avg(off, P50)),
+                   Avg(client, Rate) / max(1.0, Avg(off, Rate)),
+                   Avg(none, P50) / max(1, Avg(off, P50)),
+                   Avg(none, Rate) / max(1.0, Avg(off, Rate))]).
 
 pct([], _) -> 0;
 pct(Sorted, P) -> lists:nth(max(1, round(P * length(Sorted))), Sorted).
