@@ -31,10 +31,15 @@
 %% and waits at most the next.
 -define(QUIET_MS, 30).
 -define(MAX_DRAIN_MS, 2000).
+%% How soon to subscribe again when the runtime's tap went away.
+-define(RESUBSCRIBE_MS, 500).
 
 -type item() :: {event, tuple()} | {message, toroco_live_channels:key(), binary()}.
 
 -record(flight, {tap :: reference() | none,
+                 %% The tap server: when it goes (the runtime restarts), so
+                 %% does the subscription, and this process subscribes again.
+                 tap_monitor = none :: reference() | none,
                  events = queue:new() :: queue:queue({integer(), item()}),
                  count = 0 :: non_neg_integer(),
                  dropped = 0 :: non_neg_integer(),
@@ -70,15 +75,9 @@ init([]) ->
     process_flag(priority, low),
     Seconds = application:get_env(toroco_live, flight_seconds, 30),
     Max = application:get_env(toroco_live, flight_max_events, ?MAX_EVENTS),
-    Tap = case toroco:subscribe_events(#{buffer => ?BUFFER}) of
-              {ok, Ref} -> Ref;
-              {error, Why} ->
-                  logger:warning("flight recorder off: ~0p", [Why], #{domain => [toroco, live]}),
-                  none
-          end,
     %% toroco_live_world starts before this process (toroco_live_sup).
     _ = (catch toroco_live_world:subscribe()),
-    {ok, #flight{tap = Tap, window_ns = Seconds * 1000000000, max = Max}}.
+    {ok, subscribe(#flight{tap = none, window_ns = Seconds * 1000000000, max = Max})}.
 
 -spec handle_call(term(), gen_server:from(), #flight{}) -> {reply, term(), #flight{}}.
 handle_call({dump, Path}, _From, F0) ->
@@ -108,6 +107,11 @@ handle_cast(_, F) ->
 -spec handle_info(term(), #flight{}) -> {noreply, #flight{}}.
 handle_info({toroco_event, Tap, Event}, F = #flight{tap = Tap}) ->
     {noreply, event(Event, F)};
+handle_info({'DOWN', M, process, _, _}, F = #flight{tap_monitor = M}) ->
+    erlang:send_after(?RESUBSCRIBE_MS, self(), subscribe),
+    {noreply, F#flight{tap = none, tap_monitor = none}};
+handle_info(subscribe, F = #flight{tap = none}) ->
+    {noreply, subscribe(F)};
 handle_info({toroco_live_world, changed}, F) ->
     {Msgs, Scene} = toroco_live_channels:world(toroco_live_world:latest(),
                                                erlang:system_time(nanosecond), F#flight.scene),
@@ -128,6 +132,17 @@ terminate(_, #flight{recording = R}) ->
 %%====================================================================
 %% Inside
 %%====================================================================
+
+subscribe(F) ->
+    try toroco:subscribe_events(#{buffer => ?BUFFER}) of
+        {ok, Ref} -> F#flight{tap = Ref, tap_monitor = monitor(process, toroco_tap)};
+        {error, _} -> retry(F)
+    catch exit:_ -> retry(F)
+    end.
+
+retry(F) ->
+    erlang:send_after(?RESUBSCRIBE_MS, self(), subscribe),
+    F.
 
 event({dropped, N}, F = #flight{dropped = D, recording = R}) ->
     F#flight{dropped = D + N, recording = case R of

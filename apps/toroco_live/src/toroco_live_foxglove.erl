@@ -63,7 +63,10 @@
               conns = #{} :: #{pid() => reference()},
               subs = #{} :: #{pos_integer() => [pid()]},
               dropped = #{} :: #{pid() => pos_integer()},
-              tap = none :: none | reference()}).
+              tap = none :: none | reference(),
+              %% The tap server: when it goes (the runtime restarts), so
+              %% does the subscription, and the hub subscribes again.
+              tap_monitor = none :: none | reference()}).
 
 %%====================================================================
 %% API
@@ -133,7 +136,10 @@ init(Opts) ->
                                    {loop, Loop}, {max, 64}]) of
         {ok, Listener} ->
             Port = mochiweb_socket_server:get(Listener, port),
-            {ok, refresh(#hub{listener = Listener, port = Port})};
+            %% The wiring is read again every ?REFRESH_MS while clients
+            %% are connected (refresh/1 does nothing without them).
+            erlang:send_after(?REFRESH_MS, self(), refresh),
+            {ok, #hub{listener = Listener, port = Port}};
         {error, Why} ->
             {stop, {listen, Why}}
     end.
@@ -172,11 +178,14 @@ handle_info({toroco_live_world, changed}, H) ->
              _ -> H
          end,
     {noreply, lists:foldl(fun deliver/2, H1#hub{scene = Scene}, Msgs)};
-handle_info(refresh, H = #hub{tap = none}) ->
-    {noreply, H};
 handle_info(refresh, H) ->
     erlang:send_after(?REFRESH_MS, self(), refresh),
     {noreply, refresh(H)};
+handle_info({'DOWN', M, process, _, _}, H = #hub{tap_monitor = M}) ->
+    erlang:send_after(?REFRESH_MS, self(), retap),
+    {noreply, H#hub{tap = none, tap_monitor = none}};
+handle_info(retap, H = #hub{tap = none, conns = Conns}) when map_size(Conns) > 0 ->
+    {noreply, refresh(tap_on(H))};
 handle_info({'DOWN', _, process, Conn, _}, H = #hub{conns = Conns, subs = Subs}) ->
     H1 = unsubscribe_all(Conn, maps:keys(Subs),
                          H#hub{conns = maps:remove(Conn, Conns),
@@ -197,22 +206,28 @@ terminate(_, #hub{listener = L, tap = Tap}) ->
 %%====================================================================
 
 tap_on(H = #hub{tap = none}) ->
-    case toroco:subscribe_events(#{buffer => ?TAP_BUFFER}) of
+    try toroco:subscribe_events(#{buffer => ?TAP_BUFFER}) of
         {ok, Ref} ->
-            erlang:send_after(?REFRESH_MS, self(), refresh),
             world_subscribe(subscribe),
-            H#hub{tap = Ref};
+            H#hub{tap = Ref, tap_monitor = monitor(process, toroco_tap)};
         {error, Why} ->
-            logger:warning("Foxglove bridge: no events from the runtime: ~0p", [Why],
-                           #{domain => [toroco, live]}),
-            H
+            no_tap(Why, H)
+    catch exit:Why ->
+            no_tap(Why, H)
     end;
 tap_on(H) -> H.
+
+no_tap(Why, H) ->
+    logger:warning("Foxglove bridge: no events from the runtime yet: ~0p", [Why],
+                   #{domain => [toroco, live]}),
+    erlang:send_after(?REFRESH_MS, self(), retap),
+    H.
 
 tap_off(H = #hub{tap = Ref, conns = Conns}) when Ref =/= none, map_size(Conns) =:= 0 ->
     toroco:unsubscribe_events(Ref),
     world_subscribe(unsubscribe),
-    H#hub{tap = none, subs = #{}};
+    demonitor(H#hub.tap_monitor, [flush]),
+    H#hub{tap = none, tap_monitor = none, subs = #{}};
 tap_off(H) -> H.
 
 %% The simulated world's snapshots (`toroco_live_world'), when a world runs.

@@ -8,7 +8,7 @@
 all() ->
     [server_info_and_channels, values_in_order, channels_follow_wiring, connection_graph,
      publish_refused_when_off, publish_injects_when_on, misbehaving_client,
-     client_that_never_reads, not_a_websocket, simulated_world].
+     client_that_never_reads, not_a_websocket, simulated_world, runtime_restart].
 
 suite() -> [{timetrap, {seconds, 60}}].
 
@@ -244,6 +244,35 @@ simulated_world(Config) ->
                                             <<"arrows">> := [_]}]}}] =
         [M || M = #{<<"topic">> := <<"/toroco/sim/scene">>} <- Ms],
     5 = length(Walls),
+    ok.
+
+runtime_restart() ->
+    [{doc, "A connected client keeps getting values after the runtime restarts under the bridge"}].
+runtime_restart(Config) ->
+    C = connect(Config),
+    await_topics(C, [<<"/toroco/out/s/dist">>]),
+    subscribe(C, <<"/toroco/out/s/dist">>),
+    ok = application:stop(toroco_hw),
+    ok = application:stop(toroco),
+    {ok, _} = application:ensure_all_started(toroco_hw),
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [dist]}),
+    %% The same topic, re-advertised or kept, carries the new sensor's values.
+    Got = fun Loop(N) when N > 0 ->
+                  ok = toroco:inject({s, dist}, again),
+                  case toroco_live_js:await(C, fun(#{<<"ev">> := <<"message">>, <<"data">> := #{<<"term">> := T}}) ->
+                                                        T =:= <<"again">>;
+                                                   (#{<<"ev">> := <<"advertise">>, <<"channels">> := Chs}) ->
+                                                        [toroco_live_js:send(C, #{cmd => subscribe, topic => Tp})
+                                                         || #{<<"topic">> := Tp = <<"/toroco/out/s/dist">>} <- Chs],
+                                                        false;
+                                                   (_) -> false
+                                                end, 500) of
+                      {ok, _, _} -> true;
+                      {error, _} -> Loop(N - 1)
+                  end;
+              Loop(_) -> false
+          end,
+    true = Got(20),
     ok.
 
 %%====================================================================

@@ -6,7 +6,8 @@
 
 all() ->
     [recording_reads_back, recording_filters, unwritable_path_refused, full_disk_refused,
-     flight_recorder_dump, flight_recorder_on_layer_removed, foreign_files_refused,
+     flight_recorder_dump, flight_recorder_on_layer_removed, flight_recorder_after_restart,
+     foreign_files_refused,
      simulated_run_replays].
 
 suite() -> [{timetrap, {seconds, 90}}].
@@ -131,6 +132,34 @@ flight_recorder_on_layer_removed(Config) ->
         true = maps:get(<<"/toroco/lifecycle">>, P) > 0
     after
         logger:remove_handler(flight_capture)
+    end.
+
+flight_recorder_after_restart() ->
+    [{doc, "The flight recorder stays on when the runtime restarts under it"}].
+flight_recorder_after_restart(Config) ->
+    ok = application:stop(toroco_hw),
+    ok = application:stop(toroco),
+    {ok, _} = application:ensure_all_started(toroco_hw),
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [dist]}),
+    ok = toroco:add_device(a, toroco_fake_actuator, #{inputs => [d]}),
+    ok = toroco:set_inputs(a, #{d => [{s, dist}]}),
+    Path = path(Config, "after_restart.mcap"),
+    Dumped = fun() ->
+                     ok = toroco:inject({s, dist}, after_restart),
+                     {ok, _} = toroco_live:dump(Path),
+                     #{<<"last">> := Last} = read(Path),
+                     lists:member(#{<<"kind">> => <<"send">>, <<"value">> => <<"after_restart">>,
+                                    <<"term">> => <<"after_restart">>},
+                                  maps:get(<<"/toroco/out/s/dist">>, Last, []))
+             end,
+    true = until(Dumped, 10000),
+    ok.
+
+until(Pred, Ms) when Ms =< 0 -> Pred();
+until(Pred, Ms) ->
+    case Pred() of
+        true -> true;
+        false -> timer:sleep(200), until(Pred, Ms - 200)
     end.
 
 %% logger handler: sends the flight recorder's line to the test.
