@@ -16,13 +16,19 @@ init_per_suite(Config) ->
     ok = toroco_live_js:ensure_installed(),
     %% Nothing on the default ports: each case starts on free ones.
     _ = application:load(toroco_live),
+    Env = [{K, application:get_env(toroco_live, K)} || K <- [enabled, log_dir, client_publish]],
     ok = application:set_env(toroco_live, enabled, false),
     {ok, _} = application:ensure_all_started(toroco_hw),
     {ok, _} = application:ensure_all_started(toroco_live),
-    Config.
+    [{env, Env} | Config].
 
-end_per_suite(_Config) ->
+%% The app env as it was, for the suites that come after.
+end_per_suite(Config) ->
     application:stop(toroco_live),
+    [case V of
+         {ok, Value} -> application:set_env(toroco_live, K, Value);
+         undefined -> application:unset_env(toroco_live, K)
+     end || {K, V} <- ?config(env, Config)],
     ok.
 
 init_per_testcase(Case, Config) ->
