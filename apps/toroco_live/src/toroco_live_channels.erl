@@ -265,12 +265,8 @@ world(Snapshot, T, Last) ->
 scene(Snapshot, {_, Walls0, Objects0, Names}, Stamp) ->
     Walls = [wall(P1, P2) || {P1, P2} <- arena_walls(Snapshot) ++ Walls0],
     Objects = [cylinder(At, R, colour(C)) || {C, At, R} <- Objects0],
-    Arena = #{timestamp => Stamp, frame_id => <<"arena">>, id => <<"arena">>,
-              lifetime => #{sec => 0, nsec => 0}, frame_locked => false,
-              cubes => Walls, cylinders => Objects, arrows => []},
-    Robots = [#{timestamp => Stamp, frame_id => Name, id => Name,
-                lifetime => #{sec => 0, nsec => 0}, frame_locked => true,
-                cubes => [], cylinders => [],
+    Arena = (entity(Stamp, <<"arena">>, <<"arena">>, false))#{cubes => Walls, cylinders => Objects},
+    Robots = [(entity(Stamp, Name, Name, true))#{
                 arrows => [#{pose => #{position => #{x => 0.0, y => 0.0, z => 0.05},
                                        orientation => yaw(0)},
                              color => #{r => 0.2, g => 0.8, b => 0.2, a => 1.0},
@@ -278,6 +274,12 @@ scene(Snapshot, {_, Walls0, Objects0, Names}, Stamp) ->
                              head_length => 0.06, head_diameter => 0.08}]}
               || Name <- Names],
     json(#{deletions => [], entities => [Arena | Robots]}).
+
+%% Every field of foxglove.SceneEntity, so a viewer finds each list it looks for.
+entity(Stamp, Frame, Id, Locked) ->
+    #{timestamp => Stamp, frame_id => Frame, id => Id, lifetime => #{sec => 0, nsec => 0},
+      frame_locked => Locked, metadata => [], arrows => [], cubes => [], spheres => [],
+      cylinders => [], lines => [], triangles => [], texts => [], models => []}.
 
 stamp(T) -> #{sec => T div 1000000000, nsec => T rem 1000000000}.
 
