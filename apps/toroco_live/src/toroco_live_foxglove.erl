@@ -168,8 +168,6 @@ handle_info({toroco_event, Ref, Event}, H = #hub{tap = Ref}) ->
     {noreply, event(Event, H)};
 handle_info({toroco_event, _, _}, H) ->
     {noreply, H};
-handle_info({toroco_live_world, changed}, H = #hub{tap = none}) ->
-    {noreply, H};
 handle_info({toroco_live_world, changed}, H) ->
     {Msgs, Scene} = toroco_live_channels:world(toroco_live_world:latest(),
                                                erlang:system_time(nanosecond), H#hub.scene),
