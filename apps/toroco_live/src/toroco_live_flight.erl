@@ -11,7 +11,10 @@
 %% One tap subscription (SPEC §10) serves the flight recorder and the
 %% recording, and the process runs at low priority: the robot first. Memory
 %% is bounded by time (older events go as new ones come), by count
-%% (`flight_max_events', default 200000, the oldest go first) and by the
+%% (`flight_max_events', default 200000) and by size (`flight_max_bytes',
+%% default 32 MiB, the events' terms as `erlang:external_size/1' counts
+%% them, binaries included), the oldest
+%% going first, and by the
 %% tap's buffer for what waits in the mailbox; what the tap drops is
 %% counted, said in a dump's log line and in a recording's result.
 %%
@@ -25,6 +28,7 @@
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2, terminate/2]).
 
 -define(MAX_EVENTS, 200000).
+-define(MAX_BYTES, 32 * 1024 * 1024).
 -define(BUFFER, 20000).
 %% A dump, and stopping a recording, take the events still on their way (the tap's
 %% relay forwards them a little later) until the tap is quiet this long,
@@ -40,8 +44,10 @@
                  %% The tap server: when it goes (the runtime restarts), so
                  %% does the subscription, and this process subscribes again.
                  tap_monitor = none :: reference() | none,
-                 events = queue:new() :: queue:queue({integer(), item()}),
+                 events = queue:new() :: queue:queue({integer(), non_neg_integer(), item()}),
                  count = 0 :: non_neg_integer(),
+                 bytes = 0 :: non_neg_integer(),
+                 max_bytes :: pos_integer(),
                  dropped = 0 :: non_neg_integer(),
                  window_ns :: pos_integer(),
                  max :: pos_integer(),
@@ -75,9 +81,11 @@ init([]) ->
     process_flag(priority, low),
     Seconds = application:get_env(toroco_live, flight_seconds, 30),
     Max = application:get_env(toroco_live, flight_max_events, ?MAX_EVENTS),
+    MaxBytes = application:get_env(toroco_live, flight_max_bytes, ?MAX_BYTES),
     %% toroco_live_world starts before this process (toroco_live_sup).
     _ = (catch toroco_live_world:subscribe()),
-    {ok, subscribe(#flight{tap = none, window_ns = Seconds * 1000000000, max = Max})}.
+    {ok, subscribe(#flight{tap = none, window_ns = Seconds * 1000000000, max = Max,
+                             max_bytes = MaxBytes})}.
 
 -spec handle_call(term(), gen_server:from(), #flight{}) -> {reply, term(), #flight{}}.
 handle_call({dump, Path}, _From, F0) ->
@@ -174,14 +182,25 @@ drain(F = #flight{tap = Tap}, Until) ->
     after Wait -> F
     end.
 
-keep(Msg, F = #flight{events = Q, count = N, max = Max}) when N >= Max ->
-    keep(Msg, F#flight{events = queue:drop(Q), count = N - 1});
-keep(Msg, F = #flight{events = Q, count = N}) ->
-    F#flight{events = queue:in(Msg, Q), count = N + 1}.
+%% The oldest go first when the count or the bytes would pass their bound.
+keep({T, Item}, F) ->
+    Size = erlang:external_size(Item),
+    F1 = #flight{events = Q, count = N, bytes = B} = make_room(Size, F),
+    F1#flight{events = queue:in({T, Size, Item}, Q), count = N + 1, bytes = B + Size}.
 
-trim(Now, F = #flight{events = Q, count = N, window_ns = W}) ->
+make_room(Size, F = #flight{count = N, max = Max, bytes = B, max_bytes = MaxB})
+  when N > 0, (N >= Max orelse B + Size > MaxB) ->
+    make_room(Size, drop_oldest(F));
+make_room(_, F) ->
+    F.
+
+drop_oldest(F = #flight{events = Q, count = N, bytes = B}) ->
+    {{value, {_, Size, _}}, Q1} = queue:out(Q),
+    F#flight{events = Q1, count = N - 1, bytes = B - Size}.
+
+trim(Now, F = #flight{events = Q, window_ns = W}) ->
     case queue:peek(Q) of
-        {value, {T, _}} when T < Now - W -> trim(Now, F#flight{events = queue:drop(Q), count = N - 1});
+        {value, {T, _, _}} when T < Now - W -> trim(Now, drop_oldest(F));
         _ -> F
     end.
 
@@ -215,5 +234,5 @@ write(Path, #flight{events = Q}) ->
         {error, Why} -> {error, {cannot_write, Path, Why}}
     end.
 
-message({_, {event, Event}}) -> toroco_live_channels:of_event(Event);
-message({T, {message, K, J}}) -> {K, T, J}.
+message({_, _, {event, Event}}) -> toroco_live_channels:of_event(Event);
+message({T, _, {message, K, J}}) -> {K, T, J}.

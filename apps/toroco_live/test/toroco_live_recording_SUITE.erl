@@ -6,7 +6,8 @@
 
 all() ->
     [recording_reads_back, recording_filters, unwritable_path_refused, full_disk_refused,
-     flight_recorder_dump, flight_recorder_on_layer_removed, flight_recorder_after_restart,
+     flight_recorder_dump, flight_recorder_bounded, flight_recorder_on_layer_removed,
+     flight_recorder_after_restart,
      foreign_files_refused,
      simulated_run_replays].
 
@@ -122,6 +123,35 @@ flight_recorder_dump(Config) ->
     Terms = [T || #{<<"term">> := T} <- maps:get(<<"/toroco/out/s/dist">>, Last)],
     true = lists:member(<<"{flight,20}">>, Terms),
     ok.
+
+flight_recorder_bounded() ->
+    [{doc, "The flight recorder keeps at most flight_max_bytes of events, the newest"}].
+flight_recorder_bounded(Config) ->
+    ok = application:set_env(toroco_live, flight_max_bytes, 200000),
+    try
+        restart_flight(),
+        Kb = binary:copy(<<"x">>, 1000),
+        N = 2000,
+        [ok = toroco:inject({s, dist}, {I, Kb}) || I <- lists:seq(1, N)],
+        ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= N end, 10000),
+        Path = path(Config, "bounded.mcap"),
+        {ok, #{messages := M}} = toroco_live:dump(Path),
+        ct:log("~b events of 1 kB (each emitted and delivered), ~b kept", [N, M]),
+        %% Each event holds about 1 kB: some 200 fit in 200 kB.
+        true = M > 50 andalso M < 250,
+        #{<<"last">> := Last} = read(Path),
+        Newest = toroco_live_json:term_text({N, Kb}),
+        %% The newest kept: the last delivery (the emitter's events may all
+        %% have come before the actuator's).
+        [#{<<"term">> := Newest} | _] = lists:reverse(maps:get(<<"/toroco/in/a/d">>, Last))
+    after
+        application:unset_env(toroco_live, flight_max_bytes),
+        restart_flight()
+    end.
+
+restart_flight() ->
+    ok = supervisor:terminate_child(toroco_live_sup, toroco_live_flight),
+    {ok, _} = supervisor:restart_child(toroco_live_sup, toroco_live_flight).
 
 flight_recorder_on_layer_removed() ->
     [{doc, "When a layer is taken out the flight recorder dumps into the log directory "
