@@ -12,29 +12,15 @@ all() ->
 
 suite() -> [{timetrap, {seconds, 60}}].
 
+%% Nothing on the default ports: each case starts on free ones.
 init_per_suite(Config) ->
-    ok = toroco_live_js:ensure_installed(),
-    %% Nothing on the default ports: each case starts on free ones.
-    _ = application:load(toroco_live),
-    Env = [{K, application:get_env(toroco_live, K)} || K <- [enabled, log_dir, client_publish]],
-    ok = application:set_env(toroco_live, enabled, false),
-    {ok, _} = application:ensure_all_started(toroco_hw),
-    {ok, _} = application:ensure_all_started(toroco_live),
-    [{env, Env} | Config].
+    [{env, tl_live:start(#{})} | Config].
 
-%% The app env as it was, for the suites that come after.
 end_per_suite(Config) ->
-    application:stop(toroco_live),
-    [case V of
-         {ok, Value} -> application:set_env(toroco_live, K, Value);
-         undefined -> application:unset_env(toroco_live, K)
-     end || {K, V} <- ?config(env, Config)],
-    ok.
+    tl_live:stop(?config(env, Config)).
 
 init_per_testcase(Case, Config) ->
-    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [dist]}),
-    ok = toroco:add_device(a, toroco_fake_actuator, #{inputs => [d]}),
-    ok = toroco:set_inputs(a, #{d => [{s, dist}]}),
+    tl_live:fake_robot(),
     ok = application:set_env(toroco_live, client_publish, Case =:= publish_injects_when_on),
     {ok, #{foxglove := Port}} = toroco_live:start(#{http => 0, foxglove => 0}),
     Transcript = filename:join(?config(priv_dir, Config), atom_to_list(Case) ++ ".jsonl"),

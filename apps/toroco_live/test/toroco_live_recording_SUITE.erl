@@ -14,31 +14,16 @@ all() ->
 suite() -> [{timetrap, {seconds, 90}}].
 
 init_per_suite(Config) ->
-    ok = toroco_live_js:ensure_installed(),
     LogDir = filename:join(?config(priv_dir, Config), "log"),
-    _ = application:load(toroco_live),
-    Env = [{K, application:get_env(toroco_live, K)} || K <- [enabled, log_dir, client_publish]],
-    ok = application:set_env(toroco_live, log_dir, LogDir),
-    ok = application:set_env(toroco_live, enabled, false),
-    {ok, _} = application:ensure_all_started(toroco_hw),
-    {ok, _} = application:ensure_all_started(toroco_live),
-    [{log_dir, LogDir}, {env, Env} | Config].
+    [{log_dir, LogDir}, {env, tl_live:start(#{log_dir => LogDir})} | Config].
 
-%% The app env as it was, for the suites that come after.
 end_per_suite(Config) ->
-    application:stop(toroco_live),
-    [case V of
-         {ok, Value} -> application:set_env(toroco_live, K, Value);
-         undefined -> application:unset_env(toroco_live, K)
-     end || {K, V} <- ?config(env, Config)],
-    ok.
+    tl_live:stop(?config(env, Config)).
 
 init_per_testcase(simulated_run_replays, Config) ->
     Config;
 init_per_testcase(_Case, Config) ->
-    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [dist]}),
-    ok = toroco:add_device(a, toroco_fake_actuator, #{inputs => [d]}),
-    ok = toroco:set_inputs(a, #{d => [{s, dist}]}),
+    tl_live:fake_robot(),
     Config.
 
 end_per_testcase(_Case, _Config) ->
@@ -176,9 +161,7 @@ flight_recorder_after_restart(Config) ->
     ok = application:stop(toroco_hw),
     ok = application:stop(toroco),
     {ok, _} = application:ensure_all_started(toroco_hw),
-    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [dist]}),
-    ok = toroco:add_device(a, toroco_fake_actuator, #{inputs => [d]}),
-    ok = toroco:set_inputs(a, #{d => [{s, dist}]}),
+    tl_live:fake_robot(),
     Path = path(Config, "after_restart.mcap"),
     Dumped = fun() ->
                      ok = toroco:inject({s, dist}, after_restart),
