@@ -11,7 +11,7 @@ all() ->
     [placement_and_names, top_and_watch_cover_nodes, suppression_across_nodes, inhibition_gate_on_third_node,
      hierarchy_uses_remote_layers, reset_from_another_node, remote_emitter_restart_caught_up,
      stale_source_dropped_and_back, node_killed_and_restarted, partition_heals_with_wiring_as_before,
-     wiring_file_places_on_nodes, clash_after_partition_reported].
+     wiring_file_places_on_nodes, clash_after_partition_reported, over_tls].
 
 init_per_suite(Config) ->
     _ = application:stop(toroco_hw),
@@ -371,3 +371,49 @@ wiring_file_places_on_nodes(Config) ->
     ok = t(A, inject, [{far, out}, 1, #{latch => true}]),
     await_values(B, act, [1]),
     end_per_testcase(x, [{peers, Ps} | Config]).
+
+over_tls() -> [{doc, "the two-node suppression case with distribution over TLS (inet_tls_dist), certificates made by scripts/dist-certs"}].
+over_tls(Config) ->
+    Script = filename:join(repo_root(), "scripts/dist-certs"),
+    Dir = filename:join(?config(priv_dir, Config), "certs"),
+    Conf = lists:last(string:split(string:trim(os:cmd(Script ++ " " ++ Dir)), "\n", all)),
+    true = filelib:is_regular(Conf),
+    Paths = [P || P <- code:get_path(), string:find(P, "_build") =/= nomatch],
+    Start = fun(Tag) ->
+                    {ok, P, N} = peer:start_link(
+                                   #{name => peer_name(Tag), host => "127.0.0.1", longnames => true,
+                                     connection => standard_io,
+                                     args => ["-proto_dist", "inet_tls", "-ssl_dist_optfile", Conf,
+                                              "-setcookie", "toroco_tls_test", "-connect_all", "false",
+                                              "-pa" | Paths]}),
+                    {ok, _} = peer:call(P, application, ensure_all_started, [toroco_hw]),
+                    {P, N}
+            end,
+    {PA, A} = Start(tla),
+    {PB, B} = Start(tlb),
+    Config1 = [{peers, [PA, PB]} | Config],
+    pong = peer:call(PA, net_adm, ping, [B]),
+    [{B, _}] = peer:call(PA, erlang, system_info, [dist_ctrl]),
+    {ok, [["inet_tls"]]} = peer:call(PA, init, get_argument, [proto_dist]),
+    T = fun(P, F, Args) -> peer:call(P, toroco, F, Args) end,
+    wait(fun() -> peer:call(PA, toroco_wiring, peers, []) =:= lists:sort([A, B]) end, 5000),
+    ok = T(PA, add_device, [hi, toroco_fake_sensor, #{outputs => [out]}]),
+    ok = T(PB, add_device, [lo, toroco_fake_sensor, #{outputs => [out]}]),
+    ok = T(PB, add_device, [act, toroco_fake_actuator, #{inputs => [in]}]),
+    ok = T(PA, set_inputs, [act, #{in => [{hi, out}, {lo, out}]}]),
+    ok = T(PB, inject, [{lo, out}, 1, #{latch => true}]),
+    ok = T(PA, inject, [{hi, out}, 2, #{hold => 300}]),
+    ok = T(PB, inject, [{lo, out}, 3, #{latch => true}]),
+    Values = fun() -> [V || {_, V, _} <- peer:call(PB, toroco_fake_actuator, history, [act])] end,
+    wait(fun() -> Values() =:= [1, 2, 3] end, 3000, {tls, Values()}),
+    end_per_testcase(x, Config1).
+
+repo_root() ->
+    up(filename:dirname(code:which(?MODULE))).
+
+up("/") -> ct:fail(no_repo_root);
+up(Dir) ->
+    case filelib:is_regular(filename:join(Dir, "scripts/dist-certs")) of
+        true -> Dir;
+        false -> up(filename:dirname(Dir))
+    end.
