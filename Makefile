@@ -35,7 +35,7 @@ test:
 	scripts/test
 
 run: compile
-	scripts/run $(WORLD)
+	SPLIT=$(SPLIT) scripts/run $(WORLD)
 
 bench: compile
 	scripts/bench

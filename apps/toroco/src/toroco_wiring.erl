@@ -41,7 +41,9 @@
             stopping = false :: boolean(),
             clashes = [] :: [{atom(), node()}],
             %% changes whose answer waits for the other nodes to know them
-            telling = #{} :: #{reference() => {gen_server:from(), [node()]}}}).
+            telling = #{} :: #{reference() => {gen_server:from(), [node()]}},
+            %% the nodes whose wiring servers told this one what they run
+            known = [] :: [node()]}).
 
 %%====================================================================
 %% API
@@ -69,6 +71,8 @@ call(Request) ->
 call(Node, Request) when Node =:= node() ->
     call(Request);
 call(Node, Request) ->
+    _ = lists:member(Node, peers()) orelse
+        (net_kernel:connect_node(Node) andalso call({meet, Node})),
     try gen_server:call({?MODULE, Node}, Request, infinity)
     catch exit:{{nodedown, _}, _} -> {error, {nodedown, Node}};
           exit:{noproc, _} -> {error, {nodedown, Node}}
@@ -155,6 +159,13 @@ handle_call({where, Name}, _From, S = #s{wiring = W}) ->
                 {_, #{Name := #{node := N}}} -> {ok, N};
                 _ -> {error, {unknown_name, Name}}
             end, S};
+handle_call({meet, Node}, From, S = #s{telling = T}) ->
+    %% Before a first request to another node: it learns this one's names
+    %% (and answers with its own) before the request reaches it.
+    Ref = make_ref(),
+    tell(Node, S, [], true, {self(), Ref}),
+    erlang:send_after(1000, self(), {told, Ref}),
+    {noreply, S#s{telling = T#{Ref => {From, [Node]}}}};
 handle_call(clashes, _From, S = #s{clashes = Cl}) ->
     {reply, Cl, S};
 handle_call(stopping, _From, S) ->
@@ -183,7 +194,8 @@ handle_info({'DOWN', Ref, process, _Pid, Reason}, S = #s{layers = Layers, remove
         [] ->
             {noreply, S}
     end;
-handle_info(?DIR(Node, Dir, Hello, Ack), S = #s{wiring = W, clashes = Cl}) ->
+handle_info(?DIR(Node, Dir, Hello, Ack), S0 = #s{wiring = W, clashes = Cl, known = Known}) ->
+    S = S0#s{known = lists:usort([Node | Known])},
     _ = Hello andalso tell(Node, S, [], false, none),
     {W1, Clashes} = toroco_wiring_core:set_remote(W, Node, Dir),
     _ = [logger:error("toroco: ~p is on both ~p and ~p: the names of a robot must be unique "
@@ -208,10 +220,11 @@ handle_info({told, Ref}, S = #s{telling = T}) ->
 handle_info({nodeup, Node}, S) ->
     tell(Node, S, [], true, none),
     {noreply, S};
-handle_info({nodedown, Node}, S = #s{telling = T}) ->
+handle_info({nodedown, Node}, S = #s{telling = T, known = Known}) ->
     %% Its names stay in the wiring: the routers let its sources go after
     %% their max age, and the wiring is as it was when the node comes back.
-    {noreply, maps:fold(fun(Ref, _, Acc) -> told(Ref, [Node], Acc) end, S, T)};
+    {noreply, maps:fold(fun(Ref, _, Acc) -> told(Ref, [Node], Acc) end,
+                        S#s{known = lists:delete(Node, Known)}, T)};
 handle_info(_Msg, S) ->
     {noreply, S}.
 
@@ -231,8 +244,8 @@ told(Ref, Nodes, S = #s{telling = T}) ->
         #{} -> S
     end.
 
-others() ->
-    [N || N <- peers(), N =/= node()].
+others(#s{known = Known}) ->
+    lists:usort(Known ++ peers()) -- [node()].
 
 %% The consumers fed from `Node' subscribe again to what they do not hear.
 resubscribe(Node, #s{wiring = W}) ->
@@ -249,7 +262,7 @@ reply(Result, From, S) ->
     reply(Result, From, S, []).
 
 reply({ok, S1}, From, S, Removed) ->
-    Others = others(),
+    Others = others(S),
     Changed = Others =/= [] andalso (Removed =/= [] orelse
         toroco_wiring_core:directory(S#s.wiring) =/= toroco_wiring_core:directory(S1#s.wiring)),
     case Changed of
