@@ -79,6 +79,16 @@ await_peers(Nodes) ->
 
 t(Node, F, Args) -> erpc:call(Node, toroco, F, Args).
 
+%% hi (latched `high') on A over lo (latched `low') on B, into act on B.
+hi_over_lo(A, B, Input) ->
+    sensor(A, hi),
+    sensor(B, lo),
+    ok = t(B, add_device, [act, toroco_fake_actuator, #{inputs => [in]}]),
+    ok = t(B, set_inputs, [act, #{in => Input}]),
+    ok = t(B, inject, [{lo, out}, low, #{latch => true}]),
+    ok = t(A, inject, [{hi, out}, high, #{latch => true}]),
+    await_values(B, act, [low, high]).
+
 %% The wiring of a receiver's inputs as inspect shows it.
 wiring_of(Node, R) ->
     maps:map(fun(_, #{sources := Srcs}) -> Srcs end, maps:get(inputs, t(Node, inspect, [R]))).
@@ -204,13 +214,7 @@ reset_from_another_node(Config) ->
 remote_emitter_restart_caught_up() -> [{doc, "a remote emitter that crashes ends its holds at once, and its new incarnation is heard again (the router subscribes again)"}].
 remote_emitter_restart_caught_up(Config) ->
     {Ps, A, B, _C} = nodes3(),
-    sensor(A, hi),
-    sensor(B, lo),
-    ok = t(B, add_device, [act, toroco_fake_actuator, #{inputs => [in]}]),
-    ok = t(B, set_inputs, [act, #{in => [{hi, out}, {lo, out}]}]),
-    ok = t(B, inject, [{lo, out}, low, #{latch => true}]),
-    ok = t(A, inject, [{hi, out}, high, #{latch => true}]),
-    await_values(B, act, [low, high]),
+    hi_over_lo(A, B, [{hi, out}, {lo, out}]),
     Old = erpc:call(A, erlang, whereis, [toroco_names:process(hi)]),
     true = erpc:call(A, erlang, exit, [Old, kill]),
     await_values(B, act, [low, high, low]),
@@ -226,13 +230,7 @@ remote_emitter_restart_caught_up(Config) ->
 stale_source_dropped_and_back() -> [{doc, "a frozen node's latched source is let go within max_age + 50 ms (the lower source takes over) and comes back when the node thaws; a quiet live one is kept"}].
 stale_source_dropped_and_back(Config) ->
     {Ps, A, B, _C} = nodes3(),
-    sensor(A, hi),
-    sensor(B, lo),
-    ok = t(B, add_device, [act, toroco_fake_actuator, #{inputs => [in]}]),
-    ok = t(B, set_inputs, [act, #{in => [{hi, out, #{max_age => 200}}, {lo, out}]}]),
-    ok = t(B, inject, [{lo, out}, low, #{latch => true}]),
-    ok = t(A, inject, [{hi, out}, high, #{latch => true}]),
-    await_values(B, act, [low, high]),
+    hi_over_lo(A, B, [{hi, out, #{max_age => 200}}, {lo, out}]),
     timer:sleep(600),                       % quiet, but alive: kept
     [low, high] = values(B, act),
     OsPid = erpc:call(A, os, getpid, []),
@@ -252,13 +250,7 @@ stale_source_dropped_and_back(Config) ->
 node_killed_and_restarted() -> [{doc, "a node that dies lets the lower layers take over at once; restarted with its part, the wiring is as before and its latch is delivered again"}].
 node_killed_and_restarted(Config) ->
     {[PA | Ps], A, B, _C} = nodes3(),
-    sensor(A, hi),
-    sensor(B, lo),
-    ok = t(B, add_device, [act, toroco_fake_actuator, #{inputs => [in]}]),
-    ok = t(B, set_inputs, [act, #{in => #{sources => [{hi, out}, {lo, out}], idle => stop}}]),
-    ok = t(B, inject, [{lo, out}, low, #{latch => true}]),
-    ok = t(A, inject, [{hi, out}, high, #{latch => true}]),
-    await_values(B, act, [low, high]),
+    hi_over_lo(A, B, #{sources => [{hi, out}, {lo, out}], idle => stop}),
     Before = wiring_of(B, act),
     peer:stop(PA),
     await_values(B, act, [low, high, low]),
