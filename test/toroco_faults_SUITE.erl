@@ -86,10 +86,13 @@ random_faults_leave_the_robot_whole(Config) ->
                                     first => lists:sublist(lists:reverse(Violations), 5)}})
     end.
 
-%% In the case's log and on the console.
+%% In the case's log and on the console. rebar3 ct shows a passing case's
+%% console output only with --verbose, so the line also goes to standard
+%% error, where CI's log has it on every run.
 say(Format, Args) ->
     ct:log(Format, Args),
-    ct:pal(Format, Args).
+    ct:pal(Format, Args),
+    io:format(standard_error, "toroco_faults_SUITE: " ++ Format ++ "~n", Args).
 
 %% Runs faults From..To, or fewer once ?MAX_VIOLATIONS are counted.
 faults(I, To, _Port, Stats, Vs) when I > To; length(Vs) >= ?MAX_VIOLATIONS ->
