@@ -335,7 +335,8 @@ ensure(Kind, Key, Changed, Caller) ->
             _ = toroco_consumer:ready(Mod, Key),
             ok;
         {error, Reason} ->
-            logger:error("toroco: could not start ~p ~p: ~p", [Kind, Key, Reason])
+            logger:error("toroco: could not start ~p ~p: ~p", [Kind, Key, Reason],
+                         #{domain => [toroco, wiring]})
     end.
 
 stop(Kind, Key) ->
