@@ -137,11 +137,7 @@ handle_event({timeout, keepalive}, tick, up, D = #{applied := A}) ->
 handle_event({timeout, keepalive}, tick, down, _D) ->
     keep_state_and_data;
 handle_event(Type, Content, State, D) when Type =:= info; Type =:= {timeout, reconnect} ->
-    toroco_pru_client:handle_event(?MODULE, Type, Content, State, D);
-handle_event({call, From}, Request, _State, #{name := Name}) ->
-    {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
-handle_event(_Type, _Content, _State, _D) ->
-    keep_state_and_data.
+    toroco_pru_client:handle_event(?MODULE, Type, Content, State, D).
 
 -spec info(up | down, map()) -> map().
 info(_State, D = #{client := C, bad := B}) ->
