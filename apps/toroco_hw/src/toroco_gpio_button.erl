@@ -28,6 +28,7 @@
 -export([interface/1, init/2, handle_input/4, handle_event/4, info/2, terminate/3]).
 -export([configure/1, port_event/2]).
 
+%% What sim_button/2 asks the device for: its owner.
 -define(SIM_CALL, '$toroco_gpio_button_sim').
 
 %% @doc Sim backend: the button line's physical level (0 or 1); with the
@@ -49,6 +50,7 @@ interface(_Opts) ->
 init(Name, Opts) ->
     toroco_pru_client:init(?MODULE, Name, options(Opts)).
 
+%% The button has no inputs: nothing is ever delivered.
 -spec handle_input(atom(), term(), up | down, map()) -> toroco_behavior:result().
 handle_input(_Input, _Value, _State, _D) ->
     keep_state_and_data.
@@ -82,6 +84,7 @@ configure(#{button := Button}) ->
 port_event({button, Edge, _T}, D = #{edges := N}) ->
     {keep_state, D#{last := Edge, edges := N + 1}, [{send, #{button => Edge}}]};
 port_event(_Event, _D) ->
+    %% the owner's other sections report too (ADC changes, the servos' watchdog)
     keep_state_and_data.
 
 %%====================================================================

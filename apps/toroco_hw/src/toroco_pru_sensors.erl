@@ -36,6 +36,7 @@
 -export([interface/1, init/2, handle_input/4, handle_event/4, info/2, terminate/3]).
 -export([configure/1, port_event/2]).
 
+%% What sim_adc/3 asks the device for: its owner and the sensor's channel.
 -define(SIM_CALL, '$toroco_pru_sensors_sim').
 
 %%====================================================================
@@ -66,6 +67,7 @@ interface(Opts) ->
 init(Name, Opts) ->
     toroco_pru_client:init(?MODULE, Name, options(Opts)).
 
+%% The sensors are outputs only: nothing is ever delivered.
 -spec handle_input(atom(), term(), up | down, map()) -> toroco_behavior:result().
 handle_input(_Input, _Value, _State, _D) ->
     keep_state_and_data.
@@ -121,6 +123,7 @@ port_event({adc, Ch, V, _T}, D = #{by_channel := ByCh, last := Last, emitted := 
             {keep_state, D#{foreign := F + 1}}
     end;
 port_event(_Event, _D) ->
+    %% the owner's other sections report too (button edges, the servos' watchdog)
     keep_state_and_data.
 
 %%====================================================================

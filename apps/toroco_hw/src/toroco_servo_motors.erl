@@ -173,6 +173,7 @@ configure(#{servos := Servos, watchdog_ms := W, enabled := On}) ->
 port_event({watchdog, _T}, D) ->
     watchdog(D);
 port_event(_Event, _D) ->
+    %% the owner's other sections report too (ADC changes, button edges)
     keep_state_and_data.
 
 %% @doc A restarted program or a lost owner leaves the servos at neutral.
