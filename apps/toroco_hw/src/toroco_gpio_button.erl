@@ -82,10 +82,7 @@ configure(#{button := Button}) ->
 %% @doc Each debounced edge is sent on `button'.
 -spec port_event(toroco_pru_port:event(), map()) -> toroco_behavior:result().
 port_event({button, Edge, _T}, D = #{edges := N}) ->
-    {keep_state, D#{last := Edge, edges := N + 1}, [{send, #{button => Edge}}]};
-port_event(_Event, _D) ->
-    %% the owner's other sections report too (ADC changes, the servos' watchdog)
-    keep_state_and_data.
+    {keep_state, D#{last := Edge, edges := N + 1}, [{send, #{button => Edge}}]}.
 
 %%====================================================================
 %% Internals

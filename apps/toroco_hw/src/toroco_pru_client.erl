@@ -18,7 +18,10 @@
 %% <li>`configure(Data)': the steps that set the device's section on an
 %% owner, in order, each named by the part of the section it sets (an error
 %% says `{Part, Reason}'); they run on each attach.</li>
-%% <li>`port_event(Event, Data)': what a program event means to the device.</li>
+%% <li>`port_event(Event, Data)': what a program event of one of those parts
+%% means to the device (`{adc, ...}' for part `adc', `{button, ...}' for
+%% `button', `{watchdog, T}' for `watchdog'). The owner reports every
+%% section's events to every subscriber; a device hears only its own.</li>
 %% <li>`port_status(attached | restarted | lost, Data)' (optional): the
 %% device's own part when it attached again, when the program was restarted
 %% (the owner re-applied the configuration; the servos are at neutral), or
@@ -68,7 +71,8 @@
                  retry := pos_integer(),
                  restarts := non_neg_integer(),
                  losses := non_neg_integer(),
-                 failures := non_neg_integer()}.
+                 failures := non_neg_integer(),
+                 parts := [atom()]}.
 
 %%====================================================================
 %% Options
@@ -102,7 +106,7 @@ parse(Opts) ->
 
 new(Mode) ->
     #{mode => Mode, pid => undefined, mon => undefined, retry => ?FIRST_RETRY_MS,
-      restarts => 0, losses => 0, failures => 0}.
+      restarts => 0, losses => 0, failures => 0, parts => []}.
 
 %%====================================================================
 %% The device's life
@@ -264,7 +268,8 @@ attach(C, Configure) ->
             case call(C1, fun(P) -> toroco_pru_port:subscribe(P) end) of
                 ok ->
                     case configure(Configure, Pid) of
-                        ok -> {ok, C1#{retry := ?FIRST_RETRY_MS}};
+                        ok -> {ok, C1#{retry := ?FIRST_RETRY_MS,
+                                       parts := [Part || {Part, _} <- Configure]}};
                         {error, R} -> {error, R, detach(C1)}
                     end;
                 {error, R} ->
@@ -320,8 +325,11 @@ detach(C = #{mode := {own, _}, pid := Pid}) ->
 %% What a message in the device's mailbox means for the attachment.
 classify({toroco_pru_port, {port_restarted, _Why}}, C = #{restarts := N}) ->
     {restarted, C#{restarts := N + 1}};
-classify({toroco_pru_port, Event}, _C) ->
-    {event, Event};
+classify({toroco_pru_port, Event}, #{parts := Parts}) when is_tuple(Event), tuple_size(Event) > 0 ->
+    case lists:member(element(1, Event), Parts) of
+        true -> {event, Event};
+        false -> unknown
+    end;
 classify({'DOWN', Mon, process, _, Reason}, C = #{mon := Mon}) when Mon =/= undefined ->
     lost(Reason, C);
 classify({'EXIT', Pid, Reason}, C = #{mode := {own, _}, pid := Pid}) when is_pid(Pid) ->

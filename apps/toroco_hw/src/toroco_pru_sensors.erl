@@ -121,10 +121,7 @@ port_event({adc, Ch, V, _T}, D = #{by_channel := ByCh, last := Last, emitted := 
             end;
         #{} ->
             {keep_state, D#{foreign := F + 1}}
-    end;
-port_event(_Event, _D) ->
-    %% the owner's other sections report too (button edges, the servos' watchdog)
-    keep_state_and_data.
+    end.
 
 %%====================================================================
 %% Internals

@@ -171,10 +171,7 @@ configure(#{servos := Servos, watchdog_ms := W, enabled := On}) ->
 %% @doc The program's watchdog put the servos at neutral.
 -spec port_event(toroco_pru_port:event(), map()) -> toroco_behavior:result().
 port_event({watchdog, _T}, D) ->
-    watchdog(D);
-port_event(_Event, _D) ->
-    %% the owner's other sections report too (ADC changes, button edges)
-    keep_state_and_data.
+    watchdog(D).
 
 %% @doc A restarted program or a lost owner leaves the servos at neutral.
 %% Once the port is back (restarted, or attached again) the wiring's current
