@@ -625,7 +625,16 @@ fake_pwm(Root, Chip, Ch) ->
     [ok = file:write_file(filename:join(Dir, F), "0\n") || F <- ["period", "duty_cycle", "enable"]],
     ok.
 
+%% An attribute of the fake sysfs tree. The program rewrites a file in
+%% place (truncate, then write), as sysfs is written; a read between the two
+%% sees it empty, which a real sysfs file never is: read again then.
 pwm(Root, Ch, Attr) ->
+    pwm(Root, Ch, Attr, 100).
+
+pwm(Root, Ch, Attr, Tries) ->
     Path = filename:join([Root, "class/pwm/pwmchip0", "pwm" ++ integer_to_list(Ch), Attr]),
     {ok, Bin} = file:read_file(Path),
-    string:trim(binary_to_list(Bin)).
+    case string:trim(binary_to_list(Bin)) of
+        "" when Tries > 1 -> pwm(Root, Ch, Attr, Tries - 1);
+        Value -> Value
+    end.
