@@ -1,5 +1,6 @@
 # The two commands of the README, and their parts.
-#   make run   - the Torobot in the simulated world (default config)
+#   make run   - the Torobot in the simulated world (default config);
+#                make run ROBOT=wall_follower runs a library robot of config/robots/
 #   make test  - every test suite: C port, detector, Common Test, PropEr, Dialyzer
 .PHONY: run test deps compile port port-test detector detector-test ct dialyzer bench release clean
 
@@ -35,7 +36,7 @@ test:
 	scripts/test
 
 run: compile
-	scripts/run $(WORLD)
+	scripts/run $(if $(ROBOT),config/worlds/$(ROBOT).world _build/$(ROBOT).svg config/robots/$(ROBOT).wiring,$(WORLD))
 
 bench: compile
 	scripts/bench

@@ -22,6 +22,11 @@
 %%     presses it once at the start, as one would on the board, and the
 %%     `button' behavior switches the motors on.</li>
 %% </ul>
+%% The sensors of the library's robots (`torobot_sensors': `range',
+%% `bumper', `odometry', `light', `beacon') are `torobot_sim_sensor'
+%% devices fed each tick; a wiring that does not use them (the Torobot's)
+%% leaves them unwired.
+%%
 %% Each step is tagged with the behavior that wins the motors' `setvel'
 %% input at that tick, read with `toroco:inspect(motors)': one call per tick
 %% to the wiring server, the motors device and its routers, about 65 us,
@@ -68,6 +73,7 @@
               sock :: gen_udp:socket() | undefined,
               camera :: inet:port_number() | undefined,
               ir = #{} :: map(),
+              sensors :: torobot_sensors:state() | undefined,
               next_status = 1000 :: non_neg_integer()}).
 
 %%====================================================================
@@ -111,10 +117,11 @@ simulate(WorldFile, Opts) when is_map(Opts) ->
             end
     end.
 
-%% @doc The summary as one JSON object (`none' as `null').
+%% @doc The summary as one JSON object (`none' as `null'); a world's own
+%% figures (`torobot_sensors') follow the Torobot's keys.
 -spec summary_json(torobot_world:summary()) -> binary().
 summary_json(#{red_touched_ms := Red, wall_contacts := Walls, blue_contacts := Blue,
-               distance_m := Distance}) ->
+               distance_m := Distance} = Summary) ->
     iolist_to_binary(
       ["{\"red_touched_ms\":", case Red of
                                    none -> "null";
@@ -123,7 +130,16 @@ summary_json(#{red_touched_ms := Red, wall_contacts := Walls, blue_contacts := B
        ",\"wall_contacts\":", integer_to_list(Walls),
        ",\"blue_contacts\":", integer_to_list(Blue),
        ",\"distance_m\":", float_to_list(float(Distance), [{decimals, 3}, compact]),
+       [[",\"", atom_to_list(K), "\":", figure_json(V)]
+        || {K, V} <- lists:sort(maps:to_list(maps:without([red_touched_ms, wall_contacts,
+                                                            blue_contacts, distance_m],
+                                                           Summary)))],
        "}"]).
+
+figure_json(none) -> "null";
+figure_json(V) when is_integer(V) -> integer_to_list(V);
+figure_json(V) when is_float(V) -> float_to_list(V, [{decimals, 3}, compact]);
+figure_json(V) -> io_lib:format("\"~0p\"", [V]).
 
 %%====================================================================
 %% Setting up and tearing down
@@ -169,7 +185,9 @@ add_devices(World) ->
                                           backend => sim}},
                {motors, toroco_servo_motors, #{backend => sim}},
                {camera, toroco_udp_camera, #{port => 0, ip => {127, 0, 0, 1}}},
-               {push, toroco_gpio_button, #{line => 0, backend => sim}}],
+               {push, toroco_gpio_button, #{line => 0, backend => sim}}]
+        ++ [{Name, torobot_sim_sensor, #{outputs => Outputs(World)}}
+            || {Name, Outputs} <- torobot_sensors:devices()],
     lists:foldl(fun({Name, Module, DevOpts}, ok) ->
                         case toroco:add_device(Name, Module, DevOpts) of
                             ok -> ok;
@@ -207,6 +225,7 @@ svg(_World, #{}) ->
 %% they were already running, only the nodes it added are removed.
 stop([], Behaviors) ->
     _ = [toroco:remove_behavior(B) || B <- Behaviors],
+    _ = [toroco:remove_device(D) || {D, _} <- torobot_sensors:devices()],
     _ = [toroco:remove_device(D) || D <- [wheels | lists:reverse(?DEVICES)]],
     ok;
 stop(Started, _Behaviors) ->
@@ -221,7 +240,7 @@ stop(Started, _Behaviors) ->
 init({World, Caller, Status}) ->
     monitor(process, Caller),
     {ok, #sim{world = World, caller = Caller, status = Status,
-              tick = torobot_world:tick_ms(World)}}.
+              tick = torobot_world:tick_ms(World), sensors = torobot_sensors:new(World)}}.
 
 -spec handle_call(term(), gen_server:from(), #sim{}) -> {reply, term(), #sim{}}.
 handle_call({go, Port}, _From, S) when is_integer(Port) ->
@@ -291,7 +310,9 @@ sense(S = #sim{world = W, ir = Last, sock = Sock, camera = Port}) ->
          || {Side, Raw} <- maps:to_list(Ir), maps:get(Side, Last, undefined) =/= Raw],
     _ = [gen_udp:send(Sock, {127, 0, 0, 1}, Port, Datagram)
          || Datagram <- torobot_world:camera(W)],
-    S#sim{ir = Ir}.
+    {Readings, Sensors} = torobot_sensors:read(W, S#sim.sensors),
+    maps:foreach(fun torobot_sim_sensor:feed/2, Readings),
+    S#sim{ir = Ir, sensors = Sensors}.
 
 winner() ->
     try toroco:inspect(motors) of

@@ -42,6 +42,7 @@ render(World) ->
            "/>\n",
            walls(World, H),
            objects(World, H),
+           fixtures(World, H),
            trajectory(World, H, Colours),
            robot(torobot_world:start_pose(World), World, H, start),
            robot(torobot_world:pose(World), World, H, final),
@@ -74,6 +75,24 @@ objects(World, H) ->
                          {fill, object_colour(Colour)}]), "/>\n"]
       || {Colour, {X, Y}, R} <- torobot_world:objects(World)],
      "</g>\n"].
+
+%% The library's lamps (yellow) and dock (a green square), when the world
+%% has them.
+-spec fixtures(torobot_world:world(), float()) -> iodata().
+fixtures(World, H) ->
+    Lamps = [["<circle", attrs([{cx, x(X)}, {cy, y(Y, H)}, {r, 8}, {fill, "#ffd700"},
+                                {stroke, "#b8860b"}]), "/>\n"]
+             || {{X, Y}, _} <- torobot_sensors:lights(World)],
+    Dock = case torobot_sensors:dock(World) of
+               none -> [];
+               {X, Y} -> ["<rect", attrs([{x, x(X - 0.1)}, {y, y(Y + 0.1, H)}, {width, 20},
+                                          {height, 20}, {fill, "none"}, {stroke, "#2ca02c"},
+                                          {'stroke-width', 3}]), "/>\n"]
+           end,
+    case Lamps ++ Dock of
+        [] -> [];
+        Drawn -> ["<g id=\"fixtures\">\n", Drawn, "</g>\n"]
+    end.
 
 -spec object_colour(torobot_world:colour()) -> string().
 object_colour(red) -> "#d62728";
@@ -149,11 +168,13 @@ caption(World, Top) ->
                   none -> "red not touched";
                   Ms -> ["red touched at ", fmt(Ms / 1000), " s"]
               end,
+    Figures = [["; ", atom_to_list(K), " ", io_lib:format("~0p", [V])]
+               || {K, V} <- lists:sort(maps:to_list(torobot_sensors:figures(World)))],
     ["<text id=\"caption\"", attrs([{x, ?MARGIN}, {y, Top}]), ">",
      escape([Touched, "; wall contacts ", integer_to_list(Walls),
              "; blue contacts ", integer_to_list(Blue),
              "; distance ", fmt(Distance), " m; time ",
-             fmt(torobot_world:time_ms(World) / 1000), " s"]),
+             fmt(torobot_world:time_ms(World) / 1000), " s", Figures]),
      "</text>\n"].
 
 -spec attrs([{atom(), iodata() | number()}]) -> iodata().

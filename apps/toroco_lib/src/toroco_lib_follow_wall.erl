@@ -11,8 +11,9 @@
 %% <ul>
 %% <li>something at or below `front_near' ahead: spin away from the wall;</li>
 %% <li>no wall within `lost' on the side or the diagonal: arc towards the
-%%     side (`search_turn'), which takes the robot round an outer corner
-%%     and, in the open, back to a wall;</li>
+%%     side (`search_turn'), which takes the robot round an outer corner;
+%%     lost for `search_ms', the robot is in the open and goes straight
+%%     ahead until it meets a wall;</li>
 %% <li>else steer `speed' ahead with a turn towards the wall of
 %%     `gain' x (side - `distance') + `heading_gain' x (how much the
 %%     diagonal says the robot points away from the wall), clamped to
@@ -21,13 +22,16 @@
 %%
 %% Parameters: `side' [right] (`left' | `right'), `distance' [0.25] m,
 %% `speed' [70], `gain' [120], `heading_gain' [150], `max_turn' [35],
-%% `lost' [0.6] m, `search_turn' [30], `front_near' [0.3] m, `spin' [50].
+%% `lost' [0.6] m, `search_turn' [25], `search_ms' [2500], `front_near'
+%% [0.3] m, `spin' [50].
 %%
 %% Usual layer: 0 (it never lets go), with `escape' above it.
 -module(toroco_lib_follow_wall).
 -behaviour(toroco_behavior).
 
--export([params/0, interface/0, init/1, handle_input/4]).
+-export([params/0, interface/0, init/1, handle_input/4, handle_event/4]).
+
+-type state() :: following | lost | searching.
 
 %% On a straight wall the diagonal, projected square to the wall, reads
 %% this much more than the side sensor: both start on the rim of a robot
@@ -39,25 +43,43 @@
 params() ->
     [{side, {one_of, [left, right]}, right}, {distance, metres, 0.25}, {speed, speed, 70},
      {gain, non_neg_number, 120}, {heading_gain, non_neg_number, 150},
-     {max_turn, pos_speed, 35}, {lost, metres, 0.6}, {search_turn, speed, 30},
+     {max_turn, pos_speed, 35}, {lost, metres, 0.6}, {search_turn, speed, 25}, {search_ms, ms, 2500},
      {front_near, metres, 0.3}, {spin, pos_speed, 50}].
 
 -spec interface() -> #{inputs := [side | diagonal | front], outputs := [motors]}.
 interface() -> #{inputs => [side, diagonal, front], outputs => [motors]}.
 
--spec init(map()) -> {ok, following, map()} | {error, toroco_lib_params:error()}.
+-spec init(map()) -> {ok, lost, map(), toroco_behavior:actions()} | {error, toroco_lib_params:error()}.
 init(Params) ->
     case toroco_lib_params:check(Params, params()) of
-        {ok, P} -> {ok, following, P#{readings => #{}, last => none}};
+        {ok, P} -> {ok, lost, P#{readings => #{}, last => none},
+                     [{state_timeout, maps:get(search_ms, P), search}]};
         {error, _} = Error -> Error
     end.
 
--spec handle_input(side | diagonal | front, term(), following, map()) ->
+-spec handle_input(side | diagonal | front, term(), state(), map()) ->
           toroco_behavior:result().
-handle_input(Input, Reading, _State, #{readings := Rs, last := Last} = P) ->
-    Rs1 = Rs#{Input => toroco_lib_range:metres(Reading, ?FAR)},
-    {Actions, Last1} = toroco_lib_drive:set(command(Rs1, P), Last),
-    {keep_state, P#{readings := Rs1, last := Last1}, Actions}.
+handle_input(Input, Reading, State, #{readings := Rs} = P) ->
+    P1 = P#{readings := Rs#{Input => toroco_lib_range:metres(Reading, ?FAR)}},
+    case {command(P1), State} of
+        {{follow, Command}, _} -> drive(following, Command, [], P1);
+        {{lost, Command}, following} -> drive(lost, Command, [{state_timeout, maps:get(search_ms, P), search}], P1);
+        {{lost, Command}, lost} -> drive(lost, Command, [], P1);
+        {{lost, _}, searching} -> {keep_state, P1}
+    end.
+
+-spec handle_event(gen_statem:event_type(), term(), state(), map()) -> toroco_behavior:result().
+handle_event(state_timeout, search, lost, #{speed := S} = P) ->
+    drive(searching, toroco_lib_drive:wheels(S, S), [], P);
+handle_event(_Type, _Content, _State, _P) ->
+    keep_state_and_data.
+
+drive(State, Command, Timers, #{last := Last} = P) ->
+    {Actions, Last1} = toroco_lib_drive:set(Command, Last),
+    {next_state, State, P#{last := Last1}, Actions ++ Timers}.
+
+command(#{readings := Rs} = P) ->
+    command(Rs, P).
 
 command(Rs, #{side := Side, distance := Distance, speed := Speed, gain := Gain,
               heading_gain := HGain, max_turn := MaxTurn, lost := Lost,
@@ -73,12 +95,12 @@ command(Rs, #{side := Side, distance := Distance, speed := Speed, gain := Gain,
     Front = maps:get(front, Rs, ?FAR),
     if
         Front =< FrontNear ->
-            toroco_lib_drive:spin(Away, Spin);
+            {follow, toroco_lib_drive:spin(Away, Spin)};
         SideR > Lost, DiagSquare > Lost ->
-            toroco_lib_drive:steer(Speed, Towards * Search);
+            {lost, toroco_lib_drive:steer(Speed, Towards * Search)};
         true ->
             Near = min(SideR, DiagSquare - ?PARALLEL),
             Turn = Gain * (Near - Distance) + HGain * (DiagSquare - ?PARALLEL - SideR),
             Clamped = max(-MaxTurn, min(MaxTurn, Turn)),
-            toroco_lib_drive:steer(Speed, Towards * Clamped)
+            {follow, toroco_lib_drive:steer(Speed, Towards * Clamped)}
     end.
