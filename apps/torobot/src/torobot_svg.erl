@@ -15,6 +15,8 @@
 -define(SCALE, 100).
 -define(MARGIN, 20).
 -define(ROW, 18).
+%% Wide enough for the caption of a small room.
+-define(MIN_WIDTH, 560).
 %% Tag colours, avoiding the objects' red and blue; reused in turn when a
 %% run has more tags than colours.
 -define(PALETTE, ["#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2",
@@ -26,9 +28,14 @@ render(World) ->
     {W, H} = torobot_world:arena(World),
     Tags = tags(torobot_world:trajectory(World)),
     Colours = lists:zip(Tags, palette(length(Tags))),
-    Width = px(W) + 2 * ?MARGIN,
+    %% a world's own figures (torobot_sensors) take a second caption line
+    Extra = case map_size(torobot_sensors:figures(World)) of
+                0 -> 0;
+                _ -> 1
+            end,
+    Width = max(px(W) + 2 * ?MARGIN, ?MIN_WIDTH),
     Bottom = px(H) + 2 * ?MARGIN,
-    Height = Bottom + ?ROW * (1 + length(Tags)) + ?MARGIN div 2,
+    Height = Bottom + ?ROW * (1 + Extra + length(Tags)) + ?MARGIN div 2,
     Svg = ["<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n",
            "<svg xmlns=\"http://www.w3.org/2000/svg\" version=\"1.1\"",
            attrs([{width, Width}, {height, Height},
@@ -46,7 +53,7 @@ render(World) ->
            trajectory(World, H, Colours),
            robot(torobot_world:start_pose(World), World, H, start),
            robot(torobot_world:pose(World), World, H, final),
-           legend(Colours, Bottom),
+           legend(Colours, Bottom + ?ROW * Extra),
            caption(World, Bottom),
            "</svg>\n"],
     unicode:characters_to_binary(Svg).
@@ -168,14 +175,19 @@ caption(World, Top) ->
                   none -> "red not touched";
                   Ms -> ["red touched at ", fmt(Ms / 1000), " s"]
               end,
-    Figures = [["; ", atom_to_list(K), " ", io_lib:format("~0p", [V])]
-               || {K, V} <- lists:sort(maps:to_list(torobot_sensors:figures(World)))],
+    Figures = lists:join("; ", [[atom_to_list(K), " ", io_lib:format("~0p", [V])]
+                               || {K, V} <- lists:sort(maps:to_list(torobot_sensors:figures(World)))]),
     ["<text id=\"caption\"", attrs([{x, ?MARGIN}, {y, Top}]), ">",
      escape([Touched, "; wall contacts ", integer_to_list(Walls),
              "; blue contacts ", integer_to_list(Blue),
              "; distance ", fmt(Distance), " m; time ",
-             fmt(torobot_world:time_ms(World) / 1000), " s", Figures]),
-     "</text>\n"].
+             fmt(torobot_world:time_ms(World) / 1000), " s"]),
+     "</text>\n",
+     case Figures of
+         [] -> [];
+         _ -> ["<text id=\"figures\"", attrs([{x, ?MARGIN}, {y, Top + ?ROW}]), ">",
+               escape(Figures), "</text>\n"]
+     end].
 
 -spec attrs([{atom(), iodata() | number()}]) -> iodata().
 attrs(Attrs) ->
