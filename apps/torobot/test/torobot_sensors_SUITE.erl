@@ -26,9 +26,9 @@ ranges_read_metres() ->
     [{doc, "Range sensors read the distance from the rim to the wall along their mount, "
       "to the centimetre, and max_range when nothing is nearer."}].
 ranges_read_metres(_Config) ->
-    #{range := R} = read(world([{robot, {1.0, 1.5, 0.0}}])),
-    ?assertEqual(2.88, maps:get(front, R)),            % 4.0 - 1.0 - 0.12
-    ?assertEqual(0.88, maps:get(rear, R)),
+    #{range := R} = read(world([{robot, {3.0, 1.5, 0.0}}])),
+    ?assertEqual(0.88, maps:get(front, R)),            % 4.0 - 3.0 - 0.12
+    ?assertEqual(1.5, maps:get(rear, R)),              % max_range
     ?assertEqual(1.38, maps:get(left, R)),
     #{range := R2} = read(world([{robot, {1.0, 1.5, 0.0}},
                                  {range, #{sensors => #{ahead => 0}, max_range => 1.0}}])),
@@ -43,8 +43,8 @@ bumper_names_the_side(_Config) ->
               end,
     ?assertEqual(none, maps:get(contact, maps:get(bumper, read(world([{robot, {2.0, 1.5, 0.0}}]))))),
     ?assertEqual(front, Contact(180.0)),
-    ?assertEqual(left, Contact(-90.0)),
-    ?assertEqual(right, Contact(90.0)),
+    ?assertEqual(left, Contact(90.0)),                 % heading north, the wall west
+    ?assertEqual(right, Contact(-90.0)),
     ?assertEqual(rear, Contact(0.0)).
 
 odometry_shows_a_stall() ->
@@ -104,7 +104,7 @@ figures_laps_and_coverage(_Config) ->
     W0 = world([{robot, {3.0, 1.5, 90.0}}, {figures, [laps, coverage, docked_ms]},
                 {dock, {2.0, 2.5}}]),
     %% a circle of radius 1 m round the centre (2.0, 1.5): 2 pi m at 0.125 m/s
-    Circle = lists:foldl(fun(_, W) -> torobot_world:step(W, 100, {40, 60}) end, W0,
+    Circle = lists:foldl(fun(_, W) -> torobot_world:step(W, 100, {45, 55}) end, W0,
                          lists:seq(1, 505)),
     #{laps := Laps, coverage := C, docked_ms := Docked} = torobot_world:summary(Circle),
     ?assert(Laps >= 0.95 andalso Laps =< 1.1),
