@@ -1,9 +1,13 @@
 # The two commands of the README, and their parts.
 #   make run   - the Torobot in the simulated world (default config)
 #   make test  - every test suite: C port, detector, Common Test, PropEr, Dialyzer
-.PHONY: run test deps compile port port-test detector detector-test ct dialyzer bench release clean
+.PHONY: run test deps compile port port-test detector detector-test ct dialyzer bench release clean eval
 
 WORLD ?= config/worlds/default.world
+SPEED ?= 1
+N ?= 20
+SEED ?= 1
+WIRING ?= config/torobot.wiring
 
 deps:
 	@scripts/deps
@@ -35,7 +39,11 @@ test:
 	scripts/test
 
 run: compile
-	scripts/run $(WORLD)
+	SPEED=$(SPEED) scripts/run $(WORLD)
+
+# The simulated lab: the wiring on N generated worlds, scored (SPEC §14).
+eval: compile
+	scripts/eval $(N) $(SEED) $(WIRING)
 
 bench: compile
 	scripts/bench

@@ -22,9 +22,11 @@
 %%
 %% Speed: `speed => S' (default 1) runs the world S times faster than real
 %% time: a tick of `tick_ms' world milliseconds takes `tick_ms / S' real
-%% ones, and the robot's timers follow (the button press, and the runtime's
-%% clock where the runtime has one: holds, gate timers and behaviors'
-%% timeouts). The servos' watchdog stays in real time. What limits the
+%% ones, and the robot's timers follow: the runtime's clock
+%% (`toroco_clock') runs at the same speed, so holds, gate timers and
+%% behaviors' timeouts count world milliseconds. What belongs to real
+%% hardware stays in real time: the servos' watchdog and its keepalive,
+%% the button's debounce. What limits the
 %% speed is the event path's real latency: a reaction that takes L real ms
 %% lands L * S world ms later, so it is on time while L * S stays under a
 %% tick (`make bench' finds the highest speed that keeps the outcome).

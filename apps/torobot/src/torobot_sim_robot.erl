@@ -22,8 +22,9 @@
 %% `toroco:inspect(motors)' (some 65 us, one call per tick).
 %%
 %% Speed: the world's time runs `speed' times faster than real time; the
-%% runtime's clock (`toroco_clock', where the runtime has it) is set to the
-%% same speed for the run and set back after it. What belongs to real
+%% runtime's clock (`toroco_clock': holds, gate timers, behaviors' and
+%% devices' timeouts) is set to the same speed for the run and set back
+%% after it. What belongs to real
 %% hardware stays in real time: the servos' watchdog, and the button's
 %% debounce, so the press lasts 60 real ms and {@link go/1} answers once
 %% the motors are on: the world starts when the robot is switched on.
@@ -58,7 +59,7 @@
 -record(robot, {wheels = {0, 0} :: {number(), number()},
                 started :: [atom()],
                 behaviors :: [atom()],
-                clock :: {previous, number()} | none,
+                clock :: {previous, number()},
                 going :: {gen_server:from(), integer()} | undefined}).
 
 %%====================================================================
@@ -309,24 +310,12 @@ winner() ->
         _:_ -> none
     end.
 
-%% The runtime's clock, where the runtime has one: the module is looked up
-%% at run time, so the simulator works with a runtime that counts real
-%% time only (the speed then applies to the world's own timers).
+%% The runtime's clock runs at the world's speed for the run.
 set_clock(Speed) ->
-    Clock = toroco_clock,
-    case erlang:function_exported(Clock, set_speed, 1)
-        orelse code:ensure_loaded(Clock) =:= {module, Clock} of
-        true ->
-            Previous = Clock:speed(),
-            ok = Clock:set_speed(Speed),
-            {previous, Previous};
-        false ->
-            none
-    end.
+    Previous = toroco_clock:speed(),
+    ok = toroco_clock:set_speed(Speed),
+    {previous, Previous}.
 
 restore_clock({previous, Speed}) ->
-    Clock = toroco_clock,
-    _ = catch Clock:set_speed(Speed),
-    ok;
-restore_clock(none) ->
+    _ = toroco_clock:set_speed(Speed),
     ok.
