@@ -1,5 +1,6 @@
 # The two commands of the README, and their parts.
-#   make run   - the Torobot in the simulated world (default config)
+#   make run   - the Torobot in the simulated world (default config);
+#                make run ROBOT=wall_follower runs a library robot of config/robots/
 #   make test  - every test suite: C port, detector, Common Test, PropEr, Dialyzer
 .PHONY: run test deps compile port port-test detector detector-test ct dialyzer bench release clean eval
 
@@ -39,7 +40,7 @@ test:
 	scripts/test
 
 run: compile
-	SPEED=$(SPEED) scripts/run $(WORLD)
+	SPEED=$(SPEED) scripts/run $(if $(ROBOT),config/worlds/$(ROBOT).world _build/$(ROBOT).svg config/robots/$(ROBOT).wiring,$(WORLD))
 
 # The simulated lab: the wiring on N generated worlds, scored (SPEC §14).
 eval: compile

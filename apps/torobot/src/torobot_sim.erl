@@ -12,6 +12,10 @@
 %% camera's line of sight), then hands each robot its IR readings (to the
 %% `pru_port' sim backend, only when they change) and its camera frame (the
 %% detector's datagrams, over real UDP).
+%% The sensors of the library's robots (`torobot_sensors': `range',
+%% `bumper', `odometry', `light', `beacon') are `torobot_sim_sensor'
+%% devices on each robot's node, fed each tick with the rest; a wiring that
+%% does not use them (the Torobot's) leaves them unwired.
 %%
 %% Where robots run: the one-robot form of a world (`{robot, Pose}') runs
 %% in this node; a world of named robots (`{robot, Name, Pose}') runs each
@@ -69,6 +73,8 @@
               handle :: torobot_sim_robot:handle(),
               port :: inet:port_number(),
               ir = #{} :: map(),
+              sensors :: torobot_sensors:state(),
+              readings = #{} :: map(),
               winner = none :: atom()}).
 
 -record(sim, {bots = [] :: [#bot{}],
@@ -132,8 +138,10 @@ simulate(WorldSpec, Opts) when is_map(Opts) ->
             end
     end.
 
-%% @doc The summary as one JSON object (`none' as `null'); a world of
-%% named robots gives one object with a member per robot.
+%% @doc The summary as one JSON object (`none' as `null'); a world's own
+%% figures (`torobot_sensors', and `robot_contacts' for a named robot)
+%% follow the Torobot's keys. A world of named robots gives one object
+%% with a member per robot.
 -spec summary_json(summary()) -> binary().
 summary_json(#{red_touched_ms := Red, wall_contacts := Walls, blue_contacts := Blue,
                distance_m := Distance} = Summary) ->
@@ -144,17 +152,22 @@ summary_json(#{red_touched_ms := Red, wall_contacts := Walls, blue_contacts := B
                                end,
        ",\"wall_contacts\":", integer_to_list(Walls),
        ",\"blue_contacts\":", integer_to_list(Blue),
-       case Summary of
-           #{robot_contacts := N} -> [",\"robot_contacts\":", integer_to_list(N)];
-           #{} -> []
-       end,
        ",\"distance_m\":", float_to_list(float(Distance), [{decimals, 3}, compact]),
+       [[",\"", atom_to_list(K), "\":", figure_json(V)]
+        || {K, V} <- lists:sort(maps:to_list(maps:without([red_touched_ms, wall_contacts,
+                                                            blue_contacts, distance_m],
+                                                           Summary)))],
        "}"]);
 summary_json(PerRobot) when is_map(PerRobot) ->
     iolist_to_binary(
       ["{", lists:join(",", [["\"", atom_to_binary(Name), "\":", summary_json(S)]
                              || {Name, S} <- lists:sort(maps:to_list(PerRobot))]),
        "}"]).
+
+figure_json(none) -> "null";
+figure_json(V) when is_integer(V) -> integer_to_list(V);
+figure_json(V) when is_float(V) -> float_to_list(V, [{decimals, 3}, compact]);
+figure_json(V) -> io_lib:format("\"~0p\"", [V]).
 
 %% @doc Runs many worlds, several at once, and scores them: see
 %% `torobot_batch:run/1'.
@@ -177,11 +190,14 @@ with_robots(Worlds, Nodes, Opts) ->
                                            torobot_world:tick_ms(hd(Worlds))}, []),
     MRef = monitor(process, Sim),
     RobotOpts = #{wiring => WiringFile, speed => Speed,
-                  thresholds => torobot_world:ir_thresholds(hd(Worlds))},
+                  thresholds => torobot_world:ir_thresholds(hd(Worlds)),
+                  sensors => [{Name, Outputs(hd(Worlds))}
+                              || {Name, Outputs} <- torobot_sensors:devices()]},
     Started = start_robots(Worlds, Nodes, RobotOpts),
     try
         Bots = [case Result of
-                    {ok, Handle, Port} -> #bot{world = W, handle = Handle, port = Port};
+                    {ok, Handle, Port} -> #bot{world = W, handle = Handle, port = Port,
+                                               sensors = torobot_sensors:new(W)};
                     {error, Reason} -> throw({failed, Reason})
                 end || {W, Result} <- lists:zip(Worlds, Started)],
         ok = case gen_server:call(Sim, {go, Bots}, infinity) of
@@ -318,24 +334,28 @@ move_each([{Bot = #bot{world = W}, {Wheels, Winner}} | Rest], Tick, Moved) ->
     move_each(Rest, Tick, [Bot#bot{world = Stepped, winner = Winner} | Moved]).
 
 %% The sensors read the world as it is now: IR samples go to the PRU sim
-%% only when they change, camera frames are sent every tick, as the
-%% detector sends every frame.
+%% and the library's sensors to their devices only when they change,
+%% camera frames are sent every tick, as the detector sends every frame.
 sense(S = #sim{bots = Bots, sock = Sock}) ->
     S#sim{bots = [sense(B, [O || O <- Bots, O =/= B], Sock) || B <- Bots]}.
 
-sense(B = #bot{world = W0, handle = H, ir = Last, port = Port}, Others, Sock) ->
+sense(B = #bot{world = W0, handle = H, ir = Last, port = Port, readings = LastReadings},
+      Others, Sock) ->
     W = torobot_world:set_others(W0, [torobot_world:body(O#bot.world) || O <- Others]),
     case torobot_world:done(W) of
         true ->
             B#bot{world = W};
         false ->
             Ir = torobot_world:ir(W),
-            Changed = maps:filter(fun(Side, Raw) -> maps:get(Side, Last, undefined) =/= Raw end,
-                                  Ir),
-            _ = map_size(Changed) > 0 andalso torobot_sim_robot:sense(H, Changed) =:= ok,
+            {Readings, Sensors} = torobot_sensors:read(W, B#bot.sensors),
+            Changed = fun(Now, Before) ->
+                              maps:filter(fun(K, V) -> maps:get(K, Before, undefined) =/= V end,
+                                          Now)
+                      end,
+            _ = torobot_sim_robot:sense(H, Changed(Ir, Last), Changed(Readings, LastReadings)),
             _ = [gen_udp:send(Sock, {127, 0, 0, 1}, Port, Datagram)
                  || Datagram <- torobot_world:camera(W)],
-            B#bot{world = W, ir = Ir}
+            B#bot{world = W, ir = Ir, sensors = Sensors, readings = Readings}
     end.
 
 status(S = #sim{status = false}) ->

@@ -15,7 +15,10 @@
 %% <li>`camera' a `toroco_udp_camera' on a free loopback port, to which the
 %%     world sends the detector's datagrams;</li>
 %% <li>`push' a `toroco_gpio_button' on the sim backend, pressed once by
-%%     {@link go/1} as one would on the board.</li>
+%%     {@link go/1} as one would on the board;</li>
+%% <li>the library's sensors (`sensors' option: `torobot_sim_sensor'
+%%     devices and their outputs, from `torobot_sensors:devices/0'), fed
+%%     with {@link sense/3}.</li>
 %% </ul>
 %% The world reads {@link wheels/1} at each tick: the velocities applied
 %% now and the behavior that wins the motors' `setvel' input, read with
@@ -35,7 +38,7 @@
 -module(torobot_sim_robot).
 -behaviour(gen_server).
 
--export([start/1, stop/0, go/1, wheels/1, sense/2]).
+-export([start/1, stop/0, go/1, wheels/1, sense/3]).
 -export([start_peer/1, stop_peer/1]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2, terminate/2]).
 
@@ -43,7 +46,8 @@
 
 -type opts() :: #{wiring := file:name_all(),
                   thresholds := #{threshold_high := 0..1023, threshold_low := 0..1023},
-                  speed := number()}.
+                  speed := number(),
+                  sensors => [{atom(), [atom()]}]}.
 %% Where a robot runs: this node, or a peer node.
 -type handle() :: local | {peer, pid()}.
 
@@ -59,6 +63,7 @@
 -record(robot, {wheels = {0, 0} :: {number(), number()},
                 started :: [atom()],
                 behaviors :: [atom()],
+                sensors :: [atom()],
                 clock :: {previous, number()},
                 going :: {gen_server:from(), integer()} | undefined}).
 
@@ -114,13 +119,16 @@ go(Robot) ->
 wheels(Robot) ->
     call(Robot, wheels).
 
-%% @doc Hands the robot's IR sensors new raw readings (only those that
-%% changed need be given).
--spec sense(handle(), #{left | right => 0..1023}) -> ok.
-sense(local, Ir) ->
-    gen_server:cast(?MODULE, {sense, Ir});
-sense({peer, Peer}, Ir) ->
-    peer:cast(Peer, gen_server, cast, [?MODULE, {sense, Ir}]).
+%% @doc Hands the robot's IR sensors new raw readings and the library's
+%% sensor devices (`torobot_sim_sensor') new readings; only what changed
+%% need be given, and nothing is sent when nothing did.
+-spec sense(handle(), #{left | right => 0..1023}, #{atom() => #{atom() => term()}}) -> ok.
+sense(_Robot, Ir, Readings) when map_size(Ir) =:= 0, map_size(Readings) =:= 0 ->
+    ok;
+sense(local, Ir, Readings) ->
+    gen_server:cast(?MODULE, {sense, Ir, Readings});
+sense({peer, Peer}, Ir, Readings) ->
+    peer:cast(Peer, gen_server, cast, [?MODULE, {sense, Ir, Readings}]).
 
 %% @doc Starts a node for one robot (an OTP `peer' on this machine, over
 %% its standard I/O: not distributed, so robots never form a cluster) with
@@ -175,12 +183,14 @@ call({peer, Peer}, Request) ->
 
 -spec init(map()) -> {ok, #robot{}} | {stop, term()}.
 init(#{wiring := Wiring, thresholds := Thresholds, speed := Speed,
-       started := Started, behaviors := Behaviors}) ->
+       started := Started, behaviors := Behaviors} = Opts) ->
+    Sensors = maps:get(sensors, Opts, []),
     process_flag(trap_exit, true),
     S = #robot{started = Started, behaviors = Behaviors,
+               sensors = [Name || {Name, _} <- Sensors],
                clock = set_clock(Speed)},
     try
-        ok = step(devices, add_devices(Thresholds)),
+        ok = step(devices, add_devices(Thresholds, Sensors)),
         ok = step(wheels, toroco:add_device(wheels, torobot_sim_wheels, #{sim => self()})),
         ok = step({wiring, Wiring}, toroco:load_wiring(Wiring)),
         ok = step(wheels, toroco:set_inputs(wheels, #{applied => [{motors, applied}]})),
@@ -209,8 +219,9 @@ handle_call(_Request, _From, S) ->
     {reply, {error, unknown_call}, S}.
 
 -spec handle_cast(term(), #robot{}) -> {noreply, #robot{}}.
-handle_cast({sense, Ir}, S) ->
+handle_cast({sense, Ir, Readings}, S) ->
     _ = [ok = toroco_pru_sensors:sim_adc(ir, Side, Raw) || {Side, Raw} <- maps:to_list(Ir)],
+    maps:foreach(fun torobot_sim_sensor:feed/2, Readings),
     {noreply, S};
 handle_cast(_Msg, S) ->
     {noreply, S}.
@@ -249,14 +260,15 @@ step(_Step, ok) -> ok;
 step(Step, {error, Reason}) -> throw({step, Step, Reason});
 step(Step, Other) -> throw({step, Step, Other}).
 
-add_devices(#{threshold_high := High, threshold_low := Low}) ->
+add_devices(#{threshold_high := High, threshold_low := Low}, Sensors) ->
     Ir = fun(Channel) -> #{channel => Channel, mode => analog_threshold,
                            threshold_high => High, threshold_low => Low} end,
     Devices = [{ir, toroco_pru_sensors, #{sensors => [{left, Ir(0)}, {right, Ir(1)}],
                                           backend => sim}},
                {motors, toroco_servo_motors, #{backend => sim}},
                {camera, toroco_udp_camera, #{port => 0, ip => {127, 0, 0, 1}}},
-               {push, toroco_gpio_button, #{line => 0, backend => sim}}],
+               {push, toroco_gpio_button, #{line => 0, backend => sim}}]
+        ++ [{Name, torobot_sim_sensor, #{outputs => Outputs}} || {Name, Outputs} <- Sensors],
     lists:foldl(fun({Name, Module, DevOpts}, ok) ->
                         case toroco:add_device(Name, Module, DevOpts) of
                             ok -> ok;
@@ -273,8 +285,9 @@ camera_port() ->
 
 %% The applications this run started are stopped whole; in a node where
 %% they were already running, only what the run added is removed.
-teardown(#robot{started = [], behaviors = Behaviors, clock = Clock}) ->
+teardown(#robot{started = [], behaviors = Behaviors, sensors = Sensors, clock = Clock}) ->
     _ = [toroco:remove_behavior(B) || B <- Behaviors],
+    _ = [toroco:remove_device(D) || D <- Sensors],
     _ = [toroco:remove_device(D) || D <- [wheels | lists:reverse(?DEVICES)]],
     restore_clock(Clock);
 teardown(#robot{started = Started, clock = Clock}) ->

@@ -52,6 +52,7 @@ render_all([World | _] = Worlds) ->
            "/>\n",
            walls(World, H),
            objects(World, H),
+           fixtures(World, H),
            [[trajectory(R, H, Colours),
              robot(torobot_world:start_pose(R), R, H, start),
              robot(torobot_world:pose(R), R, H, final)] || R <- Worlds],
@@ -89,6 +90,24 @@ objects(World, H) ->
                          {fill, object_colour(Colour)}]), "/>\n"]
       || {Colour, {X, Y}, R} <- torobot_world:objects(World)],
      "</g>\n"].
+
+%% The library's lamps (yellow) and dock (a green square), when the world
+%% has them.
+-spec fixtures(torobot_world:world(), float()) -> iodata().
+fixtures(World, H) ->
+    Lamps = [["<circle", attrs([{cx, x(X)}, {cy, y(Y, H)}, {r, 8}, {fill, "#ffd700"},
+                                {stroke, "#b8860b"}]), "/>\n"]
+             || {{X, Y}, _} <- torobot_sensors:lights(World)],
+    Dock = case torobot_sensors:dock(World) of
+               none -> [];
+               {X, Y} -> ["<rect", attrs([{x, x(X - 0.1)}, {y, y(Y + 0.1, H)}, {width, 20},
+                                          {height, 20}, {fill, "none"}, {stroke, "#2ca02c"},
+                                          {'stroke-width', 3}]), "/>\n"]
+           end,
+    case Lamps ++ Dock of
+        [] -> [];
+        Drawn -> ["<g id=\"fixtures\">\n", Drawn, "</g>\n"]
+    end.
 
 -spec object_colour(torobot_world:colour()) -> string().
 object_colour(red) -> "#d62728";
@@ -183,6 +202,8 @@ caption(World, Top) ->
               undefined -> "";
               Name -> [atom_to_list(Name), ": "]
           end,
+    Figures = [["; ", atom_to_list(K), " ", io_lib:format("~0p", [V])]
+               || {K, V} <- lists:sort(maps:to_list(torobot_sensors:figures(World)))],
     Robots = case Summary of
                  #{robot_contacts := N} -> ["; robot contacts ", integer_to_list(N)];
                  #{} -> ""
@@ -191,7 +212,7 @@ caption(World, Top) ->
      escape([Who, Touched, Robots, "; wall contacts ", integer_to_list(Walls),
              "; blue contacts ", integer_to_list(Blue),
              "; distance ", fmt(Distance), " m; time ",
-             fmt(torobot_world:time_ms(World) / 1000), " s"]),
+             fmt(torobot_world:time_ms(World) / 1000), " s", Figures]),
      "</text>\n"].
 
 -spec attrs([{atom(), iodata() | number()}]) -> iodata().

@@ -52,6 +52,11 @@
 %% <li>`{tick_ms, 50}': the period the simulator should step the world with.</li>
 %% <li>`{stop_on_red, true}': whether touching a red object ends the run.</li>
 %% </ul>
+%% The sensors and fixtures of the library's robots (range sensors,
+%% bumpers, odometry, lights and light sensors, a dock and its beacon) and
+%% the figures a run is measured by are terms of `torobot_sensors', all
+%% optional; their doc is there.
+%%
 %% A bad world gives `{error, Reason}' naming the culprit: `{file, Why}',
 %% `{bad_term, Term}', `{duplicate, Term}', `{missing, arena | robot |
 %% duration_s}', `{outside_arena, Term}' or `{blocked_start, RobotTerm,
@@ -94,6 +99,8 @@
 -export([arena/1, walls/1, objects/1, start_pose/1, robot_radius/1,
          tick_ms/1, duration_ms/1]).
 -export([name/1, body/1, set_others/2]).
+%% For the sensor models of `torobot_sensors'.
+-export([extras/1, geometry/1, range/3, contact_bearings/1, line_of_sight/3, free/2]).
 
 -export_type([world/0, colour/0, point/0, pose/0, velocity/0, tag/0,
               sample/0, summary/0, ir_reading/0, ir_levels/0, reason/0, body/0]).
@@ -110,7 +117,9 @@
                      wall_contacts := non_neg_integer(),
                      blue_contacts := non_neg_integer(),
                      distance_m := float(),
-                     robot_contacts => non_neg_integer()}.
+                     robot_contacts => non_neg_integer(),
+                     %% the figures a world asks for (torobot_sensors)
+                     atom() => term()}.
 -type adc() :: 0..1023.
 -type ir_reading() :: #{left := adc(), right := adc()}.
 -type ir_levels() :: #{left := near | far, right := near | far}.
@@ -154,6 +163,7 @@
           red_touched_ms = none :: non_neg_integer() | none,
           distance = 0.0 :: float(),
           trajectory = [] :: [sample()],
+          extras = #{} :: map(),
           %% Several robots in one world: this robot's name and colour, the
           %% other robots where the simulator last put them, and the
           %% contacts with them.
@@ -279,13 +289,14 @@ parse([], Acc) ->
 parse([Term | Terms], Acc) ->
     case term(Term) of
         {ok, Key, Value} ->
-            case lists:member(Key, ?SINGLE) of
+            case lists:member(Key, ?SINGLE ++ torobot_sensors:single_terms()) of
                 true when is_map_key(Key, Acc) ->
                     {error, {duplicate, Term}};
                 true ->
                     parse(Terms, Acc#{Key => {Value, Term}});
                 false ->
-                    parse(Terms, maps:update_with(Key, fun(L) -> [{Value, Term} | L] end, Acc))
+                    parse(Terms, maps:update_with(Key, fun(L) -> [{Value, Term} | L] end,
+                                                      [{Value, Term}], Acc))
             end;
         error ->
             {error, {bad_term, Term}}
@@ -336,8 +347,8 @@ term({Section, Opts}) when (Section =:= robot_geometry orelse Section =:= ir
         true -> {ok, Section, Merged};
         false -> error
     end;
-term(_) ->
-    error.
+term(Other) ->
+    torobot_sensors:term(Other).
 
 -spec point(term()) -> {ok, point()} | error.
 point({X, Y}) when is_number(X), is_number(Y) -> {ok, {float(X), float(Y)}};
@@ -418,7 +429,8 @@ build(#{arena := {{W, H}, ArenaTerm}, robot := {{X, Y, Hd}, RobotTerm},
                            seed = value(seed, P),
                            tick_ms = value(tick_ms, P),
                            stop_on_red = value(stop_on_red, P),
-                           trajectory = [{0, X, Y, start}]},
+                           trajectory = [{0, X, Y, start}],
+                           extras = torobot_sensors:build(P)},
             {ok, World#world{touching = contacts(World, Pos, [])}}
     end;
 build(P) ->
@@ -564,14 +576,60 @@ ir(#world{ir = #{mount_deg := Mount}} = W) ->
       right => ir_reading(W, -deg_to_rad(Mount), right)}.
 
 -spec ir_reading(world(), float(), left | right) -> adc().
-ir_reading(#world{pos = Pos, theta = Th, ir = Ir} = W, Mount, Side) ->
+ir_reading(#world{ir = Ir} = W, Mount, Side) ->
     #{min_range := Min, max_range := Max, curve := {K, D0, C}, noise := Noise} = Ir,
-    Dir = {math:cos(Th + Mount), math:sin(Th + Mount)},
-    Origin = add(Pos, scale(Dir, robot_radius(W))),
-    Hits = [T || {_, Shape, _} <- obstacles(W), {hit, T} <- [ray(Origin, Dir, Shape)]],
-    D = clamp(lists:min([Max | Hits]), Min, Max),
+    D = clamp(range(W, Mount, Max), Min, Max),
     Value = K / (D * 100 + D0) + C + noise(W, {ir, Side}, Noise),
     clamp(round(Value), 0, 1023).
+
+%% @doc The distance in metres from the robot's rim, at `MountRad' from the
+%% heading (counter-clockwise), to the first wall, object or other robot
+%% along that direction; `Max' when there is none nearer.
+-spec range(world(), float(), number()) -> number().
+range(#world{pos = Pos, theta = Th} = W, MountRad, Max) ->
+    Dir = {math:cos(Th + MountRad), math:sin(Th + MountRad)},
+    Origin = add(Pos, scale(Dir, robot_radius(W))),
+    Hits = [T || {_, Shape, _} <- obstacles(W), {hit, T} <- [ray(Origin, Dir, Shape)]],
+    lists:min([Max | Hits]).
+
+%% @doc The bearings (degrees from the heading, counter-clockwise) of the
+%% walls, objects and other robots the robot touches now.
+-spec contact_bearings(world()) -> [float()].
+contact_bearings(#world{pos = Pos, theta = Th} = W) ->
+    Radius = robot_radius(W),
+    [rad_to_deg(normalise_rad(math:atan2(Dy, Dx) - Th))
+     || {_, Shape, _} <- obstacles(W), gap(Pos, Radius, Shape) =< ?RELEASE,
+        {Dx, Dy} <- [sub(case Shape of
+                             {segment, A, B} -> closest(Pos, A, B);
+                             {disc, C, _} -> C
+                         end, Pos)]].
+
+%% @doc Whether no wall (the arena's included) crosses the segment between
+%% two points.
+-spec line_of_sight(world(), point(), point()) -> boolean().
+line_of_sight(#world{obstacles = Obstacles}, From, To) ->
+    Sight = sub(To, From),
+    not lists:any(fun({_, {segment, _, _} = Wall, _}) ->
+                          case ray(From, Sight, Wall) of
+                              {hit, T} -> T < 1;
+                              miss -> false
+                          end;
+                     (_) -> false
+                  end, Obstacles).
+
+%% @doc Whether the robot could stand at a point without touching anything.
+-spec free(world(), point()) -> boolean().
+free(#world{obstacles = Obstacles} = W, Pos) ->
+    Radius = robot_radius(W),
+    lists:all(fun({_, Shape, _}) -> gap(Pos, Radius, Shape) >= 0 end, Obstacles).
+
+%% @doc What `torobot_sensors' parsed from the world file.
+-spec extras(world()) -> map().
+extras(#world{extras = Extras}) -> Extras.
+
+%% @doc The robot's geometry (`radius', `wheel_base', `max_wheel_speed').
+-spec geometry(world()) -> map().
+geometry(#world{geometry = G}) -> G.
 
 %% @doc The near/far state of each IR sensor after the current readings, given
 %% the previous state: the same hysteresis the PRU applies to the ADC.
@@ -683,10 +741,11 @@ done(#world{time_ms = T, duration_ms = D, stop_on_red = Stop, red_touched_ms = R
 %% (a world of several) also has `robot_contacts', counted as walls are.
 -spec summary(world()) -> summary().
 summary(#world{} = W) ->
-    Summary = #{red_touched_ms => W#world.red_touched_ms,
-                wall_contacts => W#world.wall_contacts,
-                blue_contacts => W#world.blue_contacts,
-                distance_m => W#world.distance},
+    Summary = maps:merge(torobot_sensors:figures(W),
+                         #{red_touched_ms => W#world.red_touched_ms,
+                           wall_contacts => W#world.wall_contacts,
+                           blue_contacts => W#world.blue_contacts,
+                           distance_m => W#world.distance}),
     case W#world.name of
         undefined -> Summary;
         _ -> Summary#{robot_contacts => W#world.robot_contacts}
