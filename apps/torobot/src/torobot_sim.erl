@@ -286,6 +286,7 @@ handle_info({timeout, _Ref, tick}, S = #sim{bots = Bots, tick = Tick}) ->
                     false -> torobot_sim_robot:wheels(H)
                 end || #bot{world = W, handle = H} <- Bots],
     S1 = status(sense(S#sim{bots = move(Bots, Commands, Tick)})),
+    publish(S1),
     Worlds = [W || #bot{world = W} <- S1#sim.bots],
     case lists:all(fun torobot_world:done/1, Worlds) of
         true ->
@@ -356,6 +357,33 @@ sense(B = #bot{world = W0, handle = H, ir = Last, port = Port, readings = LastRe
             _ = [gen_udp:send(Sock, {127, 0, 0, 1}, Port, Datagram)
                  || Datagram <- torobot_world:camera(W)],
             B#bot{world = W, ir = Ir, sensors = Sensors, readings = Readings}
+    end.
+
+%% The dashboard's view of the world (toroco_live_world's message, written
+%% down there): a plain send, and only when toroco_live runs in this node.
+%% A robot of the one-robot form is named `torobot'.
+publish(#sim{bots = Bots, t0 = T0}) ->
+    case whereis(toroco_live_world) of
+        undefined ->
+            ok;
+        Viewer ->
+            [#bot{world = W} | _] = Bots,
+            Robots = [begin
+                          #{ir := Ir, camera := Camera} = torobot_world:view(R),
+                          #{name => case torobot_world:name(R) of
+                                        undefined -> torobot;
+                                        Name -> Name
+                                    end,
+                            pose => torobot_world:pose(R),
+                            radius => torobot_world:robot_radius(R), winner => Winner,
+                            ir => Ir, camera => Camera}
+                      end || #bot{world = R, winner = Winner} <- Bots],
+            Viewer ! {toroco_live_world, snapshot,
+                      #{run => {self(), T0},
+                        t_ms => lists:max([torobot_world:time_ms(B#bot.world) || B <- Bots]),
+                        arena => torobot_world:arena(W), walls => torobot_world:walls(W),
+                        objects => torobot_world:objects(W), robots => Robots}},
+            ok
     end.
 
 status(S = #sim{status = false}) ->
