@@ -13,7 +13,7 @@
 -module(toroco_gate).
 -behaviour(gen_statem).
 
--export([start_link/1, child_spec/1, rewire/1, info/1]).
+-export([start_link/2, child_spec/2, rewire/2, info/1]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3]).
 
 -record(g, {key :: {atom(), atom()},
@@ -27,18 +27,19 @@
 %% API
 %%====================================================================
 
--spec start_link({atom(), atom()}) -> gen_statem:start_ret().
-start_link(Key) ->
-    gen_statem:start_link({local, toroco_names:gate(Key)}, ?MODULE, Key, toroco_upstream:start_opts()).
+-spec start_link({atom(), atom()}, pid() | none) -> gen_statem:start_ret().
+start_link(Key, Caller) ->
+    gen_statem:start_link({local, toroco_names:gate(Key)}, ?MODULE, {Key, Caller},
+                          toroco_upstream:start_opts()).
 
--spec child_spec({atom(), atom()}) -> supervisor:child_spec().
-child_spec(Key) ->
-    #{id => {gate, Key}, start => {?MODULE, start_link, [Key]},
+-spec child_spec({atom(), atom()}, pid() | none) -> supervisor:child_spec().
+child_spec(Key, Caller) ->
+    #{id => {gate, Key}, start => {?MODULE, start_link, [Key, Caller]},
       restart => permanent, shutdown => 1000, type => worker, modules => [?MODULE]}.
 
--spec rewire({atom(), atom()}) -> ok.
-rewire(Key) ->
-    gen_statem:call(toroco_names:gate(Key), rewire, infinity).
+-spec rewire({atom(), atom()}, pid()) -> ok.
+rewire(Key, Caller) ->
+    gen_statem:call(toroco_names:gate(Key), {rewire, Caller}, infinity).
 
 %% @doc Per member: inhibited, inhibitors, latch, inhibitor holds; `none' if the
 %% gate is not running.
@@ -55,8 +56,8 @@ info(Key) ->
 -spec callback_mode() -> gen_statem:callback_mode_result().
 callback_mode() -> handle_event_function.
 
--spec init({atom(), atom()}) -> gen_statem:init_result(gating) | ignore.
-init(Key) ->
+-spec init({{atom(), atom()}, pid() | none}) -> gen_statem:init_result(gating) | ignore.
+init({Key, Caller}) ->
     process_flag(trap_exit, true),
     case toroco_wiring:lookup({gate, Key}) of
         {ok, Cfg = #{subs := Subs}} ->
@@ -67,7 +68,7 @@ init(Key) ->
                                  [toroco_upstream:send(R, {'$toroco_hello', gate, M, self()})
                                   || R <- Regs]
                          end, Subs),
-            {D, Actions} = configure(Cfg, #g{key = Key, reg = Reg}),
+            {D, Actions} = configure(Cfg, Caller, #g{key = Key, reg = Reg}),
             {ok, gating, D, Actions};
         error ->
             ignore
@@ -111,9 +112,9 @@ handle_event(info, {'$toroco_state', Tag, Src, Pid, Latch}, _, D = #g{links = L}
 handle_event(info, {'DOWN', _, process, Pid, _}, _, D = #g{links = L}) ->
     {Srcs, L1} = toroco_upstream:down(Pid, L),
     steps([{op, S, unset} || S <- Srcs], D#g{links = L1});
-handle_event({call, From}, rewire, _, D = #g{key = Key}) ->
+handle_event({call, From}, {rewire, Caller}, _, D = #g{key = Key}) ->
     {ok, Cfg} = toroco_wiring:lookup({gate, Key}),
-    {D1, Actions} = configure(Cfg, D),
+    {D1, Actions} = configure(Cfg, Caller, D),
     {keep_state, D1, [{reply, From, ok} | Actions]};
 handle_event({call, From}, info, _, #g{core = C}) ->
     {keep_state_and_data, [{reply, From, toroco_gate_core:info(C, now_ms())}]};
@@ -129,9 +130,9 @@ terminate(_Reason, _, #g{links = L, reg = Reg}) ->
 %% Internals
 %%====================================================================
 
-configure(#{members := Members, entries := Entries, upstreams := Ups, subs := Subs},
+configure(#{members := Members, entries := Entries, upstreams := Ups, subs := Subs}, Caller,
           D = #g{links = L, reg = Reg, subs = OldSubs}) ->
-    {L1, Synced, Reset} = toroco_upstream:rewire(Ups, L, Reg),
+    {L1, Synced, Reset} = toroco_upstream:rewire(Ups, L, Reg, Caller),
     %% Keep subscribers that attached on their own; add the planned ones.
     Subs1 = maps:from_list([{M, lists:usort(maps:get(M, Subs, []) ++ maps:get(M, OldSubs, []))}
                             || M <- Members]),
@@ -164,4 +165,4 @@ timer(D = #g{core = C, timer = T}) ->
     {T1, Actions} = toroco_upstream:hold_timer(toroco_gate_core:next_deadline(C), T),
     {D#g{timer = T1}, Actions}.
 
-now_ms() -> erlang:monotonic_time(millisecond).
+now_ms() -> toroco_clock:now_ms().

@@ -11,7 +11,7 @@
 -module(toroco_upstream).
 
 -export([subscribe/3, unsubscribe/3, send/2, sync_timeout/0, start_opts/0]).
--export([new_links/0, rewire/3, detach_all/2, hello/4, late_state/5, down/2, upstream_pids/1,
+-export([new_links/0, rewire/4, detach_all/2, hello/4, late_state/5, down/2, upstream_pids/1,
          carries/3, hold_timer/2]).
 -export_type([entry/0, synced/0, links/0]).
 
@@ -39,13 +39,17 @@ new_links() -> #{ups => #{}, pids => #{}, mons => #{}}.
 %% gate that inhibits them. A source that only moved between its emitter and
 %% a gate that lets it through keeps its hold (a gate that inhibits nothing
 %% changes nothing).
--spec rewire(#{source() => upstream()}, links(), atom()) ->
+%% `Caller' (the process whose wiring call this is, or `none') is not
+%% waited for: it is busy in that call; its answer comes as a late state.
+-spec rewire(#{source() => upstream()}, links(), atom(), pid() | none) ->
           {links(), [{source(), toroco_router_core:latch()}], [source()]}.
-rewire(NewUps, Links = #{ups := OldUps}, MyReg) ->
+rewire(NewUps, Links = #{ups := OldUps}, MyReg, Caller) ->
     Gone = [S || {S, Up} <- maps:to_list(OldUps), maps:get(S, NewUps, none) =/= Up],
     [unsubscribe(S, maps:get(S, OldUps), MyReg) || S <- Gone],
     Fresh = [{S, Up} || {S, Up} <- maps:to_list(NewUps), maps:get(S, OldUps, none) =/= Up],
-    Synced = subscribe(Fresh, MyReg, sync_timeout()),
+    {Busy, Waited} = lists:partition(fun({_, {_, Up}}) -> whereis(Up) =:= Caller end, Fresh),
+    _ = [send(Up, {'$toroco_sub', S, MyReg}) || {S, {_, Up}} <- Busy],
+    Synced = subscribe(Waited, MyReg, sync_timeout()) ++ [{S, undefined, none} || {S, _} <- Busy],
     L1 = lists:foldl(fun(S, Acc) -> forget(S, Acc) end, Links#{ups := NewUps}, Gone),
     L2 = lists:foldl(fun({S, Pid, _}, Acc) when is_pid(Pid) -> listen(S, Pid, Acc);
                         (_, Acc) -> Acc
@@ -105,7 +109,8 @@ carries(Tag, Src, #{ups := Ups}) ->
           {infinity | integer(), [gen_statem:action()]}.
 hold_timer(Same, Same) -> {Same, []};
 hold_timer(infinity, _) -> {infinity, [{{timeout, hold}, cancel}]};
-hold_timer(Next, _) -> {Next, [{{timeout, hold}, Next, expire, [{abs, true}]}]}.
+hold_timer(Next, _) ->
+    {Next, [{{timeout, hold}, toroco_clock:real_deadline(Next), expire, [{abs, true}]}]}.
 
 %% @doc The pids currently listened to, by source.
 -spec upstream_pids(links()) -> #{source() => pid()}.
@@ -194,11 +199,11 @@ send(To, Msg) ->
 
 %% @doc Start options of the network's processes (behaviors, devices,
 %% routers, gates): a process idle for `hibernate_after_ms' (app env, default
-%% 1000) hibernates, which shrinks an idle behavior with its router to a few
+%% 5000) hibernates, which shrinks an idle behavior with its router to a few
 %% kilobytes; a busy one never does.
 -spec start_opts() -> [gen_statem:start_opt()].
 start_opts() ->
-    [{hibernate_after, application:get_env(toroco, hibernate_after_ms, 1000)}].
+    [{hibernate_after, application:get_env(toroco, hibernate_after_ms, 5000)}].
 
 %% @doc How long wiring waits for an upstream's answer (app env `sync_timeout_ms').
 -spec sync_timeout() -> timeout().

@@ -1,14 +1,14 @@
 %% The library's robots (config/robots/*.wiring), each in its world
 %% (config/worlds/NAME.world), run by torobot_sim on the real runtime and
-%% devices, in real time. Each robot reaches the figure the README gives
-%% for it; the bounds below are those figures.
+%% devices, at speed 5 (TOROCO_LIB_SPEED=1 runs them in real time). Each
+%% robot reaches the figure the README gives for it; the bounds below are
+%% those figures. Group `rooms' runs each robot in a second room
+%% (test/rooms/), on which it was not tuned, against the same bounds.
 %%
-%% The runs are independent, so they run at once, each on a peer node of
-%% its own (one node holds one robot): the suite takes about as long as
-%% the longest world. The summaries are logged, the SVGs are in the
-%% cases' priv_dir. Group `rooms' (not in all/0; `rebar3 ct --suite ...
-%% --group rooms') runs the robots in the second rooms of test/rooms/, on
-%% which they were not tuned, against the same bounds.
+%% The runs are independent, so they run at once, each robot on a peer
+%% node of its own (torobot_sim's `nodes => peer'): a group takes about as
+%% long as its longest world. The summaries are logged, the SVGs are in the
+%% cases' priv_dir.
 -module(toroco_lib_robots_SUITE).
 
 -include_lib("common_test/include/ct.hrl").
@@ -23,7 +23,7 @@ suite() ->
     [{timetrap, {minutes, 3}}].
 
 all() ->
-    [every_robot_is_tested, {group, robots}].
+    [every_robot_is_tested, {group, robots}, {group, rooms}].
 
 groups() ->
     [{robots, [parallel], ?ROBOTS},
@@ -133,17 +133,16 @@ run(Robot, World, Config) ->
     Root = ?config(root, Config),
     Wiring = filename:join([Root, "config", "robots", atom_to_list(Robot) ++ ".wiring"]),
     Svg = filename:join(?config(priv_dir, Config), filename:basename(World, ".world") ++ ".svg"),
-    {ok, Peer, _Node} = peer:start_link(#{connection => standard_io,
-                                   args => ["-config", filename:join([Root, "config", "sim"]),
-                                            "-pa" | code:get_path()]}),
-    try
-        {ok, Summary} = peer:call(Peer, torobot_sim, run, [World, #{wiring => Wiring, svg => Svg}],
-                                  120000),
-        ct:comment("~s", [torobot_sim:summary_json(Summary)]),
-        ct:pal("~s in ~s: ~s", [Robot, World, torobot_sim:summary_json(Summary)]),
-        Summary
-    after
-        peer:stop(Peer)
+    {ok, Summary} = torobot_sim:run(World, #{wiring => Wiring, svg => Svg, speed => speed(),
+                                             nodes => peer}),
+    ct:comment("~s", [torobot_sim:summary_json(Summary)]),
+    ct:pal("~s in ~s: ~s", [Robot, World, torobot_sim:summary_json(Summary)]),
+    Summary.
+
+speed() ->
+    case os:getenv("TOROCO_LIB_SPEED") of
+        false -> 5;
+        S -> list_to_integer(S)
     end.
 
 world(Robot, Config) ->
