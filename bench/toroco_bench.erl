@@ -25,6 +25,13 @@ main([Dir]) ->
             halt(0);
         _ -> ok
     end,
+    Tap = [tap_row(Sub, N, Dir) || Sub <- [none, one, none, one]],
+    table("Observer tap: the closed loop with no subscriber and with one subscriber reading every event "
+          "(alternated, twice)", Tap, Dir, "tap"),
+    case os:getenv("TOROCO_BENCH_ONLY") of
+        "tap" -> halt(0);
+        _ -> ok
+    end,
     Internal = [internal(I, N, Dir) || I <- [closed, 1, 2, 5, 10]],
     table("Internal test: behavior → router → behavior → router → actuator, " ++
               integer_to_list(N) ++ " events", Internal, Dir, "internal"),
@@ -98,6 +105,40 @@ internal(Interval, N, Dir) ->
     chain(case Mode of closed -> closed; _ -> none end, N),
     R = run(Mode, N, N * 20 + 10000),
     row(label(Interval), R, Dir, "internal_" ++ label(Interval)).
+
+%% The closed loop with `one' subscriber of the observer tap taking every
+%% event of every kind, or `none'.
+tap_row(Sub, N, Dir) ->
+    chain(closed, N),
+    Reader = case Sub of
+                 one -> tap_reader();
+                 none -> none
+             end,
+    R = run(closed, N, N * 20 + 10000),
+    Events = case Reader of
+                 none -> 0;
+                 _ -> Reader ! {stop, self()}, receive {Reader, Count} -> Count end
+             end,
+    Label = case Sub of
+                none -> "no subscriber";
+                one -> lists:flatten(io_lib:format("one subscriber (~b events)", [Events]))
+            end,
+    row(Label, R, Dir, "tap_" ++ atom_to_list(Sub)).
+
+tap_reader() ->
+    Parent = self(),
+    Pid = spawn(fun() ->
+                        {ok, Ref} = toroco:subscribe_events(#{}),
+                        Parent ! {self(), subscribed},
+                        tap_read(Ref, 0)
+                end),
+    receive {Pid, subscribed} -> Pid end.
+
+tap_read(Ref, Count) ->
+    receive
+        {toroco_event, Ref, _} -> tap_read(Ref, Count + 1);
+        {stop, From} -> From ! {self(), Count}
+    end.
 
 throughput(W, N) ->
     chain({window, 100}, N),

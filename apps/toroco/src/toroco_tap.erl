@@ -30,7 +30,7 @@
 -behaviour(gen_server).
 
 -export([start_link/0, subscribe/1, unsubscribe/1]).
--export([current/0, select/3, notify/2, timestamp/0, is_tap_message/1]).
+-export([current/0, select/3, notify/2, timestamp/0]).
 -export([lifecycle/2, lifecycle/3]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 -export_type([sinks/0, kind/0, event/0, opts/0, sub/0]).
@@ -148,12 +148,6 @@ select(Subs, Kinds, Name) ->
               end
       end, #{}, Subs).
 
-%% @doc Whether a message is the tap server telling a process of new
-%% subscriptions; returns them.
--spec is_tap_message(term()) -> {true, [sub()]} | false.
-is_tap_message({'$toroco_tap', Subs}) -> {true, Subs};
-is_tap_message(_) -> false.
-
 %% @doc Sends `Event' to each sink with room for it, counting a drop where
 %% there is none.
 -spec notify([sink()], event()) -> ok.
@@ -161,13 +155,13 @@ notify([], _Event) ->
     ok;
 notify([{Ref, Relay, A, Max} | Rest], Event) ->
     Held = atomics:add_get(A, ?HELD, 1),
-    case Held + atomics:get(A, ?SEEN) > Max of
-        true ->
-            atomics:sub(A, ?HELD, 1),
-            atomics:add(A, ?DROPPED, 1);
-        false ->
-            Relay ! {toroco_event, Ref, Event}
-    end,
+    _ = case Held + atomics:get(A, ?SEEN) > Max of
+            true ->
+                atomics:sub(A, ?HELD, 1),
+                atomics:add(A, ?DROPPED, 1);
+            false ->
+                Relay ! {toroco_event, Ref, Event}
+        end,
     notify(Rest, Event).
 
 %% @doc The time stamp of events: when the runtime saw it.

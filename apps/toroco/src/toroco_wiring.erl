@@ -326,15 +326,17 @@ apply_plan(#{routers := OldR, gates := OldG, subs := OldSubs},
 %% changed.
 ensure(Kind, Key, Changed, Caller) ->
     Mod = consumer_module(Kind),
-    case supervisor:start_child(toroco_routers_sup, Mod:child_spec(Key, Caller)) of
-        {ok, _} -> ok;
-        {error, {already_started, _}} when Changed -> Mod:rewire(Key, Caller);
+    case supervisor:start_child(toroco_routers_sup, toroco_consumer:child_spec(Mod, Key, Caller)) of
+        {ok, _} -> _ = toroco_consumer:ready(Mod, Key), ok;
+        {error, {already_started, _}} when Changed -> _ = toroco_consumer:rewire(Mod, Key, Caller), ok;
         {error, {already_started, _}} -> ok;
         {error, already_present} ->
             _ = supervisor:restart_child(toroco_routers_sup, {Kind, Key}),
+            _ = toroco_consumer:ready(Mod, Key),
             ok;
         {error, Reason} ->
-            logger:error("toroco: could not start ~p ~p: ~p", [Kind, Key, Reason])
+            logger:error("toroco: could not start ~p ~p: ~p", [Kind, Key, Reason],
+                         #{domain => [toroco, wiring]})
     end.
 
 stop(Kind, Key) ->
