@@ -97,7 +97,6 @@ stats() ->
 
 -spec init(map()) -> {ok, #h{}}.
 init(Config) ->
-    _ = toroco_restarts:install(),
     ok = toroco_live_world:subscribe(),
     erlang:send_after(?TICK_MS, self(), tick),
     Now = erlang:monotonic_time(millisecond),
