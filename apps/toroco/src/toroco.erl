@@ -179,12 +179,12 @@ inspect() ->
 %% latches and last value, outputs with their inhibition and latch (SPEC §6).
 -spec inspect(name()) -> map() | {error, error_reason()}.
 inspect(Name) ->
-    toroco_inspect:node(Name).
+    toroco_inspect:describe(Name).
 
 %% @doc Prints a table of the running network (for the remote shell).
 -spec top() -> ok.
 top() ->
-    toroco_inspect:top().
+    toroco_top:print().
 
 %% @doc Prints deliveries to an input (`{Receiver, Input}') or to every input
 %% of a behavior, live, until `max' events (default 100) or `seconds' (default
@@ -201,7 +201,7 @@ unwatch() ->
 %% @doc The wiring as a Graphviz `dot' graph.
 -spec wiring_dot() -> iodata().
 wiring_dot() ->
-    toroco_inspect:dot().
+    toroco_dot:wiring().
 
 %% @doc Hot code reload of every behavior running `Module'.
 -spec reload(module()) -> ok | {error, error_reason()}.

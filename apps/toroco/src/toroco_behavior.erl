@@ -14,7 +14,7 @@
 %% The process is the emitter end of every wire it feeds: it keeps, per output,
 %% the registered names of the consumers (routers or a gate) to send to, and
 %% the output's latch. Consumers subscribe with a handshake (see
-%% `toroco_upstream'), so the subscriber lists change without a central server
+%% `toroco_wire'), so the subscriber lists change without a central server
 %% on the event path. On start it announces itself to its consumers (`hello':
 %% nothing of the previous incarnation survives) and to its input routers
 %% (which re-deliver each input's latched winner).
@@ -22,6 +22,8 @@
 %% Devices (`toroco_device') run on this same engine with `kind => device'.
 -module(toroco_behavior).
 -behaviour(gen_statem).
+
+-include("toroco_wire.hrl").
 
 -export([start_link/1, child_spec/1]).
 -export([inject/3, info/1, suspend/1, resume/1, interface/3]).
@@ -80,8 +82,8 @@
             layer :: non_neg_integer(),
             args :: term(),
             user :: term(),
-            %% declared output -> registered names of its consumers
-            outputs = #{} :: #{atom() => [atom()]},
+            %% declared output -> the addresses of its consumers
+            outputs = #{} :: #{atom() => [toroco_wire:address()]},
             latches = #{} :: #{atom() => term()},
             inputs = [] :: [atom()],
             suspended = false :: boolean(),
@@ -106,7 +108,7 @@
 
 -spec start_link(spec()) -> gen_statem:start_ret().
 start_link(Spec = #{name := Name}) ->
-    gen_statem:start_link({local, toroco_names:process(Name)}, ?MODULE, Spec, toroco_upstream:start_opts()).
+    gen_statem:start_link({local, toroco_names:process(Name)}, ?MODULE, Spec, toroco_wire:start_opts()).
 
 %% @doc Behaviors are `transient': one that stops with reason `normal' is done.
 -spec child_spec(spec()) -> supervisor:child_spec().
@@ -151,11 +153,7 @@ suspend(Name) -> call(Name, '$toroco_suspend').
 resume(Name) -> call(Name, '$toroco_resume').
 
 call(Name, Req) ->
-    try gen_statem:call(toroco_names:process(Name), Req, 5000)
-    catch exit:{noproc, _} -> {error, {not_running, Name}};
-          exit:{timeout, _} -> {error, {timeout, Name}};
-          exit:{Reason, _} -> {error, {Reason, Name}}
-    end.
+    toroco_wire:call(toroco_names:process(Name), Req, 5000, Name).
 
 %%====================================================================
 %% gen_statem
@@ -170,7 +168,8 @@ init(#{kind := Kind, name := Name, module := M, layer := Layer, args := Args}) -
     case interface(Kind, M, Args) of
         {ok, #{inputs := Ins, outputs := Outs}} ->
             Planned = toroco_wiring:subs_of(Name),
-            Subs = maps:from_list([{O, maps:get(O, Planned, [])} || O <- Outs]),
+            Subs = maps:from_list([{O, [toroco_wire:address(R) || R <- maps:get(O, Planned, [])]}
+                                   || O <- Outs]),
             E = #e{name = Name, kind = Kind, module = M, layer = Layer, args = Args,
                    outputs = Subs, inputs = Ins,
                    user_events = erlang:function_exported(M, handle_event, 4),
@@ -185,14 +184,14 @@ init(#{kind := Kind, name := Name, module := M, layer := Layer, args := Args}) -
 %% Announces this incarnation: consumers drop whatever they had of the last
 %% one; input routers re-deliver their latched winners.
 announce(#e{name = Name, outputs = Outs, inputs = Ins, kind = Kind}) ->
-    maps:foreach(fun(Out, Regs) ->
-                         [toroco_upstream:send(R, {'$toroco_hello', emitter, {Name, Out}, self()})
-                          || R <- Regs]
+    maps:foreach(fun(Out, Consumers) ->
+                         [toroco_wire:send(C, ?WIRE_HELLO(emitter, {Name, Out}, self()))
+                          || C <- Consumers]
                  end, Outs),
     receiver_up(Name, case Kind of behavior -> [?RESET | Ins]; device -> Ins end).
 
 receiver_up(Name, Inputs) ->
-    [toroco_upstream:send(toroco_names:router(Name, I), {'$toroco_rx', I, self()})
+    [toroco_wire:send(toroco_wire:address(toroco_names:router(Name, I)), ?WIRE_RX(I, self()))
      || I <- Inputs],
     ok.
 
@@ -223,30 +222,31 @@ start_user(E = #e{kind = Kind, module = M, args = Args, name = Name}) ->
 handle_event(info, {'$toroco_tap', Subs}, _S, E = #e{name = Name}) ->
     {keep_state, E#e{tap = tap(Subs, Name)}};
 %% The event path: one input delivered by a router.
-handle_event(info, {'$toroco_in', Input, V}, S, E = #e{suspended = false}) ->
+handle_event(info, ?WIRE_IN(Input, V), S, E = #e{suspended = false}) ->
     input(Input, V, S, E);
-handle_event(info, {'$toroco_in', Input, V, Router}, S, E = #e{suspended = false}) ->
+handle_event(info, ?WIRE_IN(Input, V, Router), S, E = #e{suspended = false}) ->
     Result = input(Input, V, S, E),
-    Router ! {'$toroco_ack', Input},
+    Router ! ?WIRE_ACK(Input),
     Result;
-handle_event(info, {'$toroco_in', _Input, _V}, _S, _E) ->
+handle_event(info, ?WIRE_IN(_Input, _V), _S, _E) ->
     keep_state_and_data;                      % suspended: inputs are dropped
-handle_event(info, {'$toroco_in', Input, _V, Router}, _S, _E) ->
-    Router ! {'$toroco_ack', Input},
+handle_event(info, ?WIRE_IN(Input, _V, Router), _S, _E) ->
+    Router ! ?WIRE_ACK(Input),
     keep_state_and_data;
-%% Wiring: consumers attach and detach.
-handle_event(info, {'$toroco_sub', {_, Out} = Src, Reg}, _S, E = #e{outputs = Outs}) ->
+%% Wiring: consumers attach and detach (see toroco_wire).
+handle_event(info, ?WIRE_SUB({_, Out} = Src, Consumer), _S, E = #e{outputs = Outs}) ->
     case Outs of
-        #{Out := Regs} ->
-            toroco_upstream:send(Reg, {'$toroco_state', emitter, Src, self(), latch(Out, E)}),
-            {keep_state, E#e{outputs = Outs#{Out := lists:usort([Reg | Regs])}}};
+        #{Out := Consumers} ->
+            toroco_wire:send(Consumer, ?WIRE_STATE(emitter, Src, self(), latch(Out, E))),
+            {keep_state, E#e{outputs = Outs#{Out := lists:usort([Consumer | Consumers])}}};
         #{} ->
-            toroco_upstream:send(Reg, {'$toroco_state', emitter, Src, self(), none}),
+            toroco_wire:send(Consumer, ?WIRE_STATE(emitter, Src, self(), none)),
             keep_state_and_data
     end;
-handle_event(info, {'$toroco_unsub', {_, Out}, Reg}, _S, E = #e{outputs = Outs}) ->
+handle_event(info, ?WIRE_UNSUB({_, Out}, Consumer), _S, E = #e{outputs = Outs}) ->
     case Outs of
-        #{Out := Regs} -> {keep_state, E#e{outputs = Outs#{Out := lists:delete(Reg, Regs)}}};
+        #{Out := Consumers} ->
+            {keep_state, E#e{outputs = Outs#{Out := lists:delete(Consumer, Consumers)}}};
         #{} -> keep_state_and_data
     end;
 handle_event({call, From}, {'$toroco_inject', Out, Op}, _S, E = #e{outputs = Outs, name = N}) ->
@@ -433,9 +433,8 @@ emit_all(Map, Hold, E) ->
 %% One emission on one output: to every consumer, in order; the latch follows.
 emit(Out, Op, E = #e{outputs = Outs, name = Name}) ->
     case Outs of
-        #{Out := Regs} ->
-            Msg = {'$toroco', {Name, Out}, Op},
-            send_all(Regs, Msg),
+        #{Out := Consumers} ->
+            send_all(Consumers, ?WIRE_EVENT({Name, Out}, Op)),
             case E#e.tap of
                 #{emit := Sinks} -> toroco_tap:notify(Sinks, emit_event(Name, Out, Op));
                 #{} -> ok
@@ -469,9 +468,9 @@ tap(Subs, Name) ->
     toroco_tap:select(Subs, [emit, lifecycle], Name).
 
 send_all([], _Msg) -> ok;
-send_all([R | Rs], Msg) ->
-    toroco_upstream:send(R, Msg),
-    send_all(Rs, Msg).
+send_all([C | Cs], Msg) ->
+    toroco_wire:send(C, Msg),
+    send_all(Cs, Msg).
 
 relatch(Out, {set, V}, E = #e{latches = L}) ->
     E#e{latches = L#{Out => V}};

@@ -10,7 +10,7 @@
 %% count survives `remove' and a later `add' of the same name.
 -module(toroco_restarts).
 
--export([added/1, started/1, count/1, install/0]).
+-export([added/1, started/1, count/1]).
 
 -define(TABLE, toroco_lives).
 
@@ -38,9 +38,3 @@ count(Name) ->
         [] -> 0
     catch error:badarg -> 0
     end.
-
-%% @doc Nothing to install: counts are kept from boot. Kept for callers of
-%% the earlier logger-handler version.
--spec install() -> ok.
-install() ->
-    ok.

@@ -1,6 +1,7 @@
-%% The observer tap (SPEC §10) and the runtime's own resilience around the
-%% event path: the wiring server's crashes, self-calls, fast inject.
--module(toroco_tap_SUITE).
+%% The event path: the observer tap (SPEC §10), and the runtime's own
+%% resilience around it: the wiring server's crashes, self-calls, inject's
+%% errors, reset and the engine's defaults.
+-module(toroco_event_path_SUITE).
 -include_lib("common_test/include/ct.hrl").
 -compile([export_all, nowarn_export_all]).
 
@@ -15,7 +16,8 @@ groups() ->
                 per_source_order, unsubscribe_stops_events, dead_subscriber_is_unsubscribed,
                 bad_options_refused, no_subscriber_no_tap_state]},
      {resilience, [], [wiring_server_crashes_100_times_under_load, inject_into_own_output_is_refused,
-                       inject_unknown_and_stopped_names, restarts_counted_from_lifecycle]}].
+                       inject_unknown_and_stopped_names, restarts_counted_from_lifecycle,
+                       reset_cancels_named_timeouts, unknown_events_fall_to_the_engine]}].
 
 init_per_testcase(_Case, Config) ->
     ok = toroco_test_lib:start(),
@@ -36,9 +38,10 @@ chain() ->
     ok = toroco:set_inputs(b, #{in => [{s, v}]}),
     ok = toroco:set_inputs(a, #{in => [{b, out}]}).
 
-events(Ref, Timeout) ->
-    receive {toroco_event, Ref, E} -> [E | events(Ref, 0)]
-    after Timeout -> []
+%% Every event that comes until none has come for `Gap' ms.
+events(Ref, Gap) ->
+    receive {toroco_event, Ref, E} -> [E | events(Ref, Gap)]
+    after Gap -> []
     end.
 
 await_event(Ref, Pred, Timeout) ->
@@ -319,3 +322,35 @@ restarts_counted_from_lifecycle(_Config) ->
     after
         logger:set_primary_config(level, Level)
     end.
+
+reset_cancels_named_timeouts() ->
+    [{doc, "Reset cancels the generic named timeouts the old run set: they never fire after it."}].
+reset_cancels_named_timeouts(_Config) ->
+    sensor(s, [v]),
+    sensor(r, [go]),
+    ok = toroco:add_behavior(b, tb_timer, #{params => #{ms => 300}}),
+    ok = toroco:set_inputs(b, #{in => [{s, v}]}),
+    actuator(a, [in]),
+    ok = toroco:set_inputs(a, #{in => [{b, out}]}),
+    ok = toroco:set_reset(b, [{r, go}]),
+    %% Without a reset the timer fires.
+    ok = toroco:inject({s, v}, arm),
+    ok = toroco_fake_actuator:await(a, fun(H) -> [V || {_, V, _} <- H] =:= [ticked] end, 2000),
+    %% Armed, then reset: it must not fire.
+    ok = toroco:inject({s, v}, arm),
+    ok = toroco:inject({r, go}, now),
+    {error, timeout} = toroco_fake_actuator:await(a, fun(H) -> length(H) > 1 end, 800),
+    [ticked] = toroco_test_lib:values(a).
+
+unknown_events_fall_to_the_engine() ->
+    [{doc, "A handle_event/4 without a clause for an event leaves it to the engine: calls get unknown_call."}].
+unknown_events_fall_to_the_engine(_Config) ->
+    ok = toroco:add_behavior(b, tb_timer, #{}),
+    actuator(a, [in]),
+    ok = toroco:set_inputs(a, #{in => [{b, out}]}),
+    Pid = whereis(toroco_names:process(b)),
+    {error, {unknown_call, {b, what}}} = gen_statem:call(Pid, what, 1000),
+    Pid ! something_else,
+    Pid ! ping,
+    ok = toroco_fake_actuator:await(a, fun(H) -> [V || {_, V, _} <- H] =:= [pong] end, 2000),
+    Pid = whereis(toroco_names:process(b)).
