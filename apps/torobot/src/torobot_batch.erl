@@ -107,7 +107,10 @@ try_wiring(Wiring, [{_, Spec} | _]) ->
         {ok, _} ->
             {ok, [World | _]} = load(Spec),
             Opts = #{wiring => Wiring, speed => 1,
-                     thresholds => torobot_world:ir_thresholds(World)},
+                     thresholds => torobot_world:ir_thresholds(World),
+                     %% the library's sensors, as a run adds them
+                     sensors => [{Name, Outputs(World)}
+                                 || {Name, Outputs} <- torobot_sensors:devices()]},
             case torobot_sim_robot:start_peer(Opts) of
                 {ok, Handle, _Port} -> torobot_sim_robot:stop_peer(Handle);
                 {error, Reason} -> {error, {wiring, Wiring, Reason}}

@@ -18,6 +18,8 @@
 -define(SCALE, 100).
 -define(MARGIN, 20).
 -define(ROW, 18).
+%% Wide enough for the caption of a small room.
+-define(MIN_WIDTH, 560).
 %% Tag colours, avoiding the objects' red and blue; reused in turn when a
 %% run has more tags than colours.
 -define(PALETTE, ["#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2",
@@ -36,9 +38,11 @@ render_all([World | _] = Worlds) ->
     Tags = lists:foldr(fun(Tag, Acc) -> [Tag | lists:delete(Tag, Acc)] end, [],
                        lists:append([tags(torobot_world:trajectory(R)) || R <- Worlds])),
     Colours = lists:zip(Tags, palette(length(Tags))),
-    Width = px(W) + 2 * ?MARGIN,
+    %% a caption line per robot, and one for its figures (torobot_sensors)
+    Rows = [1 + min(1, map_size(torobot_sensors:figures(R))) || R <- Worlds],
+    Width = max(px(W) + 2 * ?MARGIN, ?MIN_WIDTH),
     Bottom = px(H) + 2 * ?MARGIN,
-    Height = Bottom + ?ROW * (length(Worlds) + length(Tags)) + ?MARGIN div 2,
+    Height = Bottom + ?ROW * (lists:sum(Rows) + length(Tags)) + ?MARGIN div 2,
     Svg = ["<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n",
            "<svg xmlns=\"http://www.w3.org/2000/svg\" version=\"1.1\"",
            attrs([{width, Width}, {height, Height},
@@ -56,8 +60,9 @@ render_all([World | _] = Worlds) ->
            [[trajectory(R, H, Colours),
              robot(torobot_world:start_pose(R), R, H, start),
              robot(torobot_world:pose(R), R, H, final)] || R <- Worlds],
-           legend(Colours, Bottom + ?ROW * (length(Worlds) - 1)),
-           [caption(R, Bottom + ?ROW * (I - 1)) || {I, R} <- lists:enumerate(Worlds)],
+           legend(Colours, Bottom + ?ROW * (lists:sum(Rows) - 1)),
+           [caption(R, Bottom + ?ROW * Before)
+            || {R, Before} <- lists:zip(Worlds, lists:droplast([0 | cumulative(Rows, 0)]))],
            "</svg>\n"],
     unicode:characters_to_binary(Svg).
 
@@ -202,8 +207,8 @@ caption(World, Top) ->
               undefined -> "";
               Name -> [atom_to_list(Name), ": "]
           end,
-    Figures = [["; ", atom_to_list(K), " ", io_lib:format("~0p", [V])]
-               || {K, V} <- lists:sort(maps:to_list(torobot_sensors:figures(World)))],
+    Figures = lists:join("; ", [[atom_to_list(K), " ", io_lib:format("~0p", [V])]
+                               || {K, V} <- lists:sort(maps:to_list(torobot_sensors:figures(World)))]),
     Robots = case Summary of
                  #{robot_contacts := N} -> ["; robot contacts ", integer_to_list(N)];
                  #{} -> ""
@@ -212,8 +217,18 @@ caption(World, Top) ->
      escape([Who, Touched, Robots, "; wall contacts ", integer_to_list(Walls),
              "; blue contacts ", integer_to_list(Blue),
              "; distance ", fmt(Distance), " m; time ",
-             fmt(torobot_world:time_ms(World) / 1000), " s", Figures]),
-     "</text>\n"].
+             fmt(torobot_world:time_ms(World) / 1000), " s"]),
+     "</text>\n",
+     case Figures of
+         [] -> [];
+         _ -> ["<text id=\"", id("figures", World), "\"", attrs([{x, ?MARGIN}, {y, Top + ?ROW}]), ">",
+               escape(Figures), "</text>\n"]
+     end].
+
+%% Running sums: the row each robot's caption ends before.
+-spec cumulative([non_neg_integer()], non_neg_integer()) -> [non_neg_integer()].
+cumulative([], _Sum) -> [];
+cumulative([N | Ns], Sum) -> [Sum + N | cumulative(Ns, Sum + N)].
 
 -spec attrs([{atom(), iodata() | number()}]) -> iodata().
 attrs(Attrs) ->

@@ -15,13 +15,15 @@
 %% </ul>
 %% Outputs: `motors': latched `{-back_speed, -back_speed}' for `back_ms'
 %% (skipped after a rear bump), then a spin away from the side hit for
-%% `turn_ms' (after a front bump or a stall, to each side in turn,
-%% `prefer' first), then unset. Bumps and stalls during the sequence are
+%% `turn_ms' plus a seeded random share of `turn_spread_ms' (so a robot
+%% that only bumps does not settle into the same bounce for ever; after a
+%% front bump or a stall, to each side in turn, `prefer' first), then
+%% unset. Bumps and stalls during the sequence are
 %% ignored, except a rear bump while backing, which starts the turn at once.
 %%
 %% Parameters: `back_ms' [700], `turn_ms' [600], `back_speed' [50],
-%% `spin' [50], `stall_ms' [800], `stall_ratio' [0.25], `min_command' [20],
-%% `prefer' [left].
+%% `spin' [50], `turn_spread_ms' [0] (0..), `seed' [1], `stall_ms' [800],
+%% `stall_ratio' [0.25], `min_command' [20], `prefer' [left].
 %%
 %% Usual layer: the top of the robot's motion layers (an escape must win).
 -module(toroco_lib_escape).
@@ -34,6 +36,7 @@
 -spec params() -> [toroco_lib_params:spec()].
 params() ->
     [{back_ms, ms, 700}, {turn_ms, ms, 600}, {back_speed, pos_speed, 50}, {spin, pos_speed, 50},
+     {turn_spread_ms, non_neg_number, 0}, {seed, integer, 1},
      {stall_ms, ms, 800}, {stall_ratio, non_neg_number, 0.25}, {min_command, pos_speed, 20},
      {prefer, {one_of, [left, right]}, left}].
 
@@ -43,8 +46,8 @@ interface() -> #{inputs => [bump, command, odometry], outputs => [motors]}.
 -spec init(map()) -> {ok, idle, map()} | {error, toroco_lib_params:error()}.
 init(Params) ->
     case toroco_lib_params:check(Params, params()) of
-        {ok, #{prefer := Prefer} = P} ->
-            {ok, idle, P#{next => Prefer, command => {0, 0}, odometry => {0, 0},
+        {ok, #{prefer := Prefer, seed := Seed} = P} ->
+            {ok, idle, P#{next => Prefer, rand => rand:seed_s(exsss, Seed), command => {0, 0}, odometry => {0, 0},
                           stalled => false}};
         {error, _} = Error ->
             Error
@@ -92,9 +95,11 @@ start(Hit, #{next := Next, back_ms := Back, back_speed := B} = P) ->
      [{set, #{motors => toroco_lib_drive:wheels(-B, -B)}}, {state_timeout, Back, turn},
       {{timeout, stall}, cancel}]}.
 
-turn(Dir, #{turn_ms := Turn, spin := Spin} = P) ->
-    {next_state, {turning, Dir}, P,
-     [{set, #{motors => toroco_lib_drive:spin(Dir, Spin)}}, {state_timeout, Turn, done},
+turn(Dir, #{turn_ms := Turn, turn_spread_ms := Spread, spin := Spin, rand := R0} = P) ->
+    {U, R1} = rand:uniform_s(R0),
+    {next_state, {turning, Dir}, P#{rand := R1},
+     [{set, #{motors => toroco_lib_drive:spin(Dir, Spin)}},
+      {state_timeout, Turn + round(U * Spread), done},
       {{timeout, stall}, cancel}]}.
 
 other(left) -> right;

@@ -10,7 +10,7 @@
 %% Each reading recomputes the command:
 %% <ul>
 %% <li>something at or below `front_near' ahead: spin away from the wall;</li>
-%% <li>no wall within `lost' on the side or the diagonal: arc towards the
+%% <li>no wall within `lost' on the side: arc towards the
 %%     side (`search_turn'), which takes the robot round an outer corner;
 %%     lost for `search_ms', the robot is in the open and goes straight
 %%     ahead until it meets a wall;</li>
@@ -22,7 +22,7 @@
 %%
 %% Parameters: `side' [right] (`left' | `right'), `distance' [0.25] m,
 %% `speed' [70], `gain' [120], `heading_gain' [150], `max_turn' [35],
-%% `lost' [0.6] m, `search_turn' [25], `search_ms' [2500], `front_near'
+%% `lost' [0.45] m, `search_turn' [25], `search_ms' [2500], `front_near'
 %% [0.3] m, `spin' [50].
 %%
 %% Usual layer: 0 (it never lets go), with `escape' above it.
@@ -43,13 +43,15 @@
 params() ->
     [{side, {one_of, [left, right]}, right}, {distance, metres, 0.25}, {speed, speed, 70},
      {gain, non_neg_number, 120}, {heading_gain, non_neg_number, 150},
-     {max_turn, pos_speed, 35}, {lost, metres, 0.6}, {search_turn, speed, 25}, {search_ms, ms, 2500},
+     {max_turn, pos_speed, 35}, {lost, metres, 0.45}, {search_turn, speed, 25},
+     {search_ms, ms, 2500},
      {front_near, metres, 0.3}, {spin, pos_speed, 50}].
 
 -spec interface() -> #{inputs := [side | diagonal | front], outputs := [motors]}.
 interface() -> #{inputs => [side, diagonal, front], outputs => [motors]}.
 
--spec init(map()) -> {ok, lost, map(), toroco_behavior:actions()} | {error, toroco_lib_params:error()}.
+-spec init(map()) -> {ok, lost, map(), toroco_behavior:actions()}
+                         | {error, toroco_lib_params:error()}.
 init(Params) ->
     case toroco_lib_params:check(Params, params()) of
         {ok, P} -> {ok, lost, P#{readings => #{}, last => none},
@@ -63,7 +65,8 @@ handle_input(Input, Reading, State, #{readings := Rs} = P) ->
     P1 = P#{readings := Rs#{Input => toroco_lib_range:metres(Reading, ?FAR)}},
     case {command(P1), State} of
         {{follow, Command}, _} -> drive(following, Command, [], P1);
-        {{lost, Command}, following} -> drive(lost, Command, [{state_timeout, maps:get(search_ms, P), search}], P1);
+        {{lost, Command}, following} ->
+            drive(lost, Command, [{state_timeout, maps:get(search_ms, P), search}], P1);
         {{lost, Command}, lost} -> drive(lost, Command, [], P1);
         {{lost, _}, searching} -> {keep_state, P1}
     end.
@@ -88,15 +91,17 @@ command(Rs, #{side := Side, distance := Distance, speed := Speed, gain := Gain,
     Towards = case Side of left -> -1; right -> 1 end,
     SideR = maps:get(side, Rs, ?FAR),
     Diag = maps:get(diagonal, Rs, none),
+    %% A diagonal that sees nothing near (past an outer corner, it sees the
+    %% next wall away) says nothing of the heading.
     DiagSquare = case Diag of
-                     none -> SideR + ?PARALLEL;
-                     D -> D * math:sqrt(0.5)
+                     D when is_number(D), D =< Lost -> D * math:sqrt(0.5);
+                     _ -> SideR + ?PARALLEL
                  end,
     Front = maps:get(front, Rs, ?FAR),
     if
         Front =< FrontNear ->
             {follow, toroco_lib_drive:spin(Away, Spin)};
-        SideR > Lost, DiagSquare > Lost ->
+        SideR > Lost ->
             {lost, toroco_lib_drive:steer(Speed, Towards * Search)};
         true ->
             Near = min(SideR, DiagSquare - ?PARALLEL),

@@ -8,7 +8,7 @@
 %% right / rest_level)}' (each at least 0) while a reading is at or above
 %% `threshold', unset below (see `toroco_lib_braitenberg').
 %%
-%% Parameters: `speed' [60], `rest_level' [600], `threshold' [40].
+%% Parameters: `speed' [60], `rest_level' [500], `threshold' [40].
 %%
 %% Usual layer: above `wander', below `avoid'.
 -module(toroco_lib_love).
@@ -17,7 +17,7 @@
 -export([params/0, interface/0, init/1, handle_input/4, law/3]).
 
 -spec params() -> [toroco_lib_params:spec()].
-params() -> [{speed, pos_speed, 60}, {rest_level, pos_number, 600},
+params() -> [{speed, pos_speed, 60}, {rest_level, pos_number, 500},
              {threshold, non_neg_number, 40}].
 
 -spec interface() -> #{inputs := [left | right], outputs := [motors]}.

@@ -161,7 +161,10 @@ avoid_keeps_its_side(_Config) ->
     ok = toroco:add_behavior(avoid, toroco_lib_avoid, #{params => #{prefer => right}}),
     wire(avoid, #{left => a, right => b, front => c}),
     motors([avoid]),
-    send(b, 0.1), send(a, 0.1), send(b, 1.0),
+    send(b, 0.1),
+    await_last({-50, 50}),
+    send(a, 0.1), fed(avoid, left, 0.1),
+    send(b, 1.0), fed(avoid, right, 1.0),
     send(a, 1.0),
     await([{-50, 50}, {0, 0}]),
     send(c, 0.1),
@@ -282,9 +285,13 @@ dock_homes_and_stops(_Config) ->
     send(a, {90, 2.0}),
     send(a, {-10, 2.0}),
     send(a, {0, 0.3}),
+    await_last({20, 20}),
     send(b, true),
+    await_last({0, 0}),
     send(a, {5, 0.05}),                        % docked: the beacon changes nothing
+    fed(dock, beacon, {5, 0.05}),
     send(b, false),
+    await_last({15, 25}),
     send(a, none),
     await([{-30, 30}, {60, 40}, {20, 20}, {0, 0}, {15, 25}, {0, 0}]).
 
@@ -340,7 +347,8 @@ fear_and_love(_Config) ->
                                            threshold => 50}}),
     wire(fear, #{left => a, right => b}),
     motors([fear]),
-    send(a, 300), send(b, 0),
+    send(b, 0), fed(fear, right, 0),
+    send(a, 300),
     send(a, 10),
     await([{50, 20}, {0, 0}]),
     ok = toroco:remove_behavior(fear),
@@ -349,8 +357,13 @@ fear_and_love(_Config) ->
                              #{params => #{speed => 60, rest_level => 600, threshold => 50}}),
     wire(love, #{left => a, right => b}),
     motors([love]),
-    send(a, 300), send(b, 150),
-    send(a, 600), send(b, 600),
+    send(a, 300),
+    await_last({30, 60}),
+    send(b, 150),
+    await_last({30, 45}),
+    send(a, 600),
+    await_last({0, 45}),
+    send(b, 600),
     await([{30, 60}, {30, 45}, {0, 45}, {0, 0}]).
 
 %%====================================================================
@@ -367,6 +380,18 @@ motors(Sources) ->
 
 send(Out, V) ->
     ok = toroco:inject({sensor, Out}, V, #{latch => true}).
+
+%% Waits until behavior `B' has had `V' on input `In': events of different
+%% sources may arrive in any order (SPEC §4), so a case that needs one
+%% first waits for it.
+fed(B, In, V) -> fed(B, In, V, 200).
+
+fed(B, In, V, Tries) ->
+    case toroco:inspect(B) of
+        #{inputs := #{In := #{last := {value, V}}}} -> ok;
+        _ when Tries > 0 -> timer:sleep(10), fed(B, In, V, Tries - 1);
+        Other -> ct:fail({not_fed, B, In, V, Other})
+    end.
 
 values() ->
     [V || {_, V, _} <- toroco_fake_actuator:history(motors)].
