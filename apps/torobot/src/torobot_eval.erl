@@ -168,7 +168,7 @@ success_svg(#{worlds := Rows}) ->
                 Hgt = S * (?PLOT_H - 2 * ?PAD),
                 X = ?PAD + (I - 1) * BarW,
                 [rect(X, ?PLOT_H - ?PAD - Hgt, max(1.0, BarW - 2), Hgt, "#2ca02c"),
-                 ["<title>", escape(W), "</title>"]]
+                 ["<title>", torobot_svg:escape(W), "</title>"]]
             end || {I, #{world := W, success_rate := S}} <- lists:enumerate(Rows)],
     Axis = [text(?PAD - 6, ?PLOT_H - ?PAD, "0 %", 'end'),
             text(?PAD - 6, ?PAD + 4, "100 %", 'end')],
@@ -209,7 +209,7 @@ cell_svg(I, #{world := Name, run := Run, robot := Robot, summary := Summary, fin
               _ -> [" ", atom_to_list(Robot)]
           end,
     Points = [begin {Px, Py} = P({X, Y}), [Px, ",", Py] end
-              || {_, X, Y, _} <- torobot_world:trajectory(W)],
+              || {_, X, Y, _} <- thin(torobot_world:trajectory(W))],
     {Sx, Sy, _} = torobot_world:start_pose(W),
     ["<g>",
      text(Ox, Oy - 6, [Name, " #", integer_to_list(Run), Who, ": ", Outcome], start),
@@ -222,6 +222,13 @@ cell_svg(I, #{world := Name, run := Run, robot := Robot, summary := Summary, fin
      lists:join(" ", Points), "\"/>",
      Dot({Sx, Sy}, 3, "fill=\"none\" stroke=\"#555\""),
      "</g>\n"].
+
+%% A thumbnail needs no more than a point every 250 ms (5 ticks of 50 ms),
+%% and the last one.
+thin(Samples) when length(Samples) < 3 ->
+    Samples;
+thin(Samples) ->
+    [S || {I, S} <- lists:enumerate(0, Samples), I rem 5 =:= 0] ++ [lists:last(Samples)].
 
 colour(red) -> "#d62728";
 colour(blue) -> "#1f77b4".
@@ -239,15 +246,7 @@ rect(X, Y, W, H, Fill) ->
 
 text(X, Y, Text, Anchor) ->
     ["<text x=\"", fmt(X), "\" y=\"", fmt(Y), "\" text-anchor=\"", atom_to_list(Anchor), "\">",
-     escape(Text), "</text>"].
+     torobot_svg:escape(Text), "</text>"].
 
 fmt(N) when is_integer(N) -> integer_to_list(N);
 fmt(N) -> float_to_list(float(N), [{decimals, 1}, compact]).
-
-escape(Text) ->
-    lists:flatmap(fun($&) -> "&amp;";
-                     ($<) -> "&lt;";
-                     ($>) -> "&gt;";
-                     ($") -> "&quot;";
-                     (C) -> [C]
-                  end, unicode:characters_to_list(Text)).

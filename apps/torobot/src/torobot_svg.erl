@@ -13,7 +13,7 @@
 %% The picture is 100 pixels per metre with y up, as in the world file.
 -module(torobot_svg).
 
--export([render/1, write/2, render_all/1, write_all/2]).
+-export([render/1, write/2, render_all/1, write_all/2, escape/1]).
 
 -define(SCALE, 100).
 -define(MARGIN, 20).
@@ -251,6 +251,7 @@ px(Metres) -> round(Metres * ?SCALE).
 -spec fmt(number()) -> string().
 fmt(N) -> float_to_list(float(N), [{decimals, 2}, compact]).
 
+%% @doc Text made safe for SVG (XML) content and attribute values.
 -spec escape(unicode:chardata()) -> string().
 escape(Text) ->
     lists:flatmap(fun($&) -> "&amp;";

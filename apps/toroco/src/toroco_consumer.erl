@@ -58,7 +58,6 @@
 
 -record(c, {mod :: module(),
             key :: key(),
-            me :: toroco_wire:address(),
             data :: kind_data(),
             links = toroco_wire:new_links() :: toroco_wire:links(),
             timer = infinity :: infinity | integer(),
@@ -85,12 +84,12 @@ child_spec(Mod, Key, Caller) ->
 %% for `sync_timeout_ms').
 -spec rewire(module(), key(), pid() | none) -> ok | {error, term()}.
 rewire(Mod, Key, Caller) ->
-    call(Mod, Key, {rewire, Caller}, infinity).
+    call(Mod, Key, {rewire, Caller}, answer_timeout()).
 
 %% @doc Returns once a just-started consumer has taken its sources in.
 -spec ready(module(), key()) -> ok | {error, term()}.
 ready(Mod, Key) ->
-    call(Mod, Key, ready, infinity).
+    call(Mod, Key, ready, answer_timeout()).
 
 %% @doc The consumer's inspection view, or `none' if it is not running.
 -spec info(module(), key()) -> term() | none.
@@ -119,8 +118,7 @@ init({Mod, Key, Caller}) ->
     process_flag(trap_exit, true),
     case toroco_wiring:lookup({Mod:kind(), Key}) of
         {ok, Cfg} ->
-            C = #c{mod = Mod, key = Key, me = toroco_wire:address(Mod:reg(Key)),
-                   data = Mod:init(Key, Cfg)},
+            C = #c{mod = Mod, key = Key, data = Mod:init(Key, Cfg)},
             {St, C1, Actions} = start_sync(Cfg, Caller, none, C),
             {ok, St, C1, Actions};
         error ->
@@ -194,8 +192,8 @@ handle_event(Type, Content, _, C) ->
     kind(Type, Content, C).
 
 -spec terminate(term(), ready | syncing, #c{}) -> ok.
-terminate(_Reason, _, #c{links = L, me = Me}) ->
-    toroco_wire:detach_all(L, Me).
+terminate(_Reason, _, C = #c{links = L}) ->
+    toroco_wire:detach_all(L, me(C)).
 
 %%====================================================================
 %% Events
@@ -250,8 +248,8 @@ add_actions(More, {keep_state, C, Actions}) -> {keep_state, C, More ++ Actions}.
 %% Re-wiring
 %%====================================================================
 
-start_sync(Cfg = #{upstreams := Ups}, Caller, From, C = #c{links = L, me = Me}) ->
-    {L1, Sync} = toroco_wire:start_sync(Ups, L, Me, Caller),
+start_sync(Cfg = #{upstreams := Ups}, Caller, From, C = #c{links = L}) ->
+    {L1, Sync} = toroco_wire:start_sync(Ups, L, me(C), Caller),
     C1 = C#c{links = L1, sync = {Sync, From, Cfg}},
     case toroco_wire:sync_done(Sync) of
         true -> finish(C1);
@@ -278,6 +276,15 @@ finish(C = #c{sync = {Sync, From, Cfg}, links = L, mod = Mod, data = D}) ->
                 _ -> [{reply, From, ok}]
             end,
     {ready, C1, [{{timeout, sync}, cancel} | Reply ++ Actions]}.
+
+%% A consumer answers once its own wait is over, so the wiring server waits
+%% a little longer than that, and never forever.
+answer_timeout() ->
+    sync_timeout() + 5000.
+
+%% The consumer's own address, as its upstreams know it.
+me(#c{mod = Mod, key = Key}) ->
+    toroco_wire:address(Mod:reg(Key)).
 
 sync_timeout() ->
     application:get_env(toroco, sync_timeout_ms, 5000).

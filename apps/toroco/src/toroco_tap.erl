@@ -9,23 +9,24 @@
 %%     the network (`{'$toroco_tap', Subs}'). Each process keeps, in its own
 %%     state, only the sinks that concern it ({@link select/3}): with no
 %%     subscriber an emission does no send and no lookup;</li>
-%% <li>one relay process per subscription, on the subscriber's node, between
-%%     the producers and the subscriber: it keeps the subscriber's pending
-%%     events under `buffer' and counts what it cannot keep;</li>
-%% <li>the producers' side, {@link notify/2}: one bounded send per sink.</li>
+%% <li>the producers' side, {@link notify/2}: one bounded send per sink,
+%%     straight to the subscriber;</li>
+%% <li>one watcher process per subscription, beside the subscriber, that
+%%     looks at the subscriber's queue every few milliseconds, tells the
+%%     producers how full it is, and reports what they dropped.</li>
 %% </ul>
 %%
-%% Bounding. A sink carries an `atomics' array: (1) events the relay holds
-%% (in its mailbox or its queue), (2) events dropped, (3) the subscriber's
-%% queue length as the relay last saw it. A producer sends only while
-%% held + seen &lt; buffer, else counts a drop; the relay forwards what the
-%% subscriber has room for, and while anything is held, seen or dropped it
-%% looks again every few milliseconds, so `{dropped, N}' reaches the
-%% subscriber as soon as it has room, even if no later event comes. Every
-%% event is either received or counted.
+%% Bounding. A sink carries an `atomics' array: (1) events sent since the
+%% watcher last looked, (2) events dropped, (3) the subscriber's queue
+%% length when the watcher last looked. A producer sends only while
+%% sent + seen &lt; buffer, else counts a drop. The watcher looks every
+%% 5 ms while anything is sent, seen or dropped (every 50 ms otherwise),
+%% and as soon as the subscriber has room it sends `{dropped, N}', even if
+%% no later event comes. Every event is either received or counted; the
+%% count errs on the side of dropping early, never of growing the queue.
 %%
-%% Per producer, events go producer → relay → subscriber, so the events of
-%% one source arrive in emission order.
+%% Events go from each producer straight to the subscriber, so the events
+%% of one source arrive in emission order.
 -module(toroco_tap).
 -behaviour(gen_server).
 
@@ -47,7 +48,7 @@
 %% One subscription as the producers see it.
 -opaque sub() :: {reference(), pid(), atomics:atomics_ref(), pos_integer(),
                   [kind()], all | [atom()]}.
--type sink() :: {reference(), pid(), atomics:atomics_ref(), pos_integer()}.
+-type sink() :: {reference(), pid(), atomics:atomics_ref(), pos_integer()}.  % subscriber
 %% What a producer keeps: the sinks of each kind that concern it.
 -type sinks() :: #{kind() => [sink()]}.
 
@@ -55,6 +56,7 @@
 -define(KINDS, [emit, deliver, router, lifecycle]).
 -define(DEFAULT_BUFFER, 10000).
 -define(POLL_MS, 5).
+-define(IDLE_POLL_MS, 50).
 %% Cells of a sink's atomics array.
 -define(HELD, 1).
 -define(DROPPED, 2).
@@ -134,13 +136,13 @@ select([], _Kinds, _Name) ->
     #{};
 select(Subs, Kinds, Name) ->
     lists:foldl(
-      fun({Ref, Relay, A, Max, SubKinds, Names}, Acc) ->
+      fun({Ref, Sub, A, Max, SubKinds, Names}, Acc) ->
               case Names =:= all orelse lists:member(Name, Names) of
                   true ->
                       lists:foldl(fun(K, Acc1) ->
                                           case lists:member(K, SubKinds) of
-                                              true -> maps:update_with(K, fun(L) -> L ++ [{Ref, Relay, A, Max}] end,
-                                                                       [{Ref, Relay, A, Max}], Acc1);
+                                              true -> maps:update_with(K, fun(L) -> L ++ [{Ref, Sub, A, Max}] end,
+                                                                       [{Ref, Sub, A, Max}], Acc1);
                                               false -> Acc1
                                           end
                                   end, Acc, Kinds);
@@ -153,14 +155,14 @@ select(Subs, Kinds, Name) ->
 -spec notify([sink()], event()) -> ok.
 notify([], _Event) ->
     ok;
-notify([{Ref, Relay, A, Max} | Rest], Event) ->
+notify([{Ref, Sub, A, Max} | Rest], Event) ->
     Held = atomics:add_get(A, ?HELD, 1),
     _ = case Held + atomics:get(A, ?SEEN) > Max of
             true ->
                 atomics:sub(A, ?HELD, 1),
                 atomics:add(A, ?DROPPED, 1);
             false ->
-                Relay ! {toroco_event, Ref, Event}
+                Sub ! {toroco_event, Ref, Event}
         end,
     notify(Rest, Event).
 
@@ -186,52 +188,54 @@ lifecycle(#{}, _Name, _What) ->
 %% The tap server
 %%====================================================================
 
--spec init([]) -> {ok, #{reference() => sub()}}.
+%% The server's state: the subscriptions, and the watcher of each.
+-spec init([]) -> {ok, {#{reference() => sub()}, #{reference() => pid()}}}.
 init([]) ->
     process_flag(trap_exit, true),
     _ = ets:new(?TABLE, [named_table, protected, set, {read_concurrency, true}]),
     ets:insert(?TABLE, {subs, []}),
-    {ok, #{}}.
+    {ok, {#{}, #{}}}.
 
--spec handle_call(term(), gen_server:from(), map()) -> {reply, term(), map()}.
-handle_call({subscribe, Pid, Kinds, Names, Buffer}, _From, Subs) ->
+-spec handle_call(term(), gen_server:from(), State) -> {reply, term(), State}
+              when State :: {map(), map()}.
+handle_call({subscribe, Pid, Kinds, Names, Buffer}, _From, {Subs, Ws}) ->
     Ref = make_ref(),
     A = atomics:new(3, [{signed, true}]),
-    Relay = spawn_relay(Pid, Ref, A, Buffer),
-    Subs1 = Subs#{Ref => {Ref, Relay, A, Buffer, Kinds, Names}},
+    W = spawn_watcher(Pid, Ref, A, Buffer),
+    Subs1 = Subs#{Ref => {Ref, Pid, A, Buffer, Kinds, Names}},
     publish(Subs1),
-    {reply, {ok, Ref}, Subs1};
-handle_call({unsubscribe, Ref}, _From, Subs) ->
-    case Subs of
-        #{Ref := {_, Relay, _, _, _, _}} ->
+    {reply, {ok, Ref}, {Subs1, Ws#{Ref => W}}};
+handle_call({unsubscribe, Ref}, _From, {Subs, Ws}) ->
+    case Ws of
+        #{Ref := W} ->
             Subs1 = maps:remove(Ref, Subs),
             publish(Subs1),
-            unlink(Relay),
-            exit(Relay, kill),
-            {reply, ok, Subs1};
+            unlink(W),
+            exit(W, kill),
+            {reply, ok, {Subs1, maps:remove(Ref, Ws)}};
         #{} ->
-            {reply, ok, Subs}
+            {reply, ok, {Subs, Ws}}
     end;
-handle_call(_Req, _From, Subs) ->
-    {reply, {error, unknown_request}, Subs}.
+handle_call(_Req, _From, State) ->
+    {reply, {error, unknown_request}, State}.
 
--spec handle_cast(term(), map()) -> {noreply, map()}.
-handle_cast(_Msg, Subs) ->
-    {noreply, Subs}.
+-spec handle_cast(term(), State) -> {noreply, State} when State :: {map(), map()}.
+handle_cast(_Msg, State) ->
+    {noreply, State}.
 
-%% A relay ends when its subscriber dies: the subscription goes with it.
--spec handle_info(term(), map()) -> {noreply, map()}.
-handle_info({'EXIT', Pid, _}, Subs) ->
-    case [R || {R, {_, Relay, _, _, _, _}} <- maps:to_list(Subs), Relay =:= Pid] of
+%% A watcher ends when its subscriber dies: the subscription goes with it.
+-spec handle_info(term(), State) -> {noreply, State} when State :: {map(), map()}.
+handle_info({'EXIT', Pid, _}, {Subs, Ws}) ->
+    case [R || {R, W} <- maps:to_list(Ws), W =:= Pid] of
         [Ref] ->
             Subs1 = maps:remove(Ref, Subs),
             publish(Subs1),
-            {noreply, Subs1};
+            {noreply, {Subs1, maps:remove(Ref, Ws)}};
         [] ->
-            {noreply, Subs}
+            {noreply, {Subs, Ws}}
     end;
-handle_info(_Msg, Subs) ->
-    {noreply, Subs}.
+handle_info(_Msg, State) ->
+    {noreply, State}.
 
 %% The table first, then every running process of the network: a process
 %% registers its name before it reads the table in init, so none is missed.
@@ -249,70 +253,37 @@ is_network(Name) ->
     end.
 
 %%====================================================================
-%% The relay
+%% The watcher
 %%====================================================================
 
-spawn_relay(Sub, Ref, A, Max) ->
+spawn_watcher(Sub, Ref, A, Max) ->
     spawn_link(fun() ->
-                       process_flag(priority, high),
                        Mon = erlang:monitor(process, Sub),
-                       relay(#{sub => Sub, mon => Mon, ref => Ref, a => A, max => Max,
-                               q => queue:new(), qlen => 0, timer => false})
+                       watch(Sub, Mon, Ref, A, Max)
                end).
 
-relay(S = #{mon := Mon, ref := Ref}) ->
-    receive
-        {toroco_event, Ref, Event} ->
-            relay(drain(enqueue(Event, S)));
-        poll ->
-            relay(flush(S#{timer := false}));
-        {'DOWN', Mon, process, _, _} ->
+watch(Sub, Mon, Ref, A, Max) ->
+    Sent = atomics:get(A, ?HELD),
+    case erlang:process_info(Sub, message_queue_len) of
+        {message_queue_len, Len} ->
+            Dropped = atomics:get(A, ?DROPPED),
+            Seen = case Dropped > 0 andalso Len < Max of
+                       true ->
+                           Sub ! {toroco_event, Ref, {dropped, Dropped}},
+                           atomics:sub(A, ?DROPPED, Dropped),
+                           Len + 1;
+                       false ->
+                           Len
+                   end,
+            atomics:put(A, ?SEEN, Seen),
+            %% What was sent before the look is in the queue length now.
+            atomics:sub(A, ?HELD, Sent),
+            Busy = Sent > 0 orelse Seen > 0 orelse atomics:get(A, ?DROPPED) > 0,
+            receive
+                {'DOWN', Mon, process, _, _} -> exit(normal)
+            after case Busy of true -> ?POLL_MS; false -> ?IDLE_POLL_MS end ->
+                    watch(Sub, Mon, Ref, A, Max)
+            end;
+        undefined ->
             exit(normal)
     end.
-
-%% Takes everything already in the mailbox before forwarding, so that one
-%% look at the subscriber's queue serves many events.
-drain(S = #{ref := Ref}) ->
-    receive
-        {toroco_event, Ref, Event} -> drain(enqueue(Event, S))
-    after 0 ->
-            flush(S)
-    end.
-
-enqueue(Event, S = #{q := Q, qlen := N}) ->
-    S#{q := queue:in(Event, Q), qlen := N + 1}.
-
-flush(S = #{sub := Sub, a := A, max := Max, q := Q, qlen := N, ref := Ref}) ->
-    SubLen = case erlang:process_info(Sub, message_queue_len) of
-                 {message_queue_len, L} -> L;
-                 undefined -> 0
-             end,
-    Room = max(0, Max - SubLen),
-    K = min(N, Room),
-    Q1 = forward(K, Q, Sub, Ref),
-    atomics:sub(A, ?HELD, K),
-    Dropped = case N - K of
-                  0 when Room - K > 0 -> atomics:exchange(A, ?DROPPED, 0);
-                  _ -> 0
-              end,
-    _ = Dropped > 0 andalso (Sub ! {toroco_event, Ref, {dropped, Dropped}}),
-    Seen = SubLen + K + min(Dropped, 1),
-    atomics:put(A, ?SEEN, Seen),
-    S1 = S#{q := Q1, qlen := N - K},
-    %% Look again while anything is waiting, unseen or uncounted.
-    case N - K > 0 orelse Seen > 0 orelse atomics:get(A, ?DROPPED) > 0 of
-        true -> poll(S1);
-        false -> S1
-    end.
-
-forward(0, Q, _Sub, _Ref) ->
-    Q;
-forward(K, Q, Sub, Ref) ->
-    {{value, Event}, Q1} = queue:out(Q),
-    Sub ! {toroco_event, Ref, Event},
-    forward(K - 1, Q1, Sub, Ref).
-
-poll(S = #{timer := true}) -> S;
-poll(S) ->
-    erlang:send_after(?POLL_MS, self(), poll),
-    S#{timer := true}.

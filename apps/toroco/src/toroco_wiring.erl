@@ -145,26 +145,29 @@ reply({error, _} = Err, S) -> {reply, Err, S}.
 %%====================================================================
 
 %% The wiring and the server's state are written through to the table of
-%% `toroco_store' after each change, part by part (only what changed), so a
-%% restarted server reads back what it had. If the network's supervisors
-%% were restarted meanwhile (everything after the store restarts with them),
-%% the network is empty, and so is the wiring.
+%% `toroco_store' after each change, so a restarted server reads back what it
+%% had: the nodes (only those that changed), and the server's own state; the
+%% inputs and the inhibitors are read back from the routers' and gates'
+%% configurations, which the table holds anyway. If the network's
+%% supervisors were restarted meanwhile (everything after the store restarts
+%% with them), the network is empty, and so is the wiring.
 persist(#s{wiring = W0} = S0, S1 = #s{wiring = W1}) ->
-    _ = [diff(Part, maps:get(Part, W0), maps:get(Part, W1)) || Part <- [nodes, inputs, inhibitors]],
+    diff(maps:get(nodes, W0), maps:get(nodes, W1)),
     _ = meta(S0) =/= meta(S1) andalso ets:insert(?TABLE, {'$meta', meta(S1)}),
     S1.
 
-diff(Part, Old, New) ->
-    maps:foreach(fun(K, V) ->
+%% A node is kept as a tuple: a map of five keys costs twice the words.
+diff(Old, New) ->
+    maps:foreach(fun(K, V = #{kind := Kind, module := M, layer := L, inputs := Ins, outputs := Outs}) ->
                          case Old of
                              #{K := V} -> ok;
-                             #{} -> ets:insert(?TABLE, {{Part, K}, V})
+                             #{} -> ets:insert(?TABLE, {{nodes, K}, {Kind, M, L, Ins, Outs}})
                          end
                  end, New),
     maps:foreach(fun(K, _) ->
                          case New of
                              #{K := _} -> ok;
-                             #{} -> ets:delete(?TABLE, {Part, K})
+                             #{} -> ets:delete(?TABLE, {nodes, K})
                          end
                  end, Old).
 
@@ -179,8 +182,14 @@ restore() ->
     Net = network(),
     case ets:lookup(?TABLE, '$meta') of
         [{_, #{network := Net, layers := Layers, removed := Removed, stopping := Stopping}}] ->
-            Part = fun(P) -> maps:from_list(ets:select(?TABLE, [{{{P, '$1'}, '$2'}, [], [{{'$1', '$2'}}]}])) end,
-            W = #{nodes => Part(nodes), inputs => Part(inputs), inhibitors => Part(inhibitors)},
+            Part = fun(P) -> ets:select(?TABLE, [{{{P, '$1'}, '$2'}, [], [{{'$1', '$2'}}]}]) end,
+            W = #{nodes => maps:from_list([{N, #{kind => Kind, module => M, layer => L,
+                                                  inputs => Ins, outputs => Outs}}
+                                             || {N, {Kind, M, L, Ins, Outs}} <- Part(nodes)]),
+                  inputs => maps:from_list([{K, maps:with([sources, buffer, idle], Cfg)}
+                                            || {K, Cfg} <- Part(router)]),
+                  inhibitors => lists:foldl(fun({_, #{entries := Es}}, Acc) -> maps:merge(Acc, Es) end,
+                                            #{}, Part(gate))},
             %% A layer taken out while the server was down is seen here.
             {Alive, Gone} = lists:partition(fun({_, Pid}) -> is_process_alive(Pid) end,
                                             maps:to_list(Layers)),
@@ -310,8 +319,8 @@ apply_plan(#{routers := OldR, gates := OldG, subs := OldSubs},
     Changed = fun(New, Old) -> [{K, V} || {K, V} <- maps:to_list(New), maps:get(K, Old, none) =/= V] end,
     _ = [ets:insert(?TABLE, {{subs, E}, Subs}) || {E, Subs} <- Changed(NewSubs, OldSubs)],
     _ = [ets:delete(?TABLE, {subs, E}) || E <- maps:keys(OldSubs), not maps:is_key(E, NewSubs)],
-    _ = [ets:insert(?TABLE, {{gate, K}, Cfg}) || {K, Cfg} <- Changed(NewG, OldG)],
-    _ = [ets:insert(?TABLE, {{router, K}, Cfg}) || {K, Cfg} <- Changed(NewR, OldR)],
+    _ = [ets:insert(?TABLE, {{gate, K}, stored(gate, Cfg)}) || {K, Cfg} <- Changed(NewG, OldG)],
+    _ = [ets:insert(?TABLE, {{router, K}, stored(router, Cfg)}) || {K, Cfg} <- Changed(NewR, OldR)],
     %% Only consumers that are new or whose configuration changed are touched,
     %% so a change costs in proportion to what it changes.
     _ = [ensure(gate, K, maps:is_key(K, OldG), Caller)
@@ -327,23 +336,34 @@ apply_plan(#{routers := OldR, gates := OldG, subs := OldSubs},
 ensure(Kind, Key, Changed, Caller) ->
     Mod = consumer_module(Kind),
     case supervisor:start_child(toroco_routers_sup, toroco_consumer:child_spec(Mod, Key, Caller)) of
-        {ok, _} -> _ = toroco_consumer:ready(Mod, Key), ok;
-        {error, {already_started, _}} when Changed -> _ = toroco_consumer:rewire(Mod, Key, Caller), ok;
+        {ok, _} -> answered(toroco_consumer:ready(Mod, Key));
+        {error, {already_started, _}} when Changed -> answered(toroco_consumer:rewire(Mod, Key, Caller));
         {error, {already_started, _}} -> ok;
         {error, already_present} ->
             _ = supervisor:restart_child(toroco_routers_sup, {Kind, Key}),
-            _ = toroco_consumer:ready(Mod, Key),
-            ok;
+            answered(toroco_consumer:ready(Mod, Key));
         {error, Reason} ->
             logger:error("toroco: could not start ~p ~p: ~p", [Kind, Key, Reason],
                          #{domain => [toroco, wiring]})
     end.
+
+%% A consumer that did not take its change in is logged; the change goes on
+%% (the consumer's supervisor or its own late answers bring it right).
+answered(ok) -> ok;
+answered({error, Reason}) ->
+    logger:error("toroco: a router or gate did not take a wiring change in: ~p", [Reason],
+                 #{domain => [toroco, wiring]}).
 
 stop(Kind, Key) ->
     _ = Kind =:= router andalso toroco_router:unwire(Key),
     _ = supervisor:terminate_child(toroco_routers_sup, {Kind, Key}),
     _ = supervisor:delete_child(toroco_routers_sup, {Kind, Key}),
     ets:delete(?TABLE, {Kind, Key}).
+
+%% What a consumer reads of its configuration: the rest is the plan's own
+%% (its key says the rest), and every byte counts ten thousand times.
+stored(router, Cfg) -> maps:with([sources, upstreams, buffer, idle], Cfg);
+stored(gate, Cfg) -> maps:with([members, entries, upstreams, subs], Cfg).
 
 consumer_module(router) -> toroco_router;
 consumer_module(gate) -> toroco_gate.

@@ -21,6 +21,9 @@
 
 -export([run/3, decode/2, too_large/2]).
 
+%% The event path's messages, as the runtime defines them.
+-include_lib("toroco/src/toroco_wire.hrl").
+
 -export_type([result/0]).
 
 -type result() :: {ok, jiffy:json_value()}
@@ -123,13 +126,13 @@ known(Other, What) ->
 printable(B) when is_binary(B) -> [$", B, $"];
 printable(T) -> toroco_live_json:term_text(T).
 
-%% Brooks' reset (SPEC §4) is what a reset source's event does: the runtime
-%% delivers it to the behavior as the `'$reset'' input. The dashboard hands
-%% the behavior that same delivery.
+%% Brooks' reset (SPEC §4) is what a reset source's event does: a router
+%% delivers it to the behavior as its `'$reset'' input. The dashboard hands
+%% the behavior that same delivery (the runtime has no call for it).
 reset(B) ->
     case whereis(toroco_names:process(B)) of
         undefined -> {error, {not_running, B}};
-        Pid -> Pid ! {'$toroco_in', '$reset', reset}, ok
+        Pid -> toroco_wire:send(Pid, ?WIRE_IN('$reset', reset))
     end.
 
 restart(B) ->
@@ -146,6 +149,7 @@ done({error, Reason}) ->
 error(Status, Reason, Fmt, Args) ->
     {error, Status, Reason, unicode:characters_to_binary(io_lib:format(Fmt, Args))}.
 
+-spec refuse(400 | 401 | 404 | 409 | 413, atom(), io:format(), [term()]) -> no_return().
 refuse(Status, Reason, Fmt, Args) ->
     {error, Status, Reason, Message} = error(Status, Reason, Fmt, Args),
     throw({refused, Status, Reason, Message}).

@@ -44,6 +44,9 @@
 -record(h, {max_clients :: pos_integer(),
             clients = #{} :: #{pid() => #client{}},
             tap = none :: reference() | none,
+            %% The tap server: when it goes (the runtime restarts), so does
+            %% the subscription, and the hub subscribes again.
+            tap_monitor = none :: reference() | none,
             emits = #{} :: #{{atom(), atom()} => non_neg_integer()},
             delivers = #{} :: #{{atom(), atom()} => non_neg_integer()},
             window = {#{}, #{}} :: {map(), map()},
@@ -114,7 +117,7 @@ handle_call({join, Pid}, _From, H = #h{clients = Cs, max_clients = Max}) ->
                                               <<"node">> => toroco_live_json:value(node()),
                                               <<"clients">> => map_size(Cs) + 1}),
             %% The newcomer gets the latest state at once, not at the next change.
-            H1 = H#h{clients = Cs#{Pid => C}, dirty = true, world_dirty = H#h.world =/= none},
+            H1 = H#h{clients = Cs#{Pid => C}, dirty = true, world_dirty = true},
             {reply, {ok, Hello}, H1}
     end;
 handle_call(stats, _From, H) ->
@@ -148,6 +151,8 @@ handle_info({toroco_live_world, changed}, H) ->
 handle_info(tick, H) ->
     erlang:send_after(?TICK_MS, self(), tick),
     {noreply, tick(H)};
+handle_info({'DOWN', MRef, process, _, _}, H = #h{tap_monitor = MRef}) ->
+    {noreply, H#h{tap = none, tap_monitor = none, dirty = true}};
 handle_info({'DOWN', MRef, process, Pid, _}, H = #h{clients = Cs}) ->
     case Cs of
         #{Pid := #client{mref = MRef, skipped = S}} ->
@@ -171,7 +176,7 @@ terminate(_Reason, #h{tap = Tap}) ->
 
 subscribe(H = #h{tap = none}) ->
     try toroco:subscribe_events(#{buffer => ?TAP_BUFFER}) of
-        {ok, Ref} -> H#h{tap = Ref};
+        {ok, Ref} -> H#h{tap = Ref, tap_monitor = monitor(process, toroco_tap)};
         {error, _} -> H
     catch error:undef -> H;
           exit:_ -> H

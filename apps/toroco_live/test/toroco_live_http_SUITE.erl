@@ -71,19 +71,7 @@ refused(Config, Req, Status, Reason) ->
     ?assertEqual(Before, snapshot()),
     Body.
 
-wait(Fun, Timeout) ->
-    Deadline = erlang:monotonic_time(millisecond) + Timeout,
-    wait_until(Fun, Deadline).
-
-wait_until(Fun, Deadline) ->
-    case Fun() of
-        true -> ok;
-        false ->
-            case erlang:monotonic_time(millisecond) > Deadline of
-                true -> ct:fail(condition_not_met);
-                false -> receive after 20 -> wait_until(Fun, Deadline) end
-            end
-    end.
+wait(Fun, Timeout) -> toroco_live_test_client:wait(Fun, Timeout).
 
 %%====================================================================
 %% Routes

@@ -199,8 +199,10 @@ async function relayout(s) {
       g1.setAttribute('class', 'node ' + n.kind);
       g1.dataset.node = n.name;
       el('rect', { width: c.width, height: c.height }, g1);
-      el('text', { x: 6, y: 15 }, g1).textContent = n.name;
-      const sub = el('text', { x: 6, y: 31, class: 'sub' }, g1);
+      if (n.kind === 'behavior')
+        el('rect', { width: 5, height: c.height, class: 'stripe', fill: layerColour(n.layer) }, g1);
+      el('text', { x: 10, y: 15 }, g1).textContent = n.name;
+      const sub = el('text', { x: 10, y: 31, class: 'sub' }, g1);
       g1.onclick = () => select(n.name);
       layout.nodes.set(n.name, { g: g1, sub });
     } else {
@@ -246,7 +248,7 @@ function restyle(s) {
         const latch = i.latches.find((l) => same(l.source, x.source));
         w.path.setAttribute('class', 'wire' + (win ? ' win' : hold ? ' held' : ''));
         let label = (i.sources.length > 1 ? '#' + x.priority + ' ' : '') + (x.rate ? x.rate + '/s ' : '');
-        if (hold) label += '⏳' + (hold.ms === 'infinity' ? '∞' : hold.ms + 'ms') + ' ';
+        if (hold) label += 'hold ' + (hold.ms === 'infinity' ? '∞' : hold.ms + 'ms') + ' ';
         if (latch) label += '=' + short(latch.term);
         w.label.textContent = label.trim();
         w.label.setAttribute('class', 'wire-label' + (win ? ' win' : ''));
@@ -259,6 +261,8 @@ function restyle(s) {
     }
   }
 }
+const layerColours = ['#90a4ae', '#66bb6a', '#42a5f5', '#ab47bc', '#ef5350', '#ffa726', '#26c6da'];
+function layerColour(l) { return layerColours[l % layerColours.length]; }
 function short(t) { return t.length > 18 ? t.slice(0, 17) + '…' : t; }
 
 // ---------------------------------------------------------------- details
@@ -320,7 +324,9 @@ function onWorld(w) {
   const [W, H] = w.arena;
   svg.setAttribute('viewBox', `-0.1 -0.1 ${W + 0.2} ${H + 0.2}`);
   svg.innerHTML = '';
-  const g = el('g', { transform: `matrix(1 0 0 -1 0 ${H})` }, svg);
+  const clip = el('clipPath', { id: 'arena-clip' }, el('defs', {}, svg));
+  el('rect', { x: 0, y: 0, width: W, height: H }, clip);
+  const g = el('g', { transform: `matrix(1 0 0 -1 0 ${H})`, 'clip-path': 'url(#arena-clip)' }, svg);
   el('rect', { x: 0, y: 0, width: W, height: H, fill: '#fff', stroke: '#263238', 'stroke-width': 0.03 }, g);
   for (const [[x1, y1], [x2, y2]] of w.walls)
     el('line', { x1, y1, x2, y2, stroke: '#263238', 'stroke-width': 0.04, 'stroke-linecap': 'round' }, g);
