@@ -31,7 +31,8 @@
 %% <li>`watchdog_ms' (default 500, 0 = off): the program puts the servos at
 %%     neutral when no servo command came for that long.</li>
 %% <li>`keepalive' (default `true'): while the device runs it repeats the
-%%     applied velocities every `watchdog_ms div 3', so the watchdog fires
+%%     applied velocities every `watchdog_ms div 3' of real time (at any
+%%     speed of the runtime's clock), so the watchdog fires
 %%     only when this side stalls, not when the wiring holds a latched
 %%     velocity. With `false' a velocity lasts `watchdog_ms' unless sent
 %%     again.</li>
@@ -223,10 +224,14 @@ port(D = #{client := C, port_errors := N, name := Name}, F) ->
             {error, D#{port_errors := N + 1}}
     end.
 
+%% The watchdog it feeds counts real time, so the keepalive does too: an
+%% absolute deadline on the monotonic clock, which the engine passes as is
+%% whatever the runtime clock's speed (toroco_clock scales relative ones).
 keepalive(D) ->
     case keepalive_ms(D) of
         off -> [];
-        Ms -> [{{timeout, keepalive}, Ms, tick}]
+        Ms -> [{{timeout, keepalive}, erlang:monotonic_time(millisecond) + Ms, tick,
+                [{abs, true}]}]
     end.
 
 keepalive_ms(#{keepalive := true, watchdog_ms := W}) when W > 0 -> max(10, W div 3);
