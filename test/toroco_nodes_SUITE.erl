@@ -128,6 +128,8 @@ placement_and_names(Config) ->
     #{node := B, kind := device} = t(A, inspect, [s]),
     #{node := B} = t(B, inspect, [s]),
     {error, {name_taken, s, B}} = t(A, add_device, [s, toroco_fake_sensor, #{outputs => [out]}]),
+    {error, {nodedown, 'nowhere@127.0.0.1'}} =
+        t(A, add_device, [s2, toroco_fake_sensor, #{outputs => [out], node => 'nowhere@127.0.0.1'}]),
     ok = t(A, add_device, [act, toroco_fake_actuator, #{inputs => [in]}]),
     #{devices := [act, s], nodes := #{act := A, s := B}} = t(B, inspect, []),
     %% Wired from a third node, acted on where the receiver lives.

@@ -71,9 +71,11 @@ call(Request) ->
 call(Node, Request) when Node =:= node() ->
     call(Request);
 call(Node, Request) ->
-    _ = lists:member(Node, peers()) orelse
-        (net_kernel:connect_node(Node) andalso call({meet, Node})),
-    try gen_server:call({?MODULE, Node}, Request, infinity)
+    Met = lists:member(Node, peers()) orelse
+        (net_kernel:connect_node(Node) =:= true andalso call({meet, Node}) =:= ok),
+    try Met andalso gen_server:call({?MODULE, Node}, Request, infinity) of
+        false -> {error, {nodedown, Node}};
+        Reply -> Reply
     catch exit:{{nodedown, _}, _} -> {error, {nodedown, Node}};
           exit:{noproc, _} -> {error, {nodedown, Node}}
     end.
