@@ -283,7 +283,7 @@ clash_after_partition_reported(Config) ->
     true = lists:member({twin, A}, Clashes) orelse lists:member({twin, B}, Clashes),
     end_per_testcase(x, [{peers, Ps} | Config]).
 
-top_and_watch_cover_nodes() -> [{doc, "top on one node lists the whole robot with the node of each thing; watch/2 of a receiver on another node prints here"}].
+top_and_watch_cover_nodes() -> [{doc, "top on one node lists the whole robot with the node of each thing; the observer tap hears other nodes; watch/2 of a receiver on another node prints here"}].
 top_and_watch_cover_nodes(Config) ->
     {Ps, A, B, _C} = nodes3(),
     sensor(A, s),
@@ -293,6 +293,19 @@ top_and_watch_cover_nodes(Config) ->
     [_ | _] = [L || L <- string:split(Top, "\n", all), string:find(L, "act") =/= nomatch,
                     string:find(L, atom_to_list(B)) =/= nomatch],
     [_ | _] = [L || L <- string:split(Top, "\n", all), string:find(L, "ON") =/= nomatch],
+    %% The tap on A hears B's deliveries too.
+    Me = self(),
+    Sub = erpc:call(A, erlang, spawn,
+                    [fun() ->
+                             {ok, Ref} = toroco:subscribe_events(#{kinds => [deliver]}),
+                             Me ! {subscribed, self()},
+                             receive {toroco_event, Ref, Ev} -> Me ! {tapped, Ev} end,
+                             receive stop -> toroco:unsubscribe_events(Ref) end
+                     end]),
+    receive {subscribed, Sub} -> ok after 5000 -> ct:fail(no_subscription) end,
+    ok = t(A, inject, [{s, out}, 41, #{}]),
+    receive {tapped, {deliver, _, {act, in}, 41}} -> ok after 3000 -> ct:fail(not_tapped) end,
+    Sub ! stop,
     Io = capture(),
     ok = t(A, watch, [act, #{max => 1, io => Io, notify => self()}]),
     ok = t(A, inject, [{s, out}, 42, #{}]),

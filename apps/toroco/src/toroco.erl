@@ -312,9 +312,20 @@ reload(Module) ->
 %% dies is unsubscribed.
 -spec subscribe_events(toroco_tap:opts()) -> {ok, reference()} | {error, error_reason()}.
 subscribe_events(Opts) ->
-    toroco_tap:subscribe(Opts).
+    %% A robot on several nodes: the other nodes' events come through a
+    %% relay on each (toroco_tap_relay).
+    case toroco_tap:subscribe(Opts) of
+        {ok, Ref} ->
+            case [N || N <- toroco_wiring:peers(), N =/= node()] of
+                [] -> ok;
+                Others -> _ = erpc:multicall(Others, toroco_tap_relay, start, [self(), Ref, Opts], 6000)
+            end,
+            {ok, Ref};
+        Err -> Err
+    end.
 
 %% @doc Ends a subscription.
 -spec unsubscribe_events(reference()) -> ok.
 unsubscribe_events(Ref) ->
-    toroco_tap:unsubscribe(Ref).
+    ok = toroco_tap:unsubscribe(Ref),
+    toroco_tap_relay:stop(Ref).
