@@ -316,10 +316,10 @@ subscribe_events(Opts) ->
     %% relay on each (toroco_tap_relay).
     case toroco_tap:subscribe(Opts) of
         {ok, Ref} ->
-            case [N || N <- toroco_wiring:peers(), N =/= node()] of
-                [] -> ok;
-                Others -> _ = erpc:multicall(Others, toroco_tap_relay, start, [self(), Ref, Opts], 6000)
-            end,
+            _ = case [N || N <- toroco_wiring:peers(), N =/= node()] of
+                    [] -> ok;
+                    Others -> erpc:multicall(Others, toroco_tap_relay, start, [self(), Ref, Opts], 6000)
+                end,
             {ok, Ref};
         Err -> Err
     end.
