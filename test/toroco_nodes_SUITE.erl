@@ -10,7 +10,7 @@ suite() -> [{timetrap, {seconds, 60}}].
 all() ->
     [placement_and_names, top_and_watch_cover_nodes, suppression_across_nodes, inhibition_gate_on_third_node,
      hierarchy_uses_remote_layers, reset_from_another_node, remote_emitter_restart_caught_up,
-     stale_source_dropped_and_back, node_killed_and_restarted, partition_heals_with_wiring_as_before,
+     stale_source_dropped_and_back, stale_gate_default_max_age, node_killed_and_restarted, partition_heals_with_wiring_as_before,
      wiring_file_places_on_nodes, clash_after_partition_reported, over_tls].
 
 init_per_suite(Config) ->
@@ -424,3 +424,31 @@ up(Dir) ->
         true -> Dir;
         false -> up(filename:dirname(Dir))
     end.
+
+stale_gate_default_max_age() -> [{doc, "a gated output whose gate's node freezes is let go after remote_max_age_ms (default 300) + 50 ms, its quiet latch kept alive before, and back on thaw"}].
+stale_gate_default_max_age(Config) ->
+    {Ps, A, B, C} = nodes3(),
+    sensor(A, e),
+    sensor(C, i),
+    sensor(B, lo),
+    ok = t(B, add_device, [act, toroco_fake_actuator, #{inputs => [in]}]),
+    ok = t(A, set_inhibitors, [e, #{out => [{i, out}]}]),
+    ok = t(B, set_inputs, [act, #{in => [{e, out}, {lo, out}]}]),
+    ok = t(B, inject, [{lo, out}, low, #{latch => true}]),
+    ok = t(A, inject, [{e, out}, high, #{latch => true}]),
+    await_values(B, act, [low, high]),
+    timer:sleep(700),                       % quiet, the gate's keep-alive holds it
+    [low, high] = values(B, act),
+    OsPid = erpc:call(A, os, getpid, []),
+    T0 = erpc:call(B, erlang, monotonic_time, [millisecond]),
+    _ = os:cmd("kill -STOP " ++ OsPid),
+    try
+        await_values(B, act, [low, high, low]),
+        [_, _, {in, low, T1}] = erpc:call(B, toroco_fake_actuator, history, [act]),
+        ct:pal("gated source let go after ~b ms (default max age 300)", [T1 - T0]),
+        true = T1 - T0 =< 350
+    after
+        os:cmd("kill -CONT " ++ OsPid)
+    end,
+    await_values(B, act, [low, high, low, high]),
+    end_per_testcase(x, [{peers, Ps} | Config]).
