@@ -89,6 +89,25 @@ hi_over_lo(A, B, Input) ->
     ok = t(A, inject, [{hi, out}, high, #{latch => true}]),
     await_values(B, act, [low, high]).
 
+%% act on B has had `low', then `high' from A: quiet for longer than the
+%% max age, high stays (keep-alives); A frozen, `low' comes within Bound ms;
+%% A thawed, `high' comes back.
+frozen_let_go_within(A, B, Bound, What) ->
+    timer:sleep(700),
+    [low, high] = values(B, act),
+    OsPid = erpc:call(A, os, getpid, []),
+    T0 = erpc:call(B, erlang, monotonic_time, [millisecond]),
+    _ = os:cmd("kill -STOP " ++ OsPid),
+    try
+        await_values(B, act, [low, high, low]),
+        [_, _, {in, low, T1}] = erpc:call(B, toroco_fake_actuator, history, [act]),
+        ct:pal("~ts: let go ~b ms after the freeze", [What, T1 - T0]),
+        true = T1 - T0 =< Bound
+    after
+        os:cmd("kill -CONT " ++ OsPid)
+    end,
+    await_values(B, act, [low, high, low, high]).
+
 %% The wiring of a receiver's inputs as inspect shows it.
 wiring_of(Node, R) ->
     maps:map(fun(_, #{sources := Srcs}) -> Srcs end, maps:get(inputs, t(Node, inspect, [R]))).
@@ -233,20 +252,7 @@ stale_source_dropped_and_back() -> [{doc, "a frozen node's latched source is let
 stale_source_dropped_and_back(Config) ->
     {Ps, A, B, _C} = nodes3(),
     hi_over_lo(A, B, [{hi, out, #{max_age => 200}}, {lo, out}]),
-    timer:sleep(600),                       % quiet, but alive: kept
-    [low, high] = values(B, act),
-    OsPid = erpc:call(A, os, getpid, []),
-    T0 = erpc:call(B, erlang, monotonic_time, [millisecond]),
-    _ = os:cmd("kill -STOP " ++ OsPid),
-    try
-        await_values(B, act, [low, high, low]),
-        [_, _, {in, low, T1}] = erpc:call(B, toroco_fake_actuator, history, [act]),
-        ct:pal("let go after ~b ms (max_age 200)", [T1 - T0]),
-        true = T1 - T0 =< 250
-    after
-        os:cmd("kill -CONT " ++ OsPid)
-    end,
-    await_values(B, act, [low, high, low, high]),
+    frozen_let_go_within(A, B, 250, "max_age 200"),
     end_per_testcase(x, [{peers, Ps} | Config]).
 
 node_killed_and_restarted() -> [{doc, "a node that dies lets the lower layers take over at once; restarted with its part, the wiring is as before and its latch is delivered again"}].
@@ -437,18 +443,5 @@ stale_gate_default_max_age(Config) ->
     ok = t(B, inject, [{lo, out}, low, #{latch => true}]),
     ok = t(A, inject, [{e, out}, high, #{latch => true}]),
     await_values(B, act, [low, high]),
-    timer:sleep(700),                       % quiet, the gate's keep-alive holds it
-    [low, high] = values(B, act),
-    OsPid = erpc:call(A, os, getpid, []),
-    T0 = erpc:call(B, erlang, monotonic_time, [millisecond]),
-    _ = os:cmd("kill -STOP " ++ OsPid),
-    try
-        await_values(B, act, [low, high, low]),
-        [_, _, {in, low, T1}] = erpc:call(B, toroco_fake_actuator, history, [act]),
-        ct:pal("gated source let go after ~b ms (default max age 300)", [T1 - T0]),
-        true = T1 - T0 =< 350
-    after
-        os:cmd("kill -CONT " ++ OsPid)
-    end,
-    await_values(B, act, [low, high, low, high]),
+    frozen_let_go_within(A, B, 350, "gated, default max age 300"),
     end_per_testcase(x, [{peers, Ps} | Config]).
