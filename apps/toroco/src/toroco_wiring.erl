@@ -203,7 +203,9 @@ handle_info(?DIR(Node, Dir, Hello, Ack), S0 = #s{wiring = W, clashes = Cl, known
     _ = [logger:error("toroco: ~p is on both ~p and ~p: the names of a robot must be unique "
                       "across its nodes; rename or remove one", [N, node(), Node],
                       #{domain => [toroco, wiring]}) || N <- Clashes],
-    S1 = S#s{clashes = lists:usort([{N, Node} || N <- Clashes] ++ Cl)},
+    %% A node's clashes are those of its latest directory: one resolved
+    %% (renamed or removed on either side) is no longer listed.
+    S1 = S#s{clashes = lists:usort([{N, Node} || N <- Clashes] ++ [C || C = {_, At} <- Cl, At =/= Node])},
     {ok, S2} = rewire({ok, W1}, none, S1),
     resubscribe(Node, S2),
     _ = case Ack of
@@ -263,7 +265,10 @@ resubscribe(Node, #s{wiring = W}) ->
 reply(Result, From, S) ->
     reply(Result, From, S, []).
 
-reply({ok, S1}, From, S, Removed) ->
+reply({ok, S0}, From, S, Removed) ->
+    %% A clash ends when this node's name goes.
+    Local = toroco_wiring_core:nodes(S0#s.wiring),
+    S1 = S0#s{clashes = [C || C = {N, _} <- S0#s.clashes, maps:is_key(N, Local)]},
     Others = others(S),
     Changed = Others =/= [] andalso (Removed =/= [] orelse
         toroco_wiring_core:directory(S#s.wiring) =/= toroco_wiring_core:directory(S1#s.wiring)),
