@@ -158,9 +158,9 @@ accepted(Sock, D = #{clients := Cs, allow := Allow, max_clients := Max, refusals
                        connections := N + 1}
             end;
         {error, _} ->
-            %% gone before it was handed over
+            %% gone before it was handed over: accepted all the same
             gen_tcp:close(Sock),
-            D
+            D#{connections := N + 1}
     end.
 
 drop_client(Sock, Why, D = #{clients := Cs, bad := B}) ->
