@@ -1,7 +1,7 @@
 # The two commands of the README, and their parts.
 #   make run   - the Torobot in the simulated world (default config)
 #   make test  - every test suite: C port, detector, Common Test, PropEr, Dialyzer
-.PHONY: run test deps compile port port-test detector detector-test ct dialyzer bench release clean
+.PHONY: run test deps compile port port-test detector detector-test ct dialyzer bench release board-check clean
 
 WORLD ?= config/worlds/default.world
 
@@ -42,6 +42,11 @@ bench: compile
 
 release: compile
 	rebar3 as prod release
+
+# The board release booted on Debian 12 armhf's Erlang under qemu (root; slow,
+# not part of `make test'): README, "The board".
+board-check: compile
+	scripts/board-emulate
 
 clean:
 	rm -rf _build
