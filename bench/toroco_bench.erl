@@ -20,6 +20,9 @@ main([Dir]) ->
                erlang:system_info(schedulers_online)]),
     warm_up(),
     case os:getenv("TOROCO_BENCH_ONLY") of
+        "memory" ->
+            memory_table([10, 1000, 10000]),
+            halt(0);
         "internal" ->
             table("Internal test", [internal(I, N, Dir) || I <- [closed, 10]], Dir, "internal"),
             halt(0);
@@ -151,6 +154,54 @@ alive(B, N, Dir) ->
     R = run(closed, N, N * 20 + 60000),
     Row = row(B, R, Dir, "alive_" ++ integer_to_list(B)),
     Row#{mem_per => (M1 - M0) div B}.
+
+%% Memory per idle behavior with its router, and where it goes: the new
+%% behavior and router processes, what the processes that were there before
+%% grew by (supervisors, the wiring server, the source's subscribers), ETS,
+%% atoms, and the rest of the system. No latency is measured here.
+memory_table(Counts) ->
+    io:format("~n| behaviors alive | bytes per idle behavior with its router | behavior process | "
+              "router and other new processes | older processes' growth | ETS | atoms | rest | processes |~n"
+              "|---:|---:|---:|---:|---:|---:|---:|---:|---:|~n"),
+    [memory_row(B) || B <- Counts],
+    ok.
+
+memory_row(B) ->
+    chain(closed, 10),
+    ok = toroco:add_device(idle_src, toroco_fake_sensor, #{outputs => [v]}),
+    settle_memory(),
+    Before = maps:from_list([{P, proc_mem(P)} || P <- processes()]),
+    M0 = maps:from_list(erlang:memory()),
+    Names = [list_to_atom("idle" ++ integer_to_list(I)) || I <- lists:seq(1, B)],
+    Terms = [{behavior, Nm, toroco_bench_relay, #{layer => 0}} || Nm <- Names]
+        ++ [{inputs, Nm, #{in => [{idle_src, v}]}} || Nm <- Names],
+    ok = toroco_wiring:call({load, Terms}),
+    settle_memory(),
+    M1 = maps:from_list(erlang:memory()),
+    Behaviors = [whereis(toroco_names:process(Nm)) || Nm <- Names],
+    BehaviorSet = maps:from_keys(Behaviors, true),
+    {New, Grown} = lists:foldl(
+                     fun(P, {NewAcc, GrownAcc}) ->
+                             case {maps:find(P, Before), maps:is_key(P, BehaviorSet)} of
+                                 {error, false} -> {NewAcc + proc_mem(P), GrownAcc};
+                                 {error, true} -> {NewAcc, GrownAcc};
+                                 {{ok, Was}, _} -> {NewAcc, GrownAcc + proc_mem(P) - Was}
+                             end
+                     end, {0, 0}, processes()),
+    Beh = lists:sum([proc_mem(P) || P <- Behaviors]),
+    D = fun(K) -> maps:get(K, M1) - maps:get(K, M0) end,
+    Total = D(total),
+    Rest = Total - Beh - New - Grown - D(ets) - D(atom_used),
+    Per = fun(X) -> round(X / B) end,
+    io:format("| ~w | ~w | ~w | ~w | ~w | ~w | ~w | ~w | ~w |~n",
+              [B, Per(Total), Per(Beh), Per(New), Per(Grown), Per(D(ets)), Per(D(atom_used)),
+               Per(Rest), erlang:system_info(process_count)]).
+
+proc_mem(P) ->
+    case erlang:process_info(P, memory) of
+        {memory, M} -> M;
+        undefined -> 0
+    end.
 
 %% Idle processes hibernate after hibernate_after_ms (1 s): measure after that.
 settle_memory() ->
