@@ -28,13 +28,37 @@ main([Dir]) ->
             halt(0);
         _ -> ok
     end,
-    Internal = [internal(I, N, Dir) || I <- [closed, 1, 2, 5, 10]],
+    Tap = [tap_row(Sub, N, Dir) || Sub <- [none, one, none, one]],
+    table("Observer tap: the closed loop with no subscriber and with one subscriber reading every event "
+          "(alternated, twice)", Tap, Dir, "tap"),
+    case os:getenv("TOROCO_BENCH_ONLY") of
+        "tap" -> halt(0);
+        _ -> ok
+    end,
+    Intervals = [closed, 1, 2, 5, 10],
+    TputN = case Quick of true -> 100000; false -> 500000 end,
+    %% The raw references run before and after the runtime's tests; the
+    %% "× raw" columns divide by the mean of the two.
+    RawBefore = [raw_internal(I, N, Dir) || I <- Intervals],
+    RawTputBefore = raw_throughput(1000, TputN),
+    RawExtBefore = external(raw, N, Dir),
+    Internal = [internal(I, N, Dir) || I <- Intervals],
+    Tput = [throughput(W, TputN) || W <- [1000]],
+    External = external(toroco, N, Dir),
+    RawAfter = [raw_internal(I, N, Dir) || I <- Intervals],
+    RawTputAfter = raw_throughput(1000, TputN),
+    RawExtAfter = external(raw, N, Dir),
+    Raw = mean_rows(RawBefore, RawAfter),
+    RawExt = mean_rows(RawExtBefore, RawExtAfter),
+    table("Raw reference: five plain processes, source → … → sink, " ++ integer_to_list(N)
+          ++ " events (mean of a run before and a run after the runtime's)", Raw, Dir, "raw_internal"),
     table("Internal test: behavior → router → behavior → router → actuator, " ++
-              integer_to_list(N) ++ " events", Internal, Dir, "internal"),
-    Tput = [throughput(W, case Quick of true -> 100000; false -> 500000 end) || W <- [1000]],
-    tput_table("Throughput, open loop with a bounded window", Tput, Dir, "throughput"),
-    External = external(N, Dir),
-    External =/= [] andalso table("External test: UDP sender → udp_link → behavior → udp_link → UDP receiver", External, Dir, "external"),
+              integer_to_list(N) ++ " events", Internal, Dir, "internal", Raw),
+    RawTput = mean_rate(RawTputBefore, RawTputAfter),
+    tput_table("Throughput, open loop with a bounded window", Tput, Dir, "throughput", RawTput),
+    RawExt =/= [] andalso table("Raw reference: UDP sender → plain gen_udp echo → UDP receiver "
+                                "(mean of a run before and a run after)", RawExt, Dir, "raw_external"),
+    External =/= [] andalso table("External test: UDP sender → udp_link → behavior → udp_link → UDP receiver", External, Dir, "external", RawExt),
     Sources = [sources_per_input(K, N, Dir) || K <- [1, 4, 16, 64]],
     table("Sources per input (the others holding latches below the measured source)", Sources, Dir, "sources"),
     Fanout = [fan_out(F, N div 2, Dir) || F <- [1, 8, 64]],
@@ -80,8 +104,11 @@ chain(Mode, N) ->
     ok = toroco:set_inputs(sink, #{in => [{relay, out}]}).
 
 run(Mode, N, Timeout) ->
+    measure(pid(src), Mode, N, Timeout).
+
+measure(Src, Mode, N, Timeout) ->
     Cpu0 = cpu_ticks(), W0 = erlang:monotonic_time(nanosecond),
-    pid(src) ! {run, Mode, N},
+    Src ! {run, Mode, N},
     receive
         {sink_done, _, End, Lats} ->
             Cpu1 = cpu_ticks(),
@@ -101,6 +128,63 @@ internal(Interval, N, Dir) ->
     chain(case Mode of closed -> closed; _ -> none end, N),
     R = run(Mode, N, N * 20 + 10000),
     row(label(Interval), R, Dir, "internal_" ++ label(Interval)).
+
+%% The closed loop with `one' subscriber of the observer tap taking every
+%% event of every kind, or `none'.
+tap_row(Sub, N, Dir) ->
+    chain(closed, N),
+    Reader = case Sub of
+                 one -> tap_reader();
+                 none -> none
+             end,
+    R = run(closed, N, N * 20 + 10000),
+    Events = case Reader of
+                 none -> 0;
+                 _ -> Reader ! {stop, self()}, receive {Reader, Count} -> Count end
+             end,
+    Label = case Sub of
+                none -> "no subscriber";
+                one -> lists:flatten(io_lib:format("one subscriber (~b events)", [Events]))
+            end,
+    row(Label, R, Dir, "tap_" ++ atom_to_list(Sub)).
+
+tap_reader() ->
+    Parent = self(),
+    Pid = spawn(fun() ->
+                        {ok, Ref} = toroco:subscribe_events(#{}),
+                        Parent ! {self(), subscribed},
+                        tap_read(Ref, 0)
+                end),
+    receive {Pid, subscribed} -> Pid end.
+
+tap_read(Ref, Count) ->
+    receive
+        {toroco_event, Ref, _} -> tap_read(Ref, Count + 1);
+        {stop, From} -> From ! {self(), Count}
+    end.
+
+%% The same loads on the raw chain of toroco_bench_raw.
+raw_internal(Interval, N, Dir) ->
+    Mode = case Interval of closed -> closed; Ms -> {paced, Ms} end,
+    Chain = {Src, _} = toroco_bench_raw:chain(case Mode of closed -> closed; _ -> none end, N, self()),
+    R = measure(Src, Mode, N, N * 20 + 10000),
+    toroco_bench_raw:stop(Chain),
+    row(label(Interval), R, Dir, "raw_internal_" ++ label(Interval)).
+
+raw_throughput(W, N) ->
+    Chain = {Src, _} = toroco_bench_raw:chain({window, 100}, N, self()),
+    #{wall_ns := Ns} = measure(Src, {window, W}, N, 120000),
+    toroco_bench_raw:stop(Chain),
+    round(N / (Ns / 1.0e9)).
+
+mean_rows(As, Bs) ->
+    [A#{p50 => (P50a + P50b) / 2, p99 => (P99a + P99b) / 2, avg => (Avga + Avgb) / 2,
+        min => min(Mina, Minb), max => max(Maxa, Maxb), rate => (Ra + Rb) div 2}
+     || {A = #{p50 := P50a, p99 := P99a, avg := Avga, min := Mina, max := Maxa, rate := Ra},
+         #{p50 := P50b, p99 := P99b, avg := Avgb, min := Minb, max := Maxb, rate := Rb}}
+            <- lists:zip(As, Bs)].
+
+mean_rate(A, B) -> (A + B) div 2.
 
 throughput(W, N) ->
     chain({window, 100}, N),
@@ -217,9 +301,9 @@ proc_mem(P) ->
         undefined -> 0
     end.
 
-%% Idle processes hibernate after hibernate_after_ms (1 s): measure after that.
+%% Idle processes hibernate after hibernate_after_ms (5 s): measure after that.
 settle_memory() ->
-    timer:sleep(application:get_env(toroco, hibernate_after_ms, 1000) + 500),
+    timer:sleep(application:get_env(toroco, hibernate_after_ms, 5000) + 500),
     _ = [garbage_collect(P) || P <- processes()],
     ok.
 
@@ -229,32 +313,41 @@ settle_memory() ->
 
 %% Needs the UDP link device and the C sender/receiver (bench/udp_bench.c,
 %% built by scripts/bench). Skipped with a message if either is missing.
-external(N, Dir) ->
+external(What, N, Dir) ->
     Prog = filename:join(filename:dirname(Dir), "udp_bench"),
     case {code:which(toroco_udp_link), filelib:is_regular(Prog)} of
         {non_existing, _} -> io:format("~n(external test skipped: no toroco_udp_link)~n"), [];
         {_, false} -> io:format("~n(external test skipped: no ~s)~n", [Prog]), [];
-        _ -> [external_run(Prog, I, N, Dir) || I <- [10, 5, 2, 1, 0.1]]
+        _ -> [external_run(What, Prog, I, N, Dir) || I <- [10, 5, 2, 1, 0.1]]
     end.
 
-external_run(Prog, IntervalMs, N, Dir) ->
-    restart(),
+%% `toroco': udp_link → relay behavior → udp_link; `raw': a plain gen_udp echo.
+external_run(What, Prog, IntervalMs, N, Dir) ->
     {ok, InSock} = gen_udp:open(0), {ok, InPort} = inet:port(InSock), ok = gen_udp:close(InSock),
     {ok, OutSock} = gen_udp:open(0), {ok, OutPort} = inet:port(OutSock), ok = gen_udp:close(OutSock),
-    ok = toroco:add_device(udp_in, toroco_udp_link, #{port => InPort, outputs => [event]}),
-    ok = toroco:add_behavior(relay, toroco_bench_relay, #{layer => 0}),
-    ok = toroco:add_device(udp_out, toroco_udp_link,
-                           #{port => 0, inputs => [in], peers => [{{127, 0, 0, 1}, OutPort}]}),
-    ok = toroco:set_inputs(relay, #{in => [{udp_in, event}]}),
-    ok = toroco:set_inputs(udp_out, #{in => [{relay, out}]}),
+    Stop = case What of
+               toroco ->
+                   restart(),
+                   ok = toroco:add_device(udp_in, toroco_udp_link, #{port => InPort, outputs => [event]}),
+                   ok = toroco:add_behavior(relay, toroco_bench_relay, #{layer => 0}),
+                   ok = toroco:add_device(udp_out, toroco_udp_link,
+                                          #{port => 0, inputs => [in], peers => [{{127, 0, 0, 1}, OutPort}]}),
+                   ok = toroco:set_inputs(relay, #{in => [{udp_in, event}]}),
+                   ok = toroco:set_inputs(udp_out, #{in => [{relay, out}]}),
+                   fun() -> ok end;
+               raw ->
+                   Echo = toroco_bench_raw:udp_echo({InPort, OutPort}),
+                   fun() -> Echo ! stop end
+           end,
     Cmd = lists:flatten(io_lib:format("~s ~w ~w ~w ~w", [Prog, InPort, OutPort, IntervalMs, N])),
     Cpu0 = cpu_ticks(), W0 = erlang:monotonic_time(nanosecond),
     Out = os:cmd(Cmd),
     Cpu1 = cpu_ticks(), W1 = erlang:monotonic_time(nanosecond),
+    Stop(),
     {Lats, Lost} = parse_udp_bench(Out),
     R = #{lat => Lats, wall_ns => W1 - W0, n => N, lost => Lost,
           cpu => 100 * (Cpu1 - Cpu0) / ticks_per_sec() / ((W1 - W0) / 1.0e9)},
-    row(IntervalMs, R, Dir, "external_" ++ lists:flatten(io_lib:format("~w", [IntervalMs]))).
+    row(IntervalMs, R, Dir, atom_to_list(What) ++ "_external_" ++ lists:flatten(io_lib:format("~w", [IntervalMs]))).
 
 parse_udp_bench(Out) ->
     Lines = string:split(string:trim(Out), "\n", all),
@@ -286,20 +379,36 @@ row(Label, R = #{lat := Lats, wall_ns := Ns, n := N, cpu := Cpu}, Dir, File) ->
 pct(Sorted, P) -> lists:nth(max(1, round(P * length(Sorted))), Sorted).
 
 table(Title, Rows, Dir, File) ->
-    Header = "| test | max µs | avg µs | min µs | p50 µs | p99 µs | mean interval µs | events/s | CPU % | lost |",
-    Lines = [io_lib:format("| ~ts | ~.1f | ~.1f | ~.1f | ~.1f | ~.1f | ~.1f | ~w | ~w | ~w |",
-                           [to_s(L), float(Max), float(Avg), float(Min), float(P50), float(P99),
-                            float(Iv), Rate, round(Cpu), Lost])
+    table(Title, Rows, Dir, File, none).
+
+%% With `Raw' (rows of the same labels from a raw reference), a last column
+%% "× raw": this row's p50 over the raw p50.
+table(Title, Rows, Dir, File, Raw) ->
+    Header = ["| test | max µs | avg µs | min µs | p50 µs | p99 µs | mean interval µs | events/s | CPU % | lost |",
+              case Raw of none -> ""; _ -> " × raw p50 |" end],
+    Ratio = fun(L, P50) ->
+                    case Raw =/= none andalso [R || #{label := RL, p50 := R} <- Raw, RL =:= L] of
+                        [R | _] when R > 0 -> io_lib:format(" ~.2f |", [P50 / R]);
+                        [_ | _] -> " - |";
+                        _ -> ""
+                    end
+            end,
+    Lines = [[io_lib:format("| ~ts | ~.1f | ~.1f | ~.1f | ~.1f | ~.1f | ~.1f | ~w | ~w | ~w |",
+                            [to_s(L), float(Max), float(Avg), float(Min), float(P50), float(P99),
+                             float(Iv), Rate, round(Cpu), Lost]), Ratio(L, P50)]
              || #{label := L, max := Max, avg := Avg, min := Min, p50 := P50, p99 := P99,
                   interval_us := Iv, rate := Rate, cpu := Cpu, lost := Lost} <- Rows],
-    Text = ["\n### ", Title, "\n\n", Header, "\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+    Text = ["\n### ", Title, "\n\n", Header, "\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+            case Raw of none -> ""; _ -> "---:|" end, "\n",
             lists:join("\n", Lines), "\n"],
     io:put_chars(Text),
     ok = file:write_file(filename:join(Dir, File ++ ".md"), unicode:characters_to_binary(Text)).
 
-tput_table(Title, Rows, Dir, File) ->
-    Text = ["\n### ", Title, "\n\n| window | events | events/s | CPU % | lost |\n|---:|---:|---:|---:|---:|\n",
-            [io_lib:format("| ~w | ~w | ~w | ~w | ~w |~n", [W, N, Rate, round(Cpu), Lost])
+tput_table(Title, Rows, Dir, File, RawRate) ->
+    Text = ["\n### ", Title, "\n\n| window | events | events/s | CPU % | lost | raw events/s | × raw |\n"
+            "|---:|---:|---:|---:|---:|---:|---:|\n",
+            [io_lib:format("| ~w | ~w | ~w | ~w | ~w | ~w | ~.2f |~n",
+                           [W, N, Rate, round(Cpu), Lost, RawRate, Rate / max(1, RawRate)])
              || #{label := W, n := N, rate := Rate, cpu := Cpu, lost := Lost} <- Rows]],
     io:put_chars(Text),
     ok = file:write_file(filename:join(Dir, File ++ ".md"), unicode:characters_to_binary(Text)).

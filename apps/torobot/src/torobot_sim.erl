@@ -248,6 +248,7 @@ handle_cast(_Msg, S) ->
 handle_info({timeout, _Ref, tick}, S = #sim{world = W, wheels = Wheels, tick = Tick}) ->
     Winner = winner(),
     S1 = status(sense(S#sim{world = torobot_world:step(W, Tick, Wheels, Winner)}), Winner),
+    publish(S1, Winner),
     case torobot_world:done(S1#sim.world) of
         true ->
             S1#sim.caller ! {?MODULE, self(), {done, S1#sim.world}},
@@ -292,6 +293,24 @@ sense(S = #sim{world = W, ir = Last, sock = Sock, camera = Port}) ->
     _ = [gen_udp:send(Sock, {127, 0, 0, 1}, Port, Datagram)
          || Datagram <- torobot_world:camera(W)],
     S#sim{ir = Ir}.
+
+%% The dashboard's view of the world (toroco_live_world's message, written
+%% down there): a plain send, and only when toroco_live runs in this node.
+publish(#sim{world = W, t0 = T0}, Winner) ->
+    case whereis(toroco_live_world) of
+        undefined ->
+            ok;
+        Viewer ->
+            #{ir := Ir, camera := Camera} = torobot_world:view(W),
+            Robot = #{name => torobot, pose => torobot_world:pose(W),
+                      radius => torobot_world:robot_radius(W), winner => Winner,
+                      ir => Ir, camera => Camera},
+            Viewer ! {toroco_live_world, snapshot,
+                      #{run => {self(), T0}, t_ms => torobot_world:time_ms(W),
+                        arena => torobot_world:arena(W), walls => torobot_world:walls(W),
+                        objects => torobot_world:objects(W), robots => [Robot]}},
+            ok
+    end.
 
 winner() ->
     try toroco:inspect(motors) of

@@ -83,7 +83,7 @@
 
 -export([load/1, from_terms/1]).
 -export([step/3, step/4]).
--export([ir/1, ir_levels/2, ir_thresholds/1, camera/1]).
+-export([ir/1, ir_levels/2, ir_thresholds/1, camera/1, view/1]).
 -export([time_ms/1, pose/1, done/1, summary/1, trajectory/1]).
 -export([arena/1, walls/1, objects/1, start_pose/1, robot_radius/1,
          tick_ms/1, duration_ms/1]).
@@ -462,6 +462,27 @@ ir_reading(#world{pos = Pos, theta = Th, ir = Ir} = W, Mount, Side) ->
     D = clamp(lists:min([Max | Hits]), Min, Max),
     Value = K / (D * 100 + D0) + C + noise(W, {ir, Side}, Noise),
     clamp(round(Value), 0, 1023).
+
+%% @doc What a viewer draws of the sensors now: each IR ray from its sensor
+%% to what it meets (or to its range) with its reading, and the camera's
+%% field of view (it looks along the heading from the robot's centre).
+-spec view(world()) -> #{ir := [#{side := left | right, from := point(), to := point(),
+                                  adc := adc()}],
+                         camera := #{fov_deg := number(), range := number()}}.
+view(#world{pos = Pos, theta = Th, ir = #{mount_deg := Mount, max_range := Max},
+            camera = #{fov_deg := Fov, range := Range}} = W) ->
+    Readings = ir(W),
+    Ray = fun(Side, Angle) ->
+                  Dir = {math:cos(Th + Angle), math:sin(Th + Angle)},
+                  Origin = add(Pos, scale(Dir, robot_radius(W))),
+                  Hits = [T || {_, Shape, _} <- W#world.obstacles,
+                               {hit, T} <- [ray(Origin, Dir, Shape)]],
+                  #{side => Side, from => Origin,
+                    to => add(Origin, scale(Dir, lists:min([Max | Hits]))),
+                    adc => maps:get(Side, Readings)}
+          end,
+    #{ir => [Ray(left, deg_to_rad(Mount)), Ray(right, -deg_to_rad(Mount))],
+      camera => #{fov_deg => Fov, range => Range}}.
 
 %% @doc The near/far state of each IR sensor after the current readings, given
 %% the previous state: the same hysteresis the PRU applies to the ADC.

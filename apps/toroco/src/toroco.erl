@@ -13,6 +13,9 @@
 %% inspect/0}, {@link inspect/1}, {@link top/0}, {@link watch/2}, {@link
 %% unwatch/0}, {@link wiring_dot/0}, {@link reload/1}.
 %%
+%% <b>Observing the event path</b> (SPEC §10): {@link subscribe_events/1},
+%% {@link unsubscribe_events/1}.
+%%
 %% Every call returns `ok' or `{error, Reason}' with a reason naming the
 %% offending behavior, device, input or output; a refused wiring change
 %% changes nothing. The semantics are those of SPEC §4.
@@ -22,12 +25,17 @@
          suspend_behavior/1, resume_behavior/1,
          set_inputs/2, set_inhibitors/2, set_reset/2, load_wiring/1,
          inject/2, inject/3, inspect/0, inspect/1,
-         top/0, watch/2, unwatch/0, wiring_dot/0, reload/1]).
+         top/0, watch/2, unwatch/0, wiring_dot/0, reload/1,
+         subscribe_events/1, unsubscribe_events/1]).
 
 -export_type([name/0, source/0, source_spec/0, input_spec/0, behavior_opts/0,
               hold/0, error_reason/0]).
 
 -type name() :: atom().
+
+%% Whether the caller is the process of behavior or device `Name': a
+%% callback that injects into its own output would wait on itself.
+-define(IS_SELF(Name), (whereis(toroco_names:process(Name)) =:= self())).
 -type source() :: {Emitter :: name(), Output :: atom()}.
 -type hold() :: non_neg_integer() | infinity.
 -type source_spec() :: source() | {Emitter :: name(), Output :: atom(), #{hold => hold()}}.
@@ -125,13 +133,20 @@ inject(Src, Value) ->
 -spec inject(source(), term(), #{latch => boolean(), hold => hold()}) ->
           ok | {error, error_reason()}.
 inject({E, Out} = Src, Value, Opts) when is_atom(E), is_atom(Out), is_map(Opts) ->
-    case inject_op(Src, Value, Opts) of
-        {ok, Op} ->
-            case toroco_wiring:call({node, E}) of
-                {ok, _} -> toroco_behavior:inject(E, Out, Op);
-                Err -> Err
+    %% Straight to the emitter; the wiring table tells an unknown name from
+    %% one that is not running.
+    case {inject_op(Src, Value, Opts), ?IS_SELF(E)} of
+        {{ok, _}, true} -> {error, {self_call, E}};
+        {{ok, Op}, false} ->
+            case toroco_behavior:inject(E, Out, Op) of
+                {error, {not_running, E}} = NotRunning ->
+                    case toroco_wiring:known(E) of
+                        true -> NotRunning;
+                        false -> {error, {unknown_name, E}}
+                    end;
+                Other -> Other
             end;
-        Err -> Err
+        {Err, _} -> Err
     end;
 inject(Src, _Value, Opts) when is_map(Opts) ->
     {error, {bad_source, Src}};
@@ -164,12 +179,12 @@ inspect() ->
 %% latches and last value, outputs with their inhibition and latch (SPEC §6).
 -spec inspect(name()) -> map() | {error, error_reason()}.
 inspect(Name) ->
-    toroco_inspect:node(Name).
+    toroco_inspect:describe(Name).
 
 %% @doc Prints a table of the running network (for the remote shell).
 -spec top() -> ok.
 top() ->
-    toroco_inspect:top().
+    toroco_top:print().
 
 %% @doc Prints deliveries to an input (`{Receiver, Input}') or to every input
 %% of a behavior, live, until `max' events (default 100) or `seconds' (default
@@ -186,9 +201,28 @@ unwatch() ->
 %% @doc The wiring as a Graphviz `dot' graph.
 -spec wiring_dot() -> iodata().
 wiring_dot() ->
-    toroco_inspect:dot().
+    toroco_dot:wiring().
 
 %% @doc Hot code reload of every behavior running `Module'.
 -spec reload(module()) -> ok | {error, error_reason()}.
 reload(Module) ->
     toroco_reload:reload(Module).
+
+%%====================================================================
+%% Observing the event path
+%%====================================================================
+
+%% @doc Subscribes the calling process to the event path: it receives
+%% `{toroco_event, Ref, Event}' for the events of `kinds' (`emit',
+%% `deliver', `router', `lifecycle'; default all) about `names' (default
+%% `all'), with at most `buffer' (default 10000) pending; past that, events
+%% are counted and reported as `{dropped, N}' (SPEC §10). A subscriber that
+%% dies is unsubscribed.
+-spec subscribe_events(toroco_tap:opts()) -> {ok, reference()} | {error, error_reason()}.
+subscribe_events(Opts) ->
+    toroco_tap:subscribe(Opts).
+
+%% @doc Ends a subscription.
+-spec unsubscribe_events(reference()) -> ok.
+unsubscribe_events(Ref) ->
+    toroco_tap:unsubscribe(Ref).

@@ -14,7 +14,7 @@
 %% The process is the emitter end of every wire it feeds: it keeps, per output,
 %% the registered names of the consumers (routers or a gate) to send to, and
 %% the output's latch. Consumers subscribe with a handshake (see
-%% `toroco_upstream'), so the subscriber lists change without a central server
+%% `toroco_wire'), so the subscriber lists change without a central server
 %% on the event path. On start it announces itself to its consumers (`hello':
 %% nothing of the previous incarnation survives) and to its input routers
 %% (which re-deliver each input's latched winner).
@@ -22,6 +22,8 @@
 %% Devices (`toroco_device') run on this same engine with `kind => device'.
 -module(toroco_behavior).
 -behaviour(gen_statem).
+
+-include("toroco_wire.hrl").
 
 -export([start_link/1, child_spec/1]).
 -export([inject/3, info/1, suspend/1, resume/1, interface/3]).
@@ -80,13 +82,25 @@
             layer :: non_neg_integer(),
             args :: term(),
             user :: term(),
-            %% declared output -> registered names of its consumers
-            outputs = #{} :: #{atom() => [atom()]},
+            %% declared output -> the addresses of its consumers
+            outputs = #{} :: #{atom() => [toroco_wire:address()]},
             latches = #{} :: #{atom() => term()},
             inputs = [] :: [atom()],
             suspended = false :: boolean(),
             queued = [] :: [{gen_statem:event_type(), term()}],
-            user_events = false :: boolean()}).
+            user_events = false :: boolean(),
+            %% the observer tap's sinks that concern this process (SPEC §10)
+            tap = #{} :: toroco_tap:sinks(),
+            %% names of the generic timeouts the callback module has set, so
+            %% that a reset cancels them
+            timers = [] :: [term()],
+            %% emissions on undeclared outputs: when last logged, how many since
+            undeclared = {never, 0} :: {never | integer(), non_neg_integer()}}).
+
+-define(LOG, #{domain => [toroco, engine]}).
+-define(IS_TIMEOUT(K), (K =:= state_timeout orelse K =:= timeout orelse
+                        (is_tuple(K) andalso tuple_size(K) =:= 2 andalso element(1, K) =:= timeout))).
+-define(WARN_INTERVAL_MS, 1000).
 
 %%====================================================================
 %% API
@@ -94,7 +108,7 @@
 
 -spec start_link(spec()) -> gen_statem:start_ret().
 start_link(Spec = #{name := Name}) ->
-    gen_statem:start_link({local, toroco_names:process(Name)}, ?MODULE, Spec, toroco_upstream:start_opts()).
+    gen_statem:start_link({local, toroco_names:process(Name)}, ?MODULE, Spec, toroco_wire:start_opts()).
 
 %% @doc Behaviors are `transient': one that stops with reason `normal' is done.
 -spec child_spec(spec()) -> supervisor:child_spec().
@@ -139,11 +153,7 @@ suspend(Name) -> call(Name, '$toroco_suspend').
 resume(Name) -> call(Name, '$toroco_resume').
 
 call(Name, Req) ->
-    try gen_statem:call(toroco_names:process(Name), Req, 5000)
-    catch exit:{noproc, _} -> {error, {not_running, Name}};
-          exit:{timeout, _} -> {error, {timeout, Name}};
-          exit:{Reason, _} -> {error, {Reason, Name}}
-    end.
+    toroco_wire:call(toroco_names:process(Name), Req, 5000, Name).
 
 %%====================================================================
 %% gen_statem
@@ -158,12 +168,13 @@ init(#{kind := Kind, name := Name, module := M, layer := Layer, args := Args}) -
     case interface(Kind, M, Args) of
         {ok, #{inputs := Ins, outputs := Outs}} ->
             Planned = toroco_wiring:subs_of(Name),
-            Subs = maps:from_list([{O, maps:get(O, Planned, [])} || O <- Outs]),
+            Subs = maps:from_list([{O, [toroco_wire:address(R) || R <- maps:get(O, Planned, [])]}
+                                   || O <- Outs]),
             E = #e{name = Name, kind = Kind, module = M, layer = Layer, args = Args,
                    outputs = Subs, inputs = Ins,
-                   user_events = erlang:function_exported(M, handle_event, 4)},
-            put('$toroco_emitter', Name),
-            put('$toroco_latches', #{}),
+                   user_events = erlang:function_exported(M, handle_event, 4),
+                   tap = tap(toroco_tap:current(), Name)},
+            toroco_tap:lifecycle(E#e.tap, Name, toroco_restarts:started(Name)),
             announce(E),
             start_user(E);
         {error, Reason} ->
@@ -173,14 +184,14 @@ init(#{kind := Kind, name := Name, module := M, layer := Layer, args := Args}) -
 %% Announces this incarnation: consumers drop whatever they had of the last
 %% one; input routers re-deliver their latched winners.
 announce(#e{name = Name, outputs = Outs, inputs = Ins, kind = Kind}) ->
-    maps:foreach(fun(Out, Regs) ->
-                         [toroco_upstream:send(R, {'$toroco_hello', emitter, {Name, Out}, self()})
-                          || R <- Regs]
+    maps:foreach(fun(Out, Consumers) ->
+                         [toroco_wire:send(C, ?WIRE_HELLO(emitter, {Name, Out}, self()))
+                          || C <- Consumers]
                  end, Outs),
     receiver_up(Name, case Kind of behavior -> [?RESET | Ins]; device -> Ins end).
 
 receiver_up(Name, Inputs) ->
-    [toroco_upstream:send(toroco_names:router(Name, I), {'$toroco_rx', I, self()})
+    [toroco_wire:send(toroco_wire:address(toroco_names:router(Name, I)), ?WIRE_RX(I, self()))
      || I <- Inputs],
     ok.
 
@@ -200,37 +211,42 @@ start_user(E = #e{kind = Kind, module = M, args = Args, name = Name}) ->
             {stop, {bad_return_from_init, Other}}
     catch
         Class:Reason:Stack ->
-            logger:error("toroco: ~p ~p crashed in init: ~p", [Kind, Name, {Class, Reason}]),
+            logger:error("toroco: ~p ~p crashed in init: ~p", [Kind, Name, {Class, Reason}],
+                         ?LOG#{name => Name}),
             erlang:raise(Class, Reason, Stack)
     end.
 
 -spec handle_event(gen_statem:event_type(), term(), term(), #e{}) ->
           gen_statem:event_handler_result(term()).
+%% The observer tap changed: keep the sinks that concern this process.
+handle_event(info, {'$toroco_tap', Subs}, _S, E = #e{name = Name}) ->
+    {keep_state, E#e{tap = tap(Subs, Name)}};
 %% The event path: one input delivered by a router.
-handle_event(info, {'$toroco_in', Input, V}, S, E = #e{suspended = false}) ->
+handle_event(info, ?WIRE_IN(Input, V), S, E = #e{suspended = false}) ->
     input(Input, V, S, E);
-handle_event(info, {'$toroco_in', Input, V, Router}, S, E = #e{suspended = false}) ->
+handle_event(info, ?WIRE_IN(Input, V, Router), S, E = #e{suspended = false}) ->
     Result = input(Input, V, S, E),
-    Router ! {'$toroco_ack', Input},
+    Router ! ?WIRE_ACK(Input),
     Result;
-handle_event(info, {'$toroco_in', _Input, _V}, _S, _E) ->
+handle_event(info, ?WIRE_IN(_Input, _V), _S, _E) ->
     keep_state_and_data;                      % suspended: inputs are dropped
-handle_event(info, {'$toroco_in', Input, _V, Router}, _S, _E) ->
-    Router ! {'$toroco_ack', Input},
+handle_event(info, ?WIRE_IN(Input, _V, Router), _S, _E) ->
+    Router ! ?WIRE_ACK(Input),
     keep_state_and_data;
-%% Wiring: consumers attach and detach.
-handle_event(info, {'$toroco_sub', {_, Out} = Src, Reg}, _S, E = #e{outputs = Outs}) ->
+%% Wiring: consumers attach and detach (see toroco_wire).
+handle_event(info, ?WIRE_SUB({_, Out} = Src, Consumer), _S, E = #e{outputs = Outs}) ->
     case Outs of
-        #{Out := Regs} ->
-            toroco_upstream:send(Reg, {'$toroco_state', emitter, Src, self(), latch(Out, E)}),
-            {keep_state, E#e{outputs = Outs#{Out := lists:usort([Reg | Regs])}}};
+        #{Out := Consumers} ->
+            toroco_wire:send(Consumer, ?WIRE_STATE(emitter, Src, self(), latch(Out, E))),
+            {keep_state, E#e{outputs = Outs#{Out := lists:usort([Consumer | Consumers])}}};
         #{} ->
-            toroco_upstream:send(Reg, {'$toroco_state', emitter, Src, self(), none}),
+            toroco_wire:send(Consumer, ?WIRE_STATE(emitter, Src, self(), none)),
             keep_state_and_data
     end;
-handle_event(info, {'$toroco_unsub', {_, Out}, Reg}, _S, E = #e{outputs = Outs}) ->
+handle_event(info, ?WIRE_UNSUB({_, Out}, Consumer), _S, E = #e{outputs = Outs}) ->
     case Outs of
-        #{Out := Regs} -> {keep_state, E#e{outputs = Outs#{Out := lists:delete(Reg, Regs)}}};
+        #{Out := Consumers} ->
+            {keep_state, E#e{outputs = Outs#{Out := lists:delete(Consumer, Consumers)}}};
         #{} -> keep_state_and_data
     end;
 handle_event({call, From}, {'$toroco_inject', Out, Op}, _S, E = #e{outputs = Outs, name = N}) ->
@@ -240,7 +256,8 @@ handle_event({call, From}, {'$toroco_inject', Out, Op}, _S, E = #e{outputs = Out
     end;
 handle_event({call, From}, '$toroco_info', S, E) ->
     {keep_state_and_data, [{reply, From, describe(S, E)}]};
-handle_event({call, From}, '$toroco_suspend', _S, E) ->
+handle_event({call, From}, '$toroco_suspend', _S, E = #e{name = Name, tap = Tap}) ->
+    toroco_tap:lifecycle(Tap, Name, suspended),
     {keep_state, E#e{suspended = true}, [{reply, From, ok}]};
 handle_event({call, From}, '$toroco_resume', _S, E = #e{suspended = false}) ->
     {keep_state, E, [{reply, From, ok}]};
@@ -248,6 +265,7 @@ handle_event({call, From}, '$toroco_resume', _S, E = #e{name = Name, inputs = In
     %% Routers forget the last value and re-deliver each input's winner; the
     %% callbacks held back while suspended run now, in order.
     receiver_up(Name, Ins),
+    toroco_tap:lifecycle(E#e.tap, Name, resumed),
     {keep_state, E#e{suspended = false, queued = []},
      [{reply, From, ok} | [{next_event, T, C} || {T, C} <- lists:reverse(Q)]]};
 %% Everything else belongs to the user module.
@@ -255,15 +273,31 @@ handle_event(Type, Content, _S, E = #e{suspended = true, queued = Q, name = Name
     case length(Q) < ?MAX_QUEUED of
         true -> {keep_state, E#e{queued = [{Type, Content} | Q]}};
         false ->
-            logger:warning("toroco: suspended ~p dropped ~p event ~p", [Name, Type, Content]),
+            logger:warning("toroco: suspended ~p dropped ~p event ~p", [Name, Type, Content],
+                           ?LOG#{name => Name}),
             keep_state_and_data
     end;
 handle_event(Type, Content, S, E = #e{user_events = true, module = M, user = UD}) ->
-    result(M:handle_event(Type, Content, S, UD), E);
-handle_event({call, From}, Request, _S, #e{name = Name}) ->
+    %% A callback module's handle_event/4 with no clause for this event
+    %% falls through to the engine's default below.
+    try M:handle_event(Type, Content, S, UD) of
+        R -> result(R, E)
+    catch
+        error:function_clause:Stack ->
+            case Stack of
+                [{M, handle_event, [Type, Content, S, UD], _} | _] -> default_event(Type, Content, E);
+                _ -> erlang:raise(error, function_clause, Stack)
+            end
+    end;
+handle_event(Type, Content, _S, E) ->
+    default_event(Type, Content, E).
+
+%% What the engine does with an event nobody handles: a call is answered
+%% with an error naming the process, anything else is logged and ignored.
+default_event({call, From}, Request, #e{name = Name}) ->
     {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
-handle_event(Type, Content, _S, #e{name = Name}) ->
-    logger:warning("toroco: ~p ignored ~p event ~p", [Name, Type, Content]),
+default_event(Type, Content, #e{name = Name}) ->
+    logger:warning("toroco: ~p ignored ~p event ~p", [Name, Type, Content], ?LOG#{name => Name}),
     keep_state_and_data.
 
 %% A user `terminate/3' may return `{emit, Actions}': its toroco actions are
@@ -271,11 +305,12 @@ handle_event(Type, Content, _S, #e{name = Name}) ->
 %% reporting they stopped). Consumers drop the process's holds and latches
 %% when it is gone, whatever it said last.
 -spec terminate(term(), term(), #e{}) -> any().
-terminate(Reason, S, E = #e{module = M, user = UD}) ->
+terminate(Reason, S, E = #e{module = M, user = UD, name = Name}) ->
     case erlang:function_exported(M, terminate, 3) andalso M:terminate(Reason, S, UD) of
         {emit, Actions} -> _ = actions(Actions, E), ok;
         _ -> ok
-    end.
+    end,
+    toroco_tap:lifecycle(E#e.tap, Name, stopped).
 
 -spec code_change(term(), term(), #e{}, term()) -> {ok, term(), #e{}}.
 code_change(OldVsn, S, E = #e{module = M, user = UD}, Extra) ->
@@ -298,16 +333,17 @@ input(Input, V, S, E = #e{module = M, user = UD}) ->
 
 %% Brooks' reset: the behavior's latches and holds are cleared, then it starts
 %% again from init/1 in the same process.
-reset(E = #e{outputs = Outs}) ->
+reset(E = #e{outputs = Outs, name = Name, tap = Tap}) ->
+    toroco_tap:lifecycle(Tap, Name, reset),
     E1 = lists:foldl(fun(Out, Acc) -> emit(Out, unset, Acc) end, E, maps:keys(Outs)),
-    case start_user(E1) of
-        {ok, S, E2} -> {next_state, S, E2, [{state_timeout, cancel}]};
-        {ok, S, E2, Actions} -> {next_state, S, E2, [{state_timeout, cancel} | Actions]};
+    Cancel = [{state_timeout, cancel} | [{{timeout, T}, cancel} || T <- E1#e.timers]],
+    case start_user(E1#e{timers = []}) of
+        {ok, S, E2} -> {next_state, S, E2, Cancel};
+        {ok, S, E2, Actions} -> {next_state, S, E2, Cancel ++ Actions};
         {stop, Reason} -> {stop, Reason, E1}
     end.
 
-result(R, E0) ->
-    E = take_serviced(E0),
+result(R, E) ->
     case R of
         {next_state, S, UD} -> {next_state, S, E#e{user = UD}};
         {next_state, S, UD, A} -> with_actions(next_state, S, A, E#e{user = UD});
@@ -348,7 +384,7 @@ actions([{send, Map, Opts} = A | T], E, Acc) when is_map(Map), is_map(Opts) ->
             actions(T, emit_all(Map, H, E), Acc);
         H ->
             logger:error("toroco: ~p emitted ~p with a bad hold ~p; dropped",
-                         [E#e.name, A, H]),
+                         [E#e.name, A, H], ?LOG#{name => E#e.name}),
             actions(T, E, Acc)
     end;
 actions([{set, Map} | T], E, Acc) when is_map(Map) ->
@@ -363,10 +399,33 @@ actions([{redeliver, Ins} | T], E = #e{name = Name, inputs = Declared}, Acc) whe
     actions(T, E, Acc);
 actions([A | T], E, Acc) when element(1, A) =:= send; element(1, A) =:= set;
                              element(1, A) =:= unset ->
-    logger:error("toroco: ~p returned a malformed action ~p; dropped", [E#e.name, A]),
+    logger:error("toroco: ~p returned a malformed action ~p; dropped", [E#e.name, A],
+                 ?LOG#{name => E#e.name}),
     actions(T, E, Acc);
+actions([{{timeout, Name}, _, _} = A | T], E, Acc) ->
+    actions(T, timer_named(Name, E), [clock(A) | Acc]);
+actions([{{timeout, Name}, _, _, _} = A | T], E, Acc) ->
+    actions(T, timer_named(Name, E), [clock(A) | Acc]);
 actions([A | T], E, Acc) ->
-    actions(T, E, [A | Acc]).
+    actions(T, E, [clock(A) | Acc]).
+
+timer_named(Name, E = #e{timers = Ts}) ->
+    case lists:member(Name, Ts) of
+        true -> E;
+        false -> E#e{timers = [Name | Ts]}
+    end.
+
+%% A callback module's timeouts count simulated milliseconds (toroco_clock):
+%% relative times are turned into real ones; absolute ones and cancels pass.
+clock({Kind, T, Msg}) when ?IS_TIMEOUT(Kind), is_integer(T) ->
+    {Kind, toroco_clock:real_ms(T), Msg};
+clock({Kind, T, Msg, Opts}) when ?IS_TIMEOUT(Kind), is_integer(T), is_list(Opts) ->
+    case proplists:get_value(abs, Opts, false) of
+        false -> {Kind, toroco_clock:real_ms(T), Msg, Opts};
+        true -> {Kind, T, Msg, Opts}
+    end;
+clock(T) when is_integer(T) -> toroco_clock:real_ms(T);
+clock(A) -> A.
 
 emit_all(Map, Hold, E) ->
     maps:fold(fun(Out, V, EAcc) -> emit(Out, {send, V, Hold}, EAcc) end, E, Map).
@@ -374,30 +433,50 @@ emit_all(Map, Hold, E) ->
 %% One emission on one output: to every consumer, in order; the latch follows.
 emit(Out, Op, E = #e{outputs = Outs, name = Name}) ->
     case Outs of
-        #{Out := Regs} ->
-            Msg = {'$toroco', {Name, Out}, Op},
-            send_all(Regs, Msg),
+        #{Out := Consumers} ->
+            send_all(Consumers, ?WIRE_EVENT({Name, Out}, Op)),
+            case E#e.tap of
+                #{emit := Sinks} -> toroco_tap:notify(Sinks, emit_event(Name, Out, Op));
+                #{} -> ok
+            end,
             relatch(Out, Op, E);
         #{} ->
-            logger:warning("toroco: ~p emitted on undeclared output ~p; dropped", [Name, Out]),
-            E
+            undeclared(Out, E)
     end.
 
+%% An emission on an undeclared output is dropped, and said at most once a
+%% second per behavior, with how many were held back since.
+undeclared(Out, E = #e{name = Name, undeclared = {Last, Held}}) ->
+    Now = erlang:monotonic_time(millisecond),
+    case Last =:= never orelse Now - Last >= ?WARN_INTERVAL_MS of
+        true ->
+            logger:warning("toroco: ~p emitted on undeclared output ~p; dropped~ts",
+                           [Name, Out, case Held of
+                                           0 -> "";
+                                           _ -> io_lib:format(" (~b more since the last warning)", [Held])
+                                       end], ?LOG#{name => Name}),
+            E#e{undeclared = {Now, 0}};
+        false ->
+            E#e{undeclared = {Last, Held + 1}}
+    end.
+
+emit_event(Name, Out, {send, V, _Hold}) -> {emit, toroco_tap:timestamp(), {Name, Out}, send, V};
+emit_event(Name, Out, {set, V}) -> {emit, toroco_tap:timestamp(), {Name, Out}, set, V};
+emit_event(Name, Out, unset) -> {emit, toroco_tap:timestamp(), {Name, Out}, unset, none}.
+
+tap(Subs, Name) ->
+    toroco_tap:select(Subs, [emit, lifecycle], Name).
+
 send_all([], _Msg) -> ok;
-send_all([R | Rs], Msg) ->
-    toroco_upstream:send(R, Msg),
-    send_all(Rs, Msg).
+send_all([C | Cs], Msg) ->
+    toroco_wire:send(C, Msg),
+    send_all(Cs, Msg).
 
 relatch(Out, {set, V}, E = #e{latches = L}) ->
-    L1 = L#{Out => V},
-    put('$toroco_latches', L1),
-    E#e{latches = L1};
+    E#e{latches = L#{Out => V}};
 relatch(Out, _, E = #e{latches = L}) ->
     case L of
-        #{Out := _} ->
-            L1 = maps:remove(Out, L),
-            put('$toroco_latches', L1),
-            E#e{latches = L1};
+        #{Out := _} -> E#e{latches = maps:remove(Out, L)};
         #{} -> E
     end.
 
@@ -405,21 +484,6 @@ latch(Out, #e{latches = L}) ->
     case L of
         #{Out := V} -> {value, V};
         #{} -> none
-    end.
-
-%% Subscriptions answered while a callback waited on the wiring server
-%% (see `toroco_wiring:call/1') are recorded here.
-take_serviced(E = #e{outputs = Outs}) ->
-    case erase('$toroco_serviced') of
-        undefined -> E;
-        Subs ->
-            E#e{outputs = lists:foldl(
-                            fun({sub, Out, Reg}, Acc) when is_map_key(Out, Acc) ->
-                                    Acc#{Out := lists:usort([Reg | maps:get(Out, Acc)])};
-                               ({unsub, Out, Reg}, Acc) when is_map_key(Out, Acc) ->
-                                    Acc#{Out := lists:delete(Reg, maps:get(Out, Acc))};
-                               (_, Acc) -> Acc
-                            end, Outs, lists:reverse(Subs))}
     end.
 
 describe(S, #e{kind = Kind, module = M, layer = L, latches = Latches, suspended = Susp,

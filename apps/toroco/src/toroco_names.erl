@@ -11,7 +11,7 @@
 
 %% @doc The registered name of a behavior or device.
 -spec process(atom()) -> atom().
-process(Name) -> name("toroco:~w", [Name]).
+process(Name) -> list_to_atom("toroco:" ++ io_lib:write_atom(Name)).
 
 %% @doc The registered name of the router of input `Input' of `Receiver'.
 -spec router(atom(), atom()) -> atom().

@@ -163,7 +163,8 @@ change(Module, OldVsn, Saved, Old, {File, NewBin}) ->
             keep(Module, File, NewBin);
         Failed when Old =:= none ->
             logger:error("toroco: reload of ~p: code_change failed in ~p; the old code was "
-                         "not kept, so the new code stays", [Module, Failed]),
+                         "not kept, so the new code stays", [Module, Failed],
+                         #{domain => [toroco, reload]}),
             {error, {code_change_failed, Failed, old_code_not_kept}};
         Failed ->
             %% States first, while everyone is still suspended: the processes
@@ -172,7 +173,7 @@ change(Module, OldVsn, Saved, Old, {File, NewBin}) ->
                  || {_, P, St, ok} <- Results],
             rollback(Module, Old),
             logger:error("toroco: reload of ~p: code_change failed in ~p; the old code and "
-                         "every state are back", [Module, Failed]),
+                         "every state are back", [Module, Failed], #{domain => [toroco, reload]}),
             {error, {code_change_failed, Failed}}
     end.
 
@@ -191,7 +192,7 @@ rollback(Module, {File, Bin}) ->
         {module, Module} -> ok;
         {error, Why} ->
             logger:error("toroco: reload of ~p: the old code could not be loaded back: ~p",
-                         [Module, Why])
+                         [Module, Why], #{domain => [toroco, reload]})
     end.
 
 %%====================================================================

@@ -1,67 +1,40 @@
-%% @doc How often each behavior and device was restarted, for `toroco:top()'.
+%% @doc How often each behavior and device was restarted, for
+%% `toroco:top()', and whether a starting process is a first start or a
+%% restart, for the observer tap's lifecycle events (SPEC §10).
 %%
-%% The supervisors of the layers and of the devices already report every
-%% child that dies abnormally (a `{supervisor, child_terminated}' report)
-%% just before they restart it, so the count is read off those reports: this
-%% module is a `logger' handler that bumps one `counters' cell per name, kept
-%% in `persistent_term'. Nothing is added to the event path or to the
-%% engine, and no process of its own is needed.
-%%
-%% The releases install the handler from their `sys.config' (kernel `logger'
-%% handler `toroco_restarts'), so counts start at boot; elsewhere
-%% {@link install/0} adds it (the first `toroco:top()' does), and counts
-%% start then. A count survives `remove' and a later `add' of the same name.
-%% It counts nothing while the primary logger level is above `error'.
+%% The engine asks {@link started/1} as each incarnation starts: the first
+%% start after the wiring server added the name is `started', every later
+%% one (a supervisor restart, or a reset that re-ran init/1 in a new
+%% process) is `restarted' and counted. The counts live in the `toroco_lives'
+%% table of `toroco_store', so they are there whatever the log level, and a
+%% count survives `remove' and a later `add' of the same name.
 -module(toroco_restarts).
 
--export([install/0, count/1]).
--export([log/2]).
+-export([added/1, started/1, count/1]).
 
--define(HANDLER, toroco_restarts).
+-define(TABLE, toroco_lives).
 
-%% @doc Adds the handler unless it is there already.
--spec install() -> ok | {error, term()}.
-install() ->
-    case logger:get_handler_config(?HANDLER) of
-        {ok, _} -> ok;
-        {error, _} ->
-            case logger:add_handler(?HANDLER, ?MODULE, #{level => error}) of
-                ok -> ok;
-                {error, {already_exist, _}} -> ok;
-                {error, _} = Err -> Err
-            end
-    end.
-
-%% @doc Restarts of behavior or device `Name' seen since the handler was
-%% installed.
--spec count(atom()) -> non_neg_integer().
-count(Name) ->
-    case persistent_term:get({?MODULE, Name}, undefined) of
-        undefined -> 0;
-        Ref -> counters:get(Ref, 1)
-    end.
-
-%% @private logger handler callback; runs in the reporting supervisor.
--spec log(logger:log_event(), logger:handler_config()) -> ok.
-log(#{msg := {report, #{label := {supervisor, child_terminated}, report := Report}}}, _Config)
-  when is_list(Report) ->
-    Offender = proplists:get_value(offender, Report, []),
-    case {proplists:get_value(id, Offender), proplists:get_value(mfargs, Offender)} of
-        {Name, {toroco_behavior, start_link, _}} when is_atom(Name) -> bump(Name);
-        _ -> ok
-    end;
-log(_Event, _Config) ->
+%% @doc The wiring server added `Name': its next start is a first start.
+-spec added(atom()) -> ok.
+added(Name) ->
+    _ = ets:update_element(?TABLE, Name, {2, 0}) orelse ets:insert_new(?TABLE, {Name, 0, 0}),
     ok.
 
-bump(Name) ->
-    Key = {?MODULE, Name},
-    Ref = case persistent_term:get(Key, undefined) of
-              undefined ->
-                  %% A new key costs no global garbage collection; one is
-                  %% created per name, on its first restart.
-                  R = counters:new(1, [write_concurrency]),
-                  persistent_term:put(Key, R),
-                  R;
-              R -> R
-          end,
-    counters:add(Ref, 1, 1).
+%% @doc An incarnation of `Name' is starting: `started' the first time in
+%% its life, `restarted' (and counted) after that.
+-spec started(atom()) -> started | restarted.
+started(Name) ->
+    try ets:update_counter(?TABLE, Name, {2, 1}, {Name, 0, 0}) of
+        1 -> started;
+        _ -> _ = ets:update_counter(?TABLE, Name, {3, 1}), restarted
+    catch error:badarg -> started
+    end.
+
+%% @doc Restarts of behavior or device `Name' since the node started.
+-spec count(atom()) -> non_neg_integer().
+count(Name) ->
+    try ets:lookup(?TABLE, Name) of
+        [{_, _, N}] -> N;
+        [] -> 0
+    catch error:badarg -> 0
+    end.

@@ -23,7 +23,7 @@
 %% info/2} is the inspection view.
 -module(toroco_router_core).
 
--export([new/0, handle/3, next_deadline/1, info/2, sources/1]).
+-export([new/0, handle/3, next_deadline/1, info/2, sources/1, view/1]).
 -export_type([core/0, event/0, op/0, hold/0, latch/0]).
 
 -type source() :: {atom(), atom()}.
@@ -95,6 +95,16 @@ next_deadline(#core{next = Next}) -> Next.
 %% @doc The sources in priority order.
 -spec sources(core()) -> [source()].
 sources(#core{by_idx = ByIdx}) -> tuple_to_list(ByIdx).
+
+%% @doc What the observer tap compares to tell that the winner, the holds
+%% or the latches changed: the winner, each holding source with its
+%% deadline, each latch.
+-spec view(core()) -> {none | pos_integer(), [{source(), infinity | integer()}],
+                       [{source(), latch()}]}.
+view(#core{srcs = Srcs, top = Top}) ->
+    L = lists:sort(maps:to_list(Srcs)),
+    {Top, [{Src, H} || {Src, #src{hold = H}} <- L, H =/= none],
+     [{Src, La} || {Src, #src{latch = La}} <- L, La =/= none]}.
 
 %% @doc The inspection view of SPEC §6 (lists in priority order).
 -spec info(core(), integer()) -> map().

@@ -2,15 +2,21 @@
 %%
 %% ```
 %% toroco_sup (rest_for_one)
-%% ├── toroco_wiring         the wiring server and its table
+%% ├── toroco_store          owns the tables (wiring, lives): they outlive their writers
+%% ├── toroco_tap            the observer tap's subscriptions (SPEC §10)
 %% ├── toroco_routers_sup    one router per wired input, one gate per inhibited output
 %% ├── toroco_devices_sup    sensors and actuators (layer 0)
-%% └── toroco_layers_sup     one supervisor per layer
-%%     ├── toroco_layer_sup 0    behaviors of layer 0
-%%     ├── toroco_layer_sup 1    behaviors of layer 1 ...
+%% ├── toroco_layers_sup     one supervisor per layer
+%% │   ├── toroco_layer_sup 0    behaviors of layer 0
+%% │   ├── toroco_layer_sup 1    behaviors of layer 1 ...
+%% └── toroco_wiring_sup
+%%     └── toroco_wiring     the wiring server: validates and applies changes
 %% '''
 %%
 %% Children are started in that order and depend on the ones before them.
+%% The wiring server comes last: it is never on the event path, and when it
+%% crashes it comes back alone, with the wiring it kept in `toroco_store's
+%% table, while the robot keeps running.
 -module(toroco_sup).
 -behaviour(supervisor).
 
@@ -22,13 +28,16 @@ start_link() ->
 
 -spec init([]) -> {ok, {supervisor:sup_flags(), [supervisor:child_spec()]}}.
 init([]) ->
-    %% rest_for_one: everything after the wiring server reads its table, and the
+    %% rest_for_one: everything after the store reads its tables, and the
     %% processes of a wire (routers, gates) must exist before their ends.
     Flags = #{strategy => rest_for_one, intensity => 3, period => 10},
     Sup = fun(Mod) -> #{id => Mod, start => {Mod, start_link, []}, type => supervisor,
                         shutdown => infinity, modules => [Mod]} end,
-    {ok, {Flags, [#{id => toroco_wiring, start => {toroco_wiring, start_link, []},
-                    type => worker, shutdown => 5000, modules => [toroco_wiring]},
+    Worker = fun(Mod) -> #{id => Mod, start => {Mod, start_link, []}, type => worker,
+                           shutdown => 5000, modules => [Mod]} end,
+    {ok, {Flags, [Worker(toroco_store),
+                  Worker(toroco_tap),
                   Sup(toroco_routers_sup),
                   Sup(toroco_devices_sup),
-                  Sup(toroco_layers_sup)]}}.
+                  Sup(toroco_layers_sup),
+                  Sup(toroco_wiring_sup)]}}.

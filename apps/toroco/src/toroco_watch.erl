@@ -1,10 +1,11 @@
 %% @doc `toroco:watch/2': a bounded live trace of deliveries, safe on a running
 %% robot (recon_trace's limits are the model).
 %%
-%% One watcher process at a time (registered as `toroco_watch') traces the
-%% messages the watched behavior or device receives and prints each input
-%% delivered to it, `{Receiver, Input}' or every input of a `Receiver', to
-%% the group leader of the caller (in a remote shell, that shell):
+%% One watcher process at a time (registered as `toroco_watch') subscribes
+%% to the observer tap (`toroco:subscribe_events/1', deliveries and
+%% lifecycle of the watched name) and prints each input delivered to it,
+%% `{Receiver, Input}' or every input of a `Receiver', to the group leader
+%% of the caller (in a remote shell, that shell):
 %% ```
 %% 1.204 s  motors.setvel <- {80,80}
 %% '''
@@ -17,14 +18,12 @@
 %% <li>the shell it prints to going away.</li>
 %% </ul>
 %% `toroco:unwatch()' stops it earlier; a new watch replaces the running one.
-%% A receiver that restarts is traced again under its new pid. Other
-%% options: `io' (an io device to print to instead of the group leader) and
-%% `notify' (a pid that gets `{toroco_watch, stopped, {Why, Printed}}' with
-%% `Why' one of `max', `seconds', `rate', `io_gone', `unwatch').
-%%
-%% Tracing uses the BEAM's tracer slot of the receiver's process: if
-%% something else (dbg, recon) already traces it, the watch is refused with
-%% `{error, {already_traced, Name}}'.
+%% The tap follows names, so a receiver that restarts is watched on, and its
+%% going down and coming back are printed. Other options: `io' (an io device
+%% to print to instead of the group leader) and `notify' (a pid that gets
+%% `{toroco_watch, stopped, {Why, Printed}}' with `Why' one of `max',
+%% `seconds', `rate', `io_gone', `unwatch'). The watch touches nothing of the
+%% receiver (no tracing), and its subscription is bounded like any other.
 -module(toroco_watch).
 
 -export([start/2, stop/0]).
@@ -37,13 +36,10 @@
 -define(NAME, toroco_watch).
 -define(DEFAULTS, #{max => 100, seconds => 60, rate => 50}).
 -define(DEPTH, 12).
-%% How often a watcher whose receiver went down looks for its restart.
--define(REATTACH_MS, 20).
 
 -record(w, {name :: atom(),
             input :: atom() | all,
-            pid :: pid() | undefined,
-            mon :: reference() | undefined,
+            ref :: reference(),
             io :: io:device(),
             notify :: pid() | undefined,
             max :: pos_integer(),
@@ -61,17 +57,14 @@
 start(What, Opts) when is_map(Opts) ->
     case {target(What), options(Opts)} of
         {{ok, Name, Input}, {ok, O}} ->
-            case whereis(toroco_names:process(Name)) of
-                undefined -> {error, {not_running, Name}};
-                Pid -> launch(Name, Input, Pid, O)
-            end;
+            launch(Name, Input, O);
         {{error, _} = Err, _} -> Err;
         {_, {error, _} = Err} -> Err
     end;
 start(What, Opts) ->
     {error, {bad_option, {What, Opts}}}.
 
-%% @doc Stops the running watch, if any; returns once its tracing is off.
+%% @doc Stops the running watch, if any; returns once it is unsubscribed.
 -spec stop() -> ok.
 stop() ->
     case whereis(?NAME) of
@@ -121,56 +114,50 @@ option(_, _) -> false.
 %% The watcher
 %%====================================================================
 
-launch(Name, Input, Pid, O) ->
+launch(Name, Input, O) ->
     stop(),
     Io = maps:get(io, O, group_leader()),
     Caller = self(),
-    {W, Ref} = spawn_monitor(fun() -> init(Caller, Name, Input, Pid, Io, O) end),
+    {W, Ref} = spawn_monitor(fun() -> init(Caller, Name, Input, Io, O) end),
     receive
-        {W, tracing} -> erlang:demonitor(Ref, [flush]), ok;
+        {W, watching} -> erlang:demonitor(Ref, [flush]), ok;
         {W, {error, _} = Err} -> erlang:demonitor(Ref, [flush]), Err;
         {'DOWN', Ref, process, W, Reason} -> {error, {watch_failed, Reason}}
     end.
 
-init(Caller, Name, Input, Pid, Io, O = #{seconds := Secs}) ->
+init(Caller, Name, Input, Io, O = #{seconds := Secs, rate := Rate}) ->
     true = register(?NAME, self()),
     _ = is_pid(Io) andalso erlang:monitor(process, Io),
-    Now = erlang:monotonic_time(millisecond),
-    S = #w{name = Name, input = Input, io = Io, notify = maps:get(notify, O, undefined),
-           max = maps:get(max, O), rate = maps:get(rate, O), start = Now, window = Now},
-    case attach(Pid, S) of
-        {ok, S1} ->
-            Caller ! {self(), tracing},
+    %% A flood is stopped at `rate' a second: more than that never waits.
+    case toroco:subscribe_events(#{kinds => [deliver, lifecycle], names => [Name],
+                                   buffer => 2 * Rate + 10}) of
+        {ok, Ref} ->
+            Now = erlang:system_time(millisecond),
+            S = #w{name = Name, input = Input, ref = Ref, io = Io,
+                   notify = maps:get(notify, O, undefined), max = maps:get(max, O),
+                   rate = Rate, start = Now, window = Now},
+            Caller ! {self(), watching},
             erlang:send_after(round(Secs * 1000), self(), {?NAME, seconds}),
-            loop(S1);
+            loop(S);
         {error, _} = Err ->
             Caller ! {self(), Err}
     end.
 
-attach(Pid, S = #w{name = Name}) ->
-    Mon = erlang:monitor(process, Pid),
-    try erlang:trace(Pid, true, ['receive', monotonic_timestamp, {tracer, self()}]) of
-        _ -> {ok, S#w{pid = Pid, mon = Mon}}
-    catch error:badarg ->
-            erlang:demonitor(Mon, [flush]),
-            case is_process_alive(Pid) of
-                true -> {error, {already_traced, Name}};
-                false -> {error, {not_running, Name}}
-            end
-    end.
-
-loop(S = #w{pid = Pid, mon = Mon, io = Io}) ->
+loop(S = #w{ref = Ref, io = Io, name = Name}) ->
     receive
-        {trace_ts, Pid, 'receive', Msg, Ts} ->
-            delivered(delivery(Msg), Ts, S);
-        {trace_ts, _, _, _, _} ->
+        {toroco_event, Ref, {deliver, T, {_, I}, V}} ->
+            delivered(I, V, erlang:convert_time_unit(T, nanosecond, millisecond), S);
+        {toroco_event, Ref, {lifecycle, _, Name, stopped}} ->
+            say(S, "watch: ~w went down~n", [Name]),
             loop(S);
-        {'DOWN', Mon, process, Pid, Reason} ->
-            say(S, "watch: ~w went down (~tW)~n", [S#w.name, Reason, 4]),
-            erlang:send_after(?REATTACH_MS, self(), {?NAME, reattach}),
-            loop(S#w{pid = undefined, mon = undefined});
-        {?NAME, reattach} when Pid =:= undefined ->
-            reattach(S);
+        {toroco_event, Ref, {lifecycle, _, Name, What}} when What =:= restarted; What =:= started ->
+            say(S, "watch: ~w is back~n", [Name]),
+            loop(S);
+        {toroco_event, Ref, {dropped, N}} ->
+            say(S, "watch: ~b deliveries not shown (too many at once)~n", [N]),
+            loop(S);
+        {toroco_event, Ref, _} ->
+            loop(S);
         {'DOWN', _, process, Io, _} ->
             done(S, io_gone);
         {?NAME, seconds} ->
@@ -181,28 +168,7 @@ loop(S = #w{pid = Pid, mon = Mon, io = Io}) ->
             loop(S)
     end.
 
-reattach(S = #w{name = Name}) ->
-    case whereis(toroco_names:process(Name)) of
-        undefined ->
-            erlang:send_after(?REATTACH_MS, self(), {?NAME, reattach}),
-            loop(S);
-        Pid ->
-            case attach(Pid, S) of
-                {ok, S1} ->
-                    say(S1, "watch: ~w is back~n", [Name]),
-                    loop(S1);
-                {error, Why} ->
-                    say(S, "watch: cannot trace ~w again: ~tw~n", [Name, Why]),
-                    done(S, unwatch)
-            end
-    end.
-
-delivery({'$toroco_in', I, V}) -> {I, V};
-delivery({'$toroco_in', I, V, _Router}) -> {I, V};
-delivery(_) -> other.
-
-delivered({I, V}, Ts, S = #w{input = Input}) when Input =:= all; I =:= Input ->
-    Ms = erlang:convert_time_unit(Ts, native, millisecond),
+delivered(I, V, Ms, S = #w{input = Input}) when Input =:= all; I =:= Input ->
     S1 = #w{count = C, in_window = InW, rate = Rate, max = Max} = tick(Ms, S),
     if InW > Rate ->
            done(S1, rate);
@@ -213,7 +179,7 @@ delivered({I, V}, Ts, S = #w{input = Input}) when Input =:= all; I =:= Input ->
                C1 -> loop(S1#w{count = C1})
            end
     end;
-delivered(_, _Ts, S) ->
+delivered(_I, _V, _Ms, S) ->
     loop(S).
 
 %% Deliveries are counted in one-second windows from the start.
@@ -222,8 +188,8 @@ tick(Ms, S = #w{window = W, in_window = N}) when Ms - W < 1000 ->
 tick(Ms, S = #w{start = Start}) ->
     S#w{window = Ms - (Ms - Start) rem 1000, in_window = 1}.
 
-done(S = #w{pid = Pid, count = C, notify = Notify}, Why) ->
-    _ = is_pid(Pid) andalso (catch erlang:trace(Pid, false, ['receive'])),
+done(S = #w{ref = Ref, count = C, notify = Notify}, Why) ->
+    ok = toroco:unsubscribe_events(Ref),
     Why =/= io_gone andalso say(S, "watch stopped: ~w after ~w deliveries~n", [Why, C]),
     _ = is_pid(Notify) andalso (Notify ! {?NAME, stopped, {Why, C}}),
     ok.

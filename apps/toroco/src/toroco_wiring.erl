@@ -13,7 +13,7 @@
 -module(toroco_wiring).
 -behaviour(gen_server).
 
--export([start_link/0, call/1, lookup/1, subs_of/1, stopping/0]).
+-export([start_link/0, call/1, lookup/1, subs_of/1, known/1, stopping/0]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 
 -define(TABLE, toroco_wiring).
@@ -33,15 +33,15 @@ start_link() ->
 
 %% @doc Sends a request to the wiring server and waits for its answer.
 %%
-%% When the caller is itself a behavior or device (a callback that adds,
-%% removes or re-wires at run time), it goes on answering subscriptions to its
-%% own outputs while it waits, so that wiring it as a source cannot deadlock.
+%% The caller may be a behavior or device (a callback that adds, removes or
+%% re-wires at run time): the consumers that subscribe to it do not wait
+%% for its answer (it is busy in this call); they take it as soon as its
+%% callback returns. Every wait behind this call is bounded (a consumer
+%% waits `sync_timeout_ms' at most for an upstream), so the call itself
+%% waits for the change to be applied, however large.
 -spec call(term()) -> term().
 call(Request) ->
-    case get('$toroco_emitter') of
-        undefined -> gen_server:call(?MODULE, Request, infinity);
-        Name -> serviced_call(Name, Request)
-    end.
+    gen_server:call(?MODULE, Request, infinity).
 
 %% @doc A router's or gate's configuration from the wiring table.
 -spec lookup({router | gate, term()}) -> {ok, map()} | error.
@@ -50,6 +50,14 @@ lookup(Key) ->
         [{_, Cfg}] -> {ok, Cfg};
         [] -> error
     catch error:badarg -> error
+    end.
+
+%% @doc Whether `Name' is a behavior or device of the wiring (read from the
+%% table, without asking the server).
+-spec known(atom()) -> boolean().
+known(Name) ->
+    try ets:member(?TABLE, {nodes, Name})
+    catch error:badarg -> false
     end.
 
 %% @doc The consumers each output of emitter `Name' is planned to feed.
@@ -73,22 +81,21 @@ stopping() ->
 
 -spec init([]) -> {ok, #s{}}.
 init([]) ->
-    _ = ets:new(?TABLE, [named_table, protected, set, {read_concurrency, true}]),
-    {ok, #s{}}.
+    {ok, restore()}.
 
 -spec handle_call(term(), gen_server:from(), #s{}) -> {reply, term(), #s{}}.
 handle_call({add, Kind, Name, Module, Opts}, _From, S) ->
     reply(add_node(Kind, Name, Module, Opts, S), S);
-handle_call({remove, Kind, Name}, _From, S) ->
-    reply(remove_node(Kind, Name, S), S);
-handle_call({set_inputs, R, Map}, _From, S = #s{wiring = W}) ->
-    reply(rewire(toroco_wiring_core:set_inputs(W, R, Map), S), S);
-handle_call({set_inhibitors, E, Map}, _From, S = #s{wiring = W}) ->
-    reply(rewire(toroco_wiring_core:set_inhibitors(W, E, Map), S), S);
-handle_call({set_reset, B, Srcs}, _From, S = #s{wiring = W}) ->
-    reply(rewire(toroco_wiring_core:set_reset(W, B, Srcs), S), S);
-handle_call({load, Terms}, _From, S) ->
-    reply(load(Terms, S), S);
+handle_call({remove, Kind, Name}, {Caller, _}, S) ->
+    reply(remove_node(Kind, Name, Caller, S), S);
+handle_call({set_inputs, R, Map}, {Caller, _}, S = #s{wiring = W}) ->
+    reply(rewire(toroco_wiring_core:set_inputs(W, R, Map), Caller, S), S);
+handle_call({set_inhibitors, E, Map}, {Caller, _}, S = #s{wiring = W}) ->
+    reply(rewire(toroco_wiring_core:set_inhibitors(W, E, Map), Caller, S), S);
+handle_call({set_reset, B, Srcs}, {Caller, _}, S = #s{wiring = W}) ->
+    reply(rewire(toroco_wiring_core:set_reset(W, B, Srcs), Caller, S), S);
+handle_call({load, Terms}, {Caller, _}, S) ->
+    reply(load(Terms, Caller, S), S);
 handle_call({node, Name}, _From, S = #s{wiring = W}) ->
     case toroco_wiring_core:node(W, Name) of
         {ok, Info} ->
@@ -102,7 +109,7 @@ handle_call({node, Name}, _From, S = #s{wiring = W}) ->
 handle_call(wiring, _From, S = #s{wiring = W, removed = Removed}) ->
     {reply, {W, Removed}, S};
 handle_call(stopping, _From, S) ->
-    {reply, ok, S#s{stopping = true}};
+    {reply, ok, persist(S, S#s{stopping = true})};
 handle_call(Request, _From, S) ->
     {reply, {error, {unknown_request, Request}}, S}.
 
@@ -114,19 +121,92 @@ handle_cast(_Msg, S) ->
 handle_info({'DOWN', Ref, process, _Pid, Reason}, S = #s{layers = Layers, removed = Removed}) ->
     case [L || {L, {_, R}} <- maps:to_list(Layers), R =:= Ref] of
         [L] when S#s.stopping ->
-            {noreply, S#s{layers = maps:remove(L, Layers)}};
+            {noreply, persist(S, S#s{layers = maps:remove(L, Layers)})};
         [L] ->
             logger:error("toroco: layer ~p exceeded its restart intensity and was taken "
-                         "out (~p); the layers below keep running", [L, Reason]),
-            {noreply, S#s{layers = maps:remove(L, Layers), removed = lists:usort([L | Removed])}};
+                         "out (~p); the layers below keep running", [L, Reason],
+                         #{domain => [toroco, wiring]}),
+            _ = [toroco_tap:lifecycle(N, {layer_removed, L})
+                 || {N, #{kind := behavior, layer := NL}} <- maps:to_list(toroco_wiring_core:nodes(S#s.wiring)),
+                    NL =:= L],
+            {noreply, persist(S, S#s{layers = maps:remove(L, Layers),
+                                     removed = lists:usort([L | Removed])})};
         [] ->
             {noreply, S}
     end;
 handle_info(_Msg, S) ->
     {noreply, S}.
 
-reply({ok, S1}, _S) -> {reply, ok, S1};
+reply({ok, S1}, S) -> {reply, ok, persist(S, S1)};
 reply({error, _} = Err, S) -> {reply, Err, S}.
+
+%%====================================================================
+%% Surviving a crash
+%%====================================================================
+
+%% The wiring and the server's state are written through to the table of
+%% `toroco_store' after each change, so a restarted server reads back what it
+%% had: the nodes (only those that changed), and the server's own state; the
+%% inputs and the inhibitors are read back from the routers' and gates'
+%% configurations, which the table holds anyway. If the network's
+%% supervisors were restarted meanwhile (everything after the store restarts
+%% with them), the network is empty, and so is the wiring.
+persist(#s{wiring = W0} = S0, S1 = #s{wiring = W1}) ->
+    diff(maps:get(nodes, W0), maps:get(nodes, W1)),
+    _ = meta(S0) =/= meta(S1) andalso ets:insert(?TABLE, {'$meta', meta(S1)}),
+    S1.
+
+%% A node is kept as a tuple: a map of five keys costs twice the words.
+diff(Old, New) ->
+    maps:foreach(fun(K, V = #{kind := Kind, module := M, layer := L, inputs := Ins, outputs := Outs}) ->
+                         case Old of
+                             #{K := V} -> ok;
+                             #{} -> ets:insert(?TABLE, {{nodes, K}, {Kind, M, L, Ins, Outs}})
+                         end
+                 end, New),
+    maps:foreach(fun(K, _) ->
+                         case New of
+                             #{K := _} -> ok;
+                             #{} -> ets:delete(?TABLE, {nodes, K})
+                         end
+                 end, Old).
+
+meta(#s{layers = Layers, removed = Removed, stopping = Stopping}) ->
+    #{network => network(), layers => maps:map(fun(_, {Pid, _}) -> Pid end, Layers),
+      removed => Removed, stopping => Stopping}.
+
+network() ->
+    [whereis(Sup) || Sup <- [toroco_routers_sup, toroco_devices_sup, toroco_layers_sup]].
+
+restore() ->
+    Net = network(),
+    case ets:lookup(?TABLE, '$meta') of
+        [{_, #{network := Net, layers := Layers, removed := Removed, stopping := Stopping}}] ->
+            Part = fun(P) -> ets:select(?TABLE, [{{{P, '$1'}, '$2'}, [], [{{'$1', '$2'}}]}]) end,
+            W = #{nodes => maps:from_list([{N, #{kind => Kind, module => M, layer => L,
+                                                  inputs => Ins, outputs => Outs}}
+                                             || {N, {Kind, M, L, Ins, Outs}} <- Part(nodes)]),
+                  inputs => maps:from_list([{K, maps:with([sources, buffer, idle], Cfg)}
+                                            || {K, Cfg} <- Part(router)]),
+                  inhibitors => lists:foldl(fun({_, #{entries := Es}}, Acc) -> maps:merge(Acc, Es) end,
+                                            #{}, Part(gate))},
+            %% A layer taken out while the server was down is seen here.
+            {Alive, Gone} = lists:partition(fun({_, Pid}) -> is_process_alive(Pid) end,
+                                            maps:to_list(Layers)),
+            S = #s{wiring = W, removed = lists:usort([L || {L, _} <- Gone] ++ Removed),
+                   stopping = Stopping,
+                   layers = maps:from_list([{L, {Pid, erlang:monitor(process, Pid)}}
+                                            || {L, Pid} <- Alive])},
+            logger:notice("toroco: the wiring server restarted with the wiring it had "
+                          "(~b behaviors and devices)", [map_size(maps:get(nodes, W))],
+                          #{domain => [toroco, wiring]}),
+            persist(S, S);
+        _ ->
+            ets:delete_all_objects(?TABLE),
+            S = #s{},
+            ets:insert(?TABLE, {'$meta', meta(S)}),
+            S
+    end.
 
 %%====================================================================
 %% Nodes
@@ -180,6 +260,7 @@ start_node(Spec = #{kind := Kind, name := Name, layer := L, module := M}, S) ->
     %% A later failed hot reload of the module can only be undone with the
     %% object code kept from now.
     ok = toroco_reload:remember(M),
+    ok = toroco_restarts:added(Name),
     case supervisor:start_child(Sup, toroco_behavior:child_spec(Spec)) of
         {ok, _} -> {ok, S1};
         {ok, _, _} -> {ok, S1};
@@ -199,7 +280,7 @@ layer_sup(L, S = #s{layers = Layers, removed = Removed}) ->
                       removed = lists:delete(L, Removed)}}
     end.
 
-remove_node(Kind, Name, S = #s{wiring = W, layers = Layers}) ->
+remove_node(Kind, Name, Caller, S = #s{wiring = W, layers = Layers}) ->
     case toroco_wiring_core:node(W, Name) of
         {ok, #{kind := Kind, layer := L}} ->
             Sup = case Kind of
@@ -213,7 +294,7 @@ remove_node(Kind, Name, S = #s{wiring = W, layers = Layers}) ->
             %% latches at once, so lower layers take over before re-wiring.
             _ = Sup =/= none andalso supervisor:terminate_child(Sup, Name),
             _ = Sup =/= none andalso supervisor:delete_child(Sup, Name),
-            rewire(toroco_wiring_core:remove_node(W, Name), S);
+            rewire(toroco_wiring_core:remove_node(W, Name), Caller, S);
         {ok, #{kind := Other}} ->
             {error, {case Other of device -> not_a_behavior; behavior -> not_a_device end, Name}};
         Err -> Err
@@ -225,26 +306,26 @@ remove_node(Kind, Name, S = #s{wiring = W, layers = Layers}) ->
 
 %% The plan of the current wiring is recomputed rather than kept: it would
 %% double the server's memory per behavior for a little CPU per change.
-rewire({ok, W1}, S = #s{wiring = W0}) ->
-    apply_plan(toroco_wiring_core:plan(W0), toroco_wiring_core:plan(W1)),
+rewire({ok, W1}, Caller, S = #s{wiring = W0}) ->
+    apply_plan(toroco_wiring_core:plan(W0), toroco_wiring_core:plan(W1), Caller),
     {ok, S#s{wiring = W1}};
-rewire({error, _} = Err, _S) ->
+rewire({error, _} = Err, _Caller, _S) ->
     Err.
 
 %% Table first (restarting processes read it), then gates upstream-first, then
 %% routers, then whatever is no longer needed.
 apply_plan(#{routers := OldR, gates := OldG, subs := OldSubs},
-           #{routers := NewR, gates := NewG, subs := NewSubs}) ->
+           #{routers := NewR, gates := NewG, subs := NewSubs}, Caller) ->
     Changed = fun(New, Old) -> [{K, V} || {K, V} <- maps:to_list(New), maps:get(K, Old, none) =/= V] end,
     _ = [ets:insert(?TABLE, {{subs, E}, Subs}) || {E, Subs} <- Changed(NewSubs, OldSubs)],
     _ = [ets:delete(?TABLE, {subs, E}) || E <- maps:keys(OldSubs), not maps:is_key(E, NewSubs)],
-    _ = [ets:insert(?TABLE, {{gate, K}, Cfg}) || {K, Cfg} <- Changed(NewG, OldG)],
-    _ = [ets:insert(?TABLE, {{router, K}, Cfg}) || {K, Cfg} <- Changed(NewR, OldR)],
+    _ = [ets:insert(?TABLE, {{gate, K}, stored(gate, Cfg)}) || {K, Cfg} <- Changed(NewG, OldG)],
+    _ = [ets:insert(?TABLE, {{router, K}, stored(router, Cfg)}) || {K, Cfg} <- Changed(NewR, OldR)],
     %% Only consumers that are new or whose configuration changed are touched,
     %% so a change costs in proportion to what it changes.
-    _ = [ensure(gate, K, maps:is_key(K, OldG))
+    _ = [ensure(gate, K, maps:is_key(K, OldG), Caller)
          || {K, Cfg} <- gate_order(NewG), maps:get(K, OldG, none) =/= Cfg],
-    _ = [ensure(router, K, maps:is_key(K, OldR))
+    _ = [ensure(router, K, maps:is_key(K, OldR), Caller)
          || {K, Cfg} <- lists:sort(maps:to_list(NewR)), maps:get(K, OldR, none) =/= Cfg],
     _ = [stop(router, K) || K <- maps:keys(OldR), not maps:is_key(K, NewR)],
     _ = [stop(gate, K) || K <- maps:keys(OldG), not maps:is_key(K, NewG)],
@@ -252,24 +333,37 @@ apply_plan(#{routers := OldR, gates := OldG, subs := OldSubs},
 
 %% Starts a consumer that is not running, or re-wires one whose configuration
 %% changed.
-ensure(Kind, Key, Changed) ->
+ensure(Kind, Key, Changed, Caller) ->
     Mod = consumer_module(Kind),
-    case supervisor:start_child(toroco_routers_sup, Mod:child_spec(Key)) of
-        {ok, _} -> ok;
-        {error, {already_started, _}} when Changed -> Mod:rewire(Key);
+    case supervisor:start_child(toroco_routers_sup, toroco_consumer:child_spec(Mod, Key, Caller)) of
+        {ok, _} -> answered(toroco_consumer:ready(Mod, Key));
+        {error, {already_started, _}} when Changed -> answered(toroco_consumer:rewire(Mod, Key, Caller));
         {error, {already_started, _}} -> ok;
         {error, already_present} ->
             _ = supervisor:restart_child(toroco_routers_sup, {Kind, Key}),
-            ok;
+            answered(toroco_consumer:ready(Mod, Key));
         {error, Reason} ->
-            logger:error("toroco: could not start ~p ~p: ~p", [Kind, Key, Reason])
+            logger:error("toroco: could not start ~p ~p: ~p", [Kind, Key, Reason],
+                         #{domain => [toroco, wiring]})
     end.
+
+%% A consumer that did not take its change in is logged; the change goes on
+%% (the consumer's supervisor or its own late answers bring it right).
+answered(ok) -> ok;
+answered({error, Reason}) ->
+    logger:error("toroco: a router or gate did not take a wiring change in: ~p", [Reason],
+                 #{domain => [toroco, wiring]}).
 
 stop(Kind, Key) ->
     _ = Kind =:= router andalso toroco_router:unwire(Key),
     _ = supervisor:terminate_child(toroco_routers_sup, {Kind, Key}),
     _ = supervisor:delete_child(toroco_routers_sup, {Kind, Key}),
     ets:delete(?TABLE, {Kind, Key}).
+
+%% What a consumer reads of its configuration: the rest is the plan's own
+%% (its key says the rest), and every byte counts ten thousand times.
+stored(router, Cfg) -> maps:with([sources, upstreams, buffer, idle], Cfg);
+stored(gate, Cfg) -> maps:with([members, entries, upstreams, subs], Cfg).
 
 consumer_module(router) -> toroco_router;
 consumer_module(gate) -> toroco_gate.
@@ -300,12 +394,12 @@ gates_of(Name, #s{wiring = W}) ->
 %% The whole file is checked against a copy of the wiring first; only then are
 %% its nodes started and its wiring applied. A node that fails to start undoes
 %% the nodes started before it.
-load(Terms, S = #s{wiring = W}) ->
+load(Terms, Caller, S = #s{wiring = W}) ->
     case validate_terms(Terms, W) of
         {ok, W1} ->
             Nodes = [T || T <- Terms, element(1, T) =:= behavior orelse element(1, T) =:= device],
             case start_nodes(Nodes, S, []) of
-                {ok, S1} -> rewire({ok, W1}, S1);
+                {ok, S1} -> rewire({ok, W1}, Caller, S1);
                 Err -> Err
             end;
         Err -> Err
@@ -354,38 +448,3 @@ undo_start(behavior, Name, #s{layers = Layers}) ->
          _ = supervisor:terminate_child(Pid, Name),
          supervisor:delete_child(Pid, Name)
      end || {Pid, _} <- maps:values(Layers)].
-
-%%====================================================================
-%% Calls from inside an emitter
-%%====================================================================
-
-serviced_call(Name, Request) ->
-    Mref = erlang:monitor(process, ?MODULE),
-    erlang:send(?MODULE, {'$gen_call', {self(), Mref}, Request}),
-    serviced_wait(Name, Mref, Request).
-
-serviced_wait(Name, Mref, Request) ->
-    receive
-        {Mref, Reply} ->
-            erlang:demonitor(Mref, [flush]),
-            Reply;
-        {'DOWN', Mref, _, _, Reason} ->
-            exit({Reason, {?MODULE, call, [Request]}});
-        {'$toroco_sub', {_, Out} = Src, Reg} ->
-            Latch = case get('$toroco_latches') of
-                        #{Out := V} -> {value, V};
-                        _ -> none
-                    end,
-            toroco_upstream:send(Reg, {'$toroco_state', emitter, Src, self(), Latch}),
-            put('$toroco_serviced', [{sub, Out, Reg} | serviced()]),
-            serviced_wait(Name, Mref, Request);
-        {'$toroco_unsub', {_, Out}, Reg} ->
-            put('$toroco_serviced', [{unsub, Out, Reg} | serviced()]),
-            serviced_wait(Name, Mref, Request)
-    end.
-
-serviced() ->
-    case get('$toroco_serviced') of
-        undefined -> [];
-        L -> L
-    end.

@@ -33,7 +33,7 @@ end_per_testcase(_TC, _Config) ->
 %%====================================================================
 
 stops_by_itself_at_max() ->
-    [{doc, "A watch prints `max' deliveries, then stops by itself, says so and stops tracing."}].
+    [{doc, "A watch prints `max' deliveries, then stops by itself, says so and unsubscribes."}].
 stops_by_itself_at_max(_Config) ->
     Io = capture(),
     ok = toroco:watch(b, #{max => 5, rate => 1000, io => Io, notify => self()}),
@@ -95,7 +95,7 @@ unwatch_stops_and_untraces(_Config) ->
     ok = toroco:unwatch().
 
 follows_a_restart() ->
-    [{doc, "A watched behavior that crashes and is restarted is traced again under its new pid."}].
+    [{doc, "A watched behavior that crashes and is restarted is watched on, and says so."}].
 follows_a_restart(_Config) ->
     Io = capture(),
     ok = toroco:watch(b, #{max => 2, io => Io, notify => self()}),
@@ -108,7 +108,7 @@ follows_a_restart(_Config) ->
     ["b.in <- crash", "b.in <- after_restart"] = deliveries(lines(Io)).
 
 stops_when_its_shell_goes() ->
-    [{doc, "A watch whose output device dies (a remote shell that went away) stops tracing."}].
+    [{doc, "A watch whose output device dies (a remote shell that went away) stops and unsubscribes."}].
 stops_when_its_shell_goes(_Config) ->
     Io = capture(),
     ok = toroco:watch(b, #{io => Io, notify => self()}),
@@ -117,8 +117,7 @@ stops_when_its_shell_goes(_Config) ->
     untraced(b).
 
 refuses_bad_requests() ->
-    [{doc, "Unknown names and inputs, bad options and a receiver traced by someone else are "
-           "refused with a reason naming them."}].
+    [{doc, "Unknown names and inputs and bad options are refused with a reason naming them."}].
 refuses_bad_requests(_Config) ->
     {error, {unknown_name, nobody}} = toroco:watch(nobody, #{}),
     {error, {unknown_input, {b, out}}} = toroco:watch({b, out}, #{}),
@@ -126,11 +125,6 @@ refuses_bad_requests(_Config) ->
     {error, {bad_option, {max, 0}}} = toroco:watch(b, #{max => 0}),
     {error, {bad_option, {rate, fast}}} = toroco:watch(b, #{rate => fast}),
     {error, {bad_option, {colour, red}}} = toroco:watch(b, #{colour => red}),
-    Pid = whereis(toroco_names:process(b)),
-    Tracer = spawn_link(fun() -> receive stop -> ok end end),
-    1 = erlang:trace(Pid, true, ['receive', {tracer, Tracer}]),
-    {error, {already_traced, b}} = toroco:watch(b, #{}),
-    1 = erlang:trace(Pid, false, ['receive']),
     undefined = whereis(toroco_watch).
 
 %%====================================================================
@@ -151,7 +145,7 @@ top_shows_the_whole_network(_Config) ->
     ok = toroco:inject({s, v}, {hold, stop, 60000}),
     await_values(a, [fwd, stop]),
     ok = toroco:suspend_behavior(inh),
-    Text = unicode:characters_to_list(toroco_inspect:top_iodata()),
+    Text = unicode:characters_to_list(toroco_top:iodata()),
     ct:pal("~ts", [Text]),
     Lines = string:split(Text, "\n", all),
     ["toroco top" ++ _, "layers     2: inh  1: b  0: lo", "taken out  none", "" | _] = Lines,
@@ -191,7 +185,6 @@ row(Lines, Re) ->
 top_counts_restarts() ->
     [{doc, "The RESTARTS column counts the restarts of each behavior by its supervisor."}].
 top_counts_restarts(_Config) ->
-    ok = toroco_restarts:install(),
     Before = toroco_restarts:count(b),
     [begin
          Pid = whereis(toroco_names:process(b)),
@@ -200,7 +193,7 @@ top_counts_restarts(_Config) ->
                     3000)
      end || _ <- [1, 2]],
     Expected = integer_to_list(Before + 2),
-    Text = unicode:characters_to_list(toroco_inspect:top_iodata()),
+    Text = unicode:characters_to_list(toroco_top:iodata()),
     ["b", "behavior", "1", "running", "relaying", "0", Expected, "tb_relay"] =
         row(string:split(Text, "\n", all), "^b "),
     0 = toroco_restarts:count(s).
@@ -261,7 +254,10 @@ stopped() ->
     after 5000 -> ct:fail(watch_did_not_stop)
     end.
 
+%% A watch that stopped leaves no subscription to the tap, and nothing on
+%% the receiver.
 untraced(Name) ->
+    [] = toroco_tap:current(),
     {flags, []} = erlang:trace_info(whereis(toroco_names:process(Name)), flags),
     ok.
 

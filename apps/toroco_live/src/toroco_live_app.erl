@@ -7,8 +7,31 @@
 
 -spec start(application:start_type(), term()) -> {ok, pid()} | {error, term()}.
 start(_Type, _Args) ->
-    toroco_live_sup:start_link().
+    case toroco_live_sup:start_link() of
+        {ok, Sup} ->
+            Env = maps:from_list(application:get_all_env(toroco_live)),
+            case maps:get(enabled, Env, true) of
+                true -> start_dashboard(maps:with([ip, http, foxglove, token, max_clients,
+                                                   max_body], Env));
+                false -> ok
+            end,
+            {ok, Sup};
+        Error ->
+            Error
+    end.
+
+%% The robot runs without its dashboard: a port already taken is logged,
+%% and the application stays up (toroco_live:start/1 may be called again).
+start_dashboard(Opts) ->
+    case toroco_live:start(Opts) of
+        {ok, #{http := Port}} ->
+            logger:notice("toroco_live: dashboard at ~ts (port ~b)",
+                          [toroco_live:url(), Port], #{domain => [toroco, live]});
+        {error, Reason} ->
+            logger:error("toroco_live: the dashboard did not start: ~0p", [Reason],
+                         #{domain => [toroco, live]})
+    end.
 
 -spec stop(term()) -> ok.
 stop(_State) ->
-    ok.
+    toroco_live_config:clear().

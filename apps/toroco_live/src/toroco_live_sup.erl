@@ -2,6 +2,9 @@
 %%
 %% ```
 %% toroco_live_sup (one_for_one)
+%%   toroco_live_world            the simulated world's latest snapshot (always there)
+%%   toroco_live_dashboard_sup    the dashboard, added by toroco_live:start/1
+%%   toroco_live_foxglove         the Foxglove bridge, added by toroco_live:start/1
 %% '''
 %%
 %% one_for_one: the dashboard, the bridge and the recorders are independent
@@ -18,4 +21,5 @@ start_link() ->
 -spec init([]) -> {ok, {supervisor:sup_flags(), [supervisor:child_spec()]}}.
 init([]) ->
     Flags = #{strategy => one_for_one, intensity => 5, period => 10},
-    {ok, {Flags, []}}.
+    World = #{id => toroco_live_world, start => {toroco_live_world, start_link, []}},
+    {ok, {Flags, [World]}}.

@@ -1,0 +1,290 @@
+%% @doc The one process shell of the consumers of the event path: the
+%% router of a wired input (`toroco_router') and the gate of an inhibited
+%% output (`toroco_gate') are this gen_statem with a callback module each.
+%%
+%% The shell owns what both do the same way: the links to the upstreams
+%% their sources come from (`toroco_wire'), the subscription handshake, the
+%% one hold timer (`{timeout, hold}', moved only when the earliest deadline
+%% changes), a new incarnation's hello, an upstream's death, and the calls
+%% of the wiring server. The callback module owns its pure core and what
+%% goes out: a router's deliveries to its receiver, a gate's forwarding to
+%% its own subscribers.
+%%
+%% Re-wiring is asynchronous. On `rewire' (or at start) the shell subscribes
+%% to the new upstreams and goes to state `syncing'; it keeps handling the
+%% events of the sources it already had, and holds back (postpones) only
+%% those of the sources being brought in, until every new upstream has
+%% answered with its latch, or died, or `sync_timeout_ms' has passed. Then
+%% the whole change enters the core at once, the wiring server's call is
+%% answered, and the held-back events follow. The wiring server's calls
+%% that need the change applied (`rewire', `ready', `unwire') wait in the
+%% mailbox meanwhile; `info' is answered at once.
+-module(toroco_consumer).
+-behaviour(gen_statem).
+
+-include("toroco_wire.hrl").
+
+-export([start_link/3, child_spec/3, rewire/3, ready/2, info/2, call/4]).
+-export([callback_mode/0, init/1, handle_event/4, terminate/3]).
+
+-type key() :: {atom(), atom()}.
+-type core_event() :: term().
+-type kind_data() :: term().
+
+%% The kind of consumer: `router' or `gate'.
+-callback kind() -> router | gate.
+%% Its registered name.
+-callback reg(key()) -> atom().
+%% Its data at start, from its configuration in the wiring table.
+-callback init(key(), Cfg :: map()) -> kind_data().
+%% One event into the core, and what comes out sent on.
+-callback run(core_event(), Now :: integer(), kind_data()) -> kind_data().
+%% After a batch of events (a router reports its state to the tap here).
+-callback settled(kind_data()) -> kind_data().
+%% The core's earliest hold deadline.
+-callback deadline(kind_data()) -> infinity | integer().
+%% A finished re-wiring, into the core at once.
+-callback rewired(Cfg :: map(), Synced :: [{key(), toroco_router_core:latch()}],
+                  Reset :: [key()], Now :: integer(), kind_data()) -> kind_data().
+%% The core events of an answer that came after the wait (or from the
+%% caller of the wiring change).
+-callback late(key(), toroco_router_core:latch() | inhibited) -> [core_event()].
+%% Messages and calls of its own: `{events, CoreEvents, Data}', `{reply,
+%% Reply, CoreEvents, Data}' (calls), or `unknown'.
+-callback handle(gen_statem:event_type(), term(), kind_data()) ->
+    {events, [core_event()], kind_data()} | {reply, term(), [core_event()], kind_data()} | unknown.
+%% The inspection view.
+-callback info(Now :: integer(), kind_data()) -> term().
+
+-record(c, {mod :: module(),
+            key :: key(),
+            data :: kind_data(),
+            links = toroco_wire:new_links() :: toroco_wire:links(),
+            timer = infinity :: infinity | integer(),
+            sync = none :: none | {toroco_wire:sync(), gen_statem:from() | none, map()}}).
+
+%%====================================================================
+%% API
+%%====================================================================
+
+%% @doc Starts the consumer of `Key' run by `Mod'. `Caller' is the process
+%% whose wiring call starts it (not waited for), or `none'.
+-spec start_link(module(), key(), pid() | none) -> gen_statem:start_ret().
+start_link(Mod, Key, Caller) ->
+    gen_statem:start_link({local, Mod:reg(Key)}, ?MODULE, {Mod, Key, Caller},
+                          toroco_wire:start_opts()).
+
+-spec child_spec(module(), key(), pid() | none) -> supervisor:child_spec().
+child_spec(Mod, Key, Caller) ->
+    #{id => {Mod:kind(), Key}, start => {?MODULE, start_link, [Mod, Key, Caller]},
+      restart => permanent, shutdown => 1000, type => worker, modules => [?MODULE, Mod]}.
+
+%% @doc Takes the configuration now in the wiring table; returns once the
+%% change is in the core (every new upstream answered, died, or was waited
+%% for `sync_timeout_ms').
+-spec rewire(module(), key(), pid() | none) -> ok | {error, term()}.
+rewire(Mod, Key, Caller) ->
+    call(Mod, Key, {rewire, Caller}, answer_timeout()).
+
+%% @doc Returns once a just-started consumer has taken its sources in.
+-spec ready(module(), key()) -> ok | {error, term()}.
+ready(Mod, Key) ->
+    call(Mod, Key, ready, answer_timeout()).
+
+%% @doc The consumer's inspection view, or `none' if it is not running.
+-spec info(module(), key()) -> term() | none.
+info(Mod, Key) ->
+    case call(Mod, Key, info, 1000) of
+        {error, _} -> none;
+        Info -> Info
+    end.
+
+%% @doc A call to the consumer; an error naming it if it is not there or
+%% does not answer.
+-spec call(module(), key(), term(), timeout()) -> term().
+call(Mod, Key, Req, Timeout) ->
+    toroco_wire:call(Mod:reg(Key), Req, Timeout, Key).
+
+%%====================================================================
+%% gen_statem
+%%====================================================================
+
+-spec callback_mode() -> gen_statem:callback_mode_result().
+callback_mode() -> handle_event_function.
+
+-spec init({module(), key(), pid() | none}) ->
+          gen_statem:init_result(ready | syncing) | ignore.
+init({Mod, Key, Caller}) ->
+    process_flag(trap_exit, true),
+    case toroco_wiring:lookup({Mod:kind(), Key}) of
+        {ok, Cfg} ->
+            C = #c{mod = Mod, key = Key, data = Mod:init(Key, Cfg)},
+            {St, C1, Actions} = start_sync(Cfg, Caller, none, C),
+            {ok, St, C1, Actions};
+        error ->
+            ignore
+    end.
+
+-spec handle_event(gen_statem:event_type(), term(), ready | syncing, #c{}) ->
+          gen_statem:event_handler_result(ready | syncing).
+%% The event path.
+handle_event(info, ?WIRE_EVENT(Src, Op), St, C) ->
+    op(emitter, Src, Op, St, C);
+handle_event(info, ?WIRE_GATED(Src, Op), St, C) ->
+    op(gate, Src, Op, St, C);
+handle_event({timeout, hold}, expire, _, C) ->
+    steps([tick], C#c{timer = infinity});
+%% Upstreams: answers, new incarnations, deaths.
+handle_event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C = #c{sync = {Sync, From, Cfg}}) ->
+    case toroco_wire:sync_answer(Tag, Src, Pid, Latch, Sync) of
+        {ok, Sync1} ->
+            maybe_finish(C#c{sync = {Sync1, From, Cfg}});
+        ignore ->
+            %% The caller of the wiring change answers when it can; its
+            %% source is not in the links until the change is applied.
+            case toroco_wire:sync_fresh(Tag, Src, Sync) of
+                true -> {keep_state_and_data, [postpone]};
+                false -> late(Tag, Src, Pid, Latch, St, C)
+            end
+    end;
+handle_event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C) ->
+    late(Tag, Src, Pid, Latch, St, C);
+handle_event(info, ?WIRE_HELLO(Tag, Src, Pid), St, C = #c{links = L}) ->
+    case St =:= syncing andalso toroco_wire:sync_fresh(Tag, Src, element(1, C#c.sync)) of
+        true ->
+            {keep_state_and_data, [postpone]};
+        false ->
+            case toroco_wire:hello(Tag, Src, Pid, L) of
+                {ok, L1} -> steps([{op, Src, unset}], C#c{links = L1});
+                ignore -> keep_state_and_data
+            end
+    end;
+handle_event(info, {'DOWN', Ref, process, Pid, _} = Down, _, C = #c{links = L, sync = Sync}) ->
+    case Sync =/= none andalso toroco_wire:sync_down(Ref, element(1, Sync)) of
+        {ok, Sync1} ->
+            maybe_finish(C#c{sync = setelement(1, Sync, Sync1)});
+        _ ->
+            case toroco_wire:down(Ref, Pid, L) of
+                %% An emitter's (or gate's) death ends its holds and clears
+                %% its latches.
+                {Srcs, L1} -> steps([{op, S, unset} || S <- Srcs], C#c{links = L1});
+                ignore -> kind(info, Down, C)
+            end
+    end;
+handle_event({timeout, sync}, expire, syncing, C = #c{sync = {Sync, From, Cfg}}) ->
+    {ready, C1, Actions} = finish(C#c{sync = {toroco_wire:sync_expire(Sync), From, Cfg}}),
+    {next_state, ready, C1, Actions};
+%% The wiring server.
+handle_event({call, From}, info, _, #c{mod = Mod, data = D}) ->
+    {keep_state_and_data, [{reply, From, Mod:info(toroco_clock:now_ms(), D)}]};
+handle_event({call, _}, _Req, syncing, _C) ->
+    {keep_state_and_data, [postpone]};
+handle_event({call, From}, {rewire, Caller}, ready, C = #c{mod = Mod, key = Key}) ->
+    {ok, Cfg} = toroco_wiring:lookup({Mod:kind(), Key}),
+    case start_sync(Cfg, Caller, From, C) of
+        {syncing, C1, Actions} -> {next_state, syncing, C1, Actions};
+        {ready, C1, Actions} -> {keep_state, C1, Actions}
+    end;
+handle_event({call, From}, ready, ready, _C) ->
+    {keep_state_and_data, [{reply, From, ok}]};
+%% The observer tap, and whatever is the kind's own.
+handle_event(Type, Content, _, C) ->
+    kind(Type, Content, C).
+
+-spec terminate(term(), ready | syncing, #c{}) -> ok.
+terminate(_Reason, _, C = #c{links = L}) ->
+    toroco_wire:detach_all(L, me(C)).
+
+%%====================================================================
+%% Events
+%%====================================================================
+
+op(Tag, Src, Op, St, C = #c{links = L, sync = Sync}) ->
+    case toroco_wire:carries(Tag, Src, L) of
+        true -> steps([{op, Src, Op}], C);
+        false when St =:= syncing ->
+            %% A source being brought in: its events wait for the change.
+            case toroco_wire:sync_fresh(Tag, Src, element(1, Sync)) of
+                true -> {keep_state_and_data, [postpone]};
+                false -> keep_state_and_data
+            end;
+        false -> keep_state_and_data
+    end.
+
+late(Tag, Src, Pid, Latch, _St, C = #c{links = L, mod = Mod}) ->
+    case toroco_wire:late_state(Tag, Src, Pid, L) of
+        {ok, L1} -> steps(Mod:late(Src, Latch), C#c{links = L1});
+        ignore -> keep_state_and_data
+    end.
+
+kind(Type, Content, C = #c{mod = Mod, data = D}) ->
+    case Mod:handle(Type, Content, D) of
+        {events, Events, D1} -> steps(Events, C#c{data = D1});
+        {reply, Reply, Events, D1} ->
+            {call, From} = Type,
+            add_actions([{reply, From, Reply}], steps(Events, C#c{data = D1}));
+        unknown ->
+            logger:warning("toroco: ~p ~p: unexpected ~p event ~p",
+                           [Mod:kind(), C#c.key, Type, Content], #{domain => [toroco, wire]}),
+            keep_state_and_data
+    end.
+
+steps(Events, C = #c{mod = Mod, data = D0}) ->
+    Now = toroco_clock:now_ms(),
+    D = Mod:settled(lists:foldl(fun(E, Acc) -> Mod:run(E, Now, Acc) end, D0, Events)),
+    case timer(C#c{data = D}) of
+        {C1, []} -> {keep_state, C1};
+        {C1, Actions} -> {keep_state, C1, Actions}
+    end.
+
+timer(C = #c{mod = Mod, data = D, timer = T}) ->
+    {T1, Actions} = toroco_wire:hold_timer(Mod:deadline(D), T),
+    {C#c{timer = T1}, Actions}.
+
+add_actions(More, {keep_state, C}) -> {keep_state, C, More};
+add_actions(More, {keep_state, C, Actions}) -> {keep_state, C, More ++ Actions}.
+
+%%====================================================================
+%% Re-wiring
+%%====================================================================
+
+start_sync(Cfg = #{upstreams := Ups}, Caller, From, C = #c{links = L}) ->
+    {L1, Sync} = toroco_wire:start_sync(Ups, L, me(C), Caller),
+    C1 = C#c{links = L1, sync = {Sync, From, Cfg}},
+    case toroco_wire:sync_done(Sync) of
+        true -> finish(C1);
+        false -> {syncing, C1, [{{timeout, sync}, sync_timeout(), expire}]}
+    end.
+
+maybe_finish(C = #c{sync = {Sync, _, _}}) ->
+    case toroco_wire:sync_done(Sync) of
+        true ->
+            {ready, C1, Actions} = finish(C),
+            {next_state, ready, C1, Actions};
+        false ->
+            {keep_state, C}
+    end.
+
+%% The whole change enters the core at once; the wiring server's call is
+%% answered; postponed events follow (leaving `syncing' replays them).
+finish(C = #c{sync = {Sync, From, Cfg}, links = L, mod = Mod, data = D}) ->
+    {L1, Synced, Reset} = toroco_wire:finish_sync(Sync, L),
+    D1 = Mod:settled(Mod:rewired(Cfg, Synced, Reset, toroco_clock:now_ms(), D)),
+    {C1, Actions} = timer(C#c{links = L1, data = D1, sync = none}),
+    Reply = case From of
+                none -> [];
+                _ -> [{reply, From, ok}]
+            end,
+    {ready, C1, [{{timeout, sync}, cancel} | Reply ++ Actions]}.
+
+%% A consumer answers once its own wait is over, so the wiring server waits
+%% a little longer than that, and never forever.
+answer_timeout() ->
+    sync_timeout() + 5000.
+
+%% The consumer's own address, as its upstreams know it.
+me(#c{mod = Mod, key = Key}) ->
+    toroco_wire:address(Mod:reg(Key)).
+
+sync_timeout() ->
+    application:get_env(toroco, sync_timeout_ms, 5000).

@@ -1,0 +1,291 @@
+%% @doc The protocol of the event path: how emitters, gates, routers and
+%% receivers talk, written down once. The messages themselves are the
+%% macros of `toroco_wire.hrl'; this module holds the consumers' side of the
+%% subscription handshake (their links to upstreams) and the one send
+%% primitive. Everything is a plain asynchronous message, processes are
+%% addressed as `{RegisteredName, Node}' or by pid, and every process that
+%% waits for another monitors it, so nothing here assumes one node.
+%%
+%% An <em>upstream</em> is the process a source's events come from: the
+%% emitter, or the gate of an inhibited output. A <em>consumer</em> is a
+%% router or a gate (a gate is both). A consumer waiting for answers keeps
+%% serving everything else (see `toroco_consumer').
+%%
+%% <table>
+%% <tr><th>message</th><th>from → to</th><th>when</th><th>answer</th></tr>
+%% <tr><td>`WIRE_SUB(Src, Consumer)'</td><td>consumer → upstream</td>
+%%     <td>wiring attaches the consumer to Src</td>
+%%     <td>`WIRE_STATE', in the same step as the consumer joins Src's
+%%         subscribers, so nothing is lost or repeated</td></tr>
+%% <tr><td>`WIRE_STATE(Kind, Src, Pid, Latch)'</td><td>upstream → consumer</td>
+%%     <td>answer to `WIRE_SUB'; `Latch' is `{value, V}', `none', or
+%%         `inhibited' from a gate holding Src back</td><td>none</td></tr>
+%% <tr><td>`WIRE_UNSUB(Src, Consumer)'</td><td>consumer → upstream</td>
+%%     <td>Src leaves the consumer's wiring, or the consumer stops</td><td>none</td></tr>
+%% <tr><td>`WIRE_EVENT(Src, Op)'</td><td>emitter → consumers</td>
+%%     <td>each emission (`{send, V, Hold}', `{set, V}', `unset')</td><td>none</td></tr>
+%% <tr><td>`WIRE_GATED(Src, Op)'</td><td>gate → consumers</td>
+%%     <td>an emission let through, an `unset' when Src becomes inhibited,
+%%         its latch as a `set' when freed</td><td>none</td></tr>
+%% <tr><td>`WIRE_HELLO(Kind, Src, Pid)'</td><td>upstream → consumers</td>
+%%     <td>a new incarnation starts: nothing of the last one holds</td><td>none</td></tr>
+%% <tr><td>`WIRE_RX(Input, Pid)'</td><td>receiver → router</td>
+%%     <td>the receiver (re)starts, resumes, or asks for a redelivery</td>
+%%     <td>the router forgets the last value and delivers the winner's latch</td></tr>
+%% <tr><td>`WIRE_IN(Input, V)' / `WIRE_IN(Input, V, Router)'</td><td>router → receiver</td>
+%%     <td>a delivery (the second with `buffer => latest')</td>
+%%     <td>`WIRE_ACK(Input)' for the second</td></tr>
+%% <tr><td>`WIRE_ACK(Input)'</td><td>receiver → router</td>
+%%     <td>a `latest' delivery was handled</td><td>the newest pending value, if any</td></tr>
+%% <tr><td>`{'$toroco_tap', Subs}'</td><td>`toroco_tap' → emitters, routers</td>
+%%     <td>observer subscriptions change</td><td>none</td></tr>
+%% </table>
+%%
+%% The wiring server reaches consumers with calls (`toroco_consumer':
+%% rewire, ready, unwire, info) whose answers are bounded by the consumer's
+%% own wait for its upstreams (`sync_timeout_ms'); a consumer never waits
+%% for the process whose wiring call it is serving (the caller's answer
+%% arrives as soon as its callback returns).
+-module(toroco_wire).
+
+-include("toroco_wire.hrl").
+
+-export([address/1, send/2, call/4, start_opts/0]).
+-export([new_links/0, start_sync/4, sync_answer/5, sync_down/2, sync_expire/1, sync_done/1,
+         sync_fresh/3, finish_sync/2, detach_all/2, hello/4, late_state/4, down/3, carries/3,
+         hold_timer/2]).
+-export_type([address/0, links/0, sync/0, upstream/0]).
+
+-type source() :: {atom(), atom()}.
+%% Where a process is reached: its registered name on its node, or its pid.
+-type address() :: {atom(), node()} | pid().
+-type upstream() :: {emitter | gate, atom()}.
+-type latch() :: toroco_router_core:latch().
+%% What a consumer knows of its upstreams: where each source comes from, the
+%% pid of the incarnation it currently listens to, and one monitor per pid.
+-type links() :: #{ups := #{source() => upstream()},
+                   pids := #{source() => pid()},
+                   mons := #{pid() => reference()}}.
+%% A re-wiring in progress: the new upstreams, the subscriptions still
+%% waiting for an answer (with a monitor of the upstream each), and the
+%% answers so far.
+-opaque sync() :: #{ups := #{source() => upstream()},
+                    old := #{source() => upstream()},
+                    fresh := #{source() => upstream()},
+                    pending := #{source() => reference()},
+                    synced := [{source(), pid() | undefined, latch() | inhibited}]}.
+
+%%====================================================================
+%% Addresses and sends
+%%====================================================================
+
+%% @doc The address of a registered process of this node.
+-spec address(atom()) -> address().
+address(Reg) -> {Reg, node()}.
+
+%% @doc Sends to an address; one that names no process (it is restarting or
+%% gone) swallows the message, as a cut wire would.
+-spec send(address() | atom(), term()) -> ok.
+send(To, Msg) ->
+    try erlang:send(To, Msg, [noconnect]) of
+        _ -> ok
+    catch
+        error:badarg -> ok
+    end.
+
+%% @doc A call to a process of the network, with a time limit; what goes
+%% wrong comes back as an error naming `Name': `{not_running, Name}',
+%% `{timeout, Name}', or the exit reason.
+-spec call(atom() | address(), term(), timeout(), term()) -> term().
+call(To, Req, Timeout, Name) ->
+    try gen_statem:call(To, Req, Timeout)
+    catch exit:{noproc, _} -> {error, {not_running, Name}};
+          exit:{{nodedown, _}, _} -> {error, {not_running, Name}};
+          exit:{timeout, _} -> {error, {timeout, Name}};
+          exit:{Reason, _} -> {error, {Reason, Name}}
+    end.
+
+%%====================================================================
+%% Links: a consumer's view of its upstreams
+%%====================================================================
+
+-spec new_links() -> links().
+new_links() -> #{ups => #{}, pids => #{}, mons => #{}}.
+
+%% @doc Starts moving the links to a new set of upstreams: unsubscribes from
+%% the sources that left (or whose upstream changed) and subscribes to the
+%% new ones, without waiting. `Caller' (the process whose wiring call this
+%% is, or `none') is subscribed to but not waited for: it is busy in that
+%% call, and its answer comes later as a late state.
+-spec start_sync(#{source() => upstream()}, links(), address(), pid() | none) -> {links(), sync()}.
+start_sync(NewUps, Links = #{ups := OldUps}, Me, Caller) ->
+    Gone = [S || {S, Up} <- maps:to_list(OldUps), maps:get(S, NewUps, none) =/= Up],
+    _ = [unsubscribe(S, maps:get(S, OldUps), Me) || S <- Gone],
+    Fresh = maps:filter(fun(S, Up) -> maps:get(S, OldUps, none) =/= Up end, NewUps),
+    Pending = maps:fold(
+                fun(S, {_, Reg} = Up, Acc) ->
+                        subscribe(S, Up, Me),
+                        case whereis(Reg) of
+                            Caller -> Acc;
+                            _ -> Acc#{S => erlang:monitor(process, address(Reg))}
+                        end
+                end, #{}, Fresh),
+    Links1 = lists:foldl(fun(S, Acc) -> forget(S, Acc) end,
+                         Links#{ups := maps:without(Gone, OldUps)}, Gone),
+    {Links1, #{ups => NewUps, old => OldUps, fresh => Fresh, pending => Pending, synced => []}}.
+
+%% @doc An answer to a subscription; `ignore' if it is not one this sync
+%% waits for.
+-spec sync_answer(emitter | gate, source(), pid(), latch() | inhibited, sync()) ->
+          {ok, sync()} | ignore.
+sync_answer(Tag, Src, Pid, Latch, Sync = #{fresh := Fresh, pending := P, synced := Acc}) ->
+    case {Fresh, P} of
+        {#{Src := {Tag, _}}, #{Src := Mref}} ->
+            erlang:demonitor(Mref, [flush]),
+            {ok, Sync#{pending := maps:remove(Src, P), synced := [{Src, Pid, Latch} | Acc]}};
+        _ ->
+            ignore
+    end.
+
+%% @doc A waited-for upstream is not running: its source comes with no latch.
+-spec sync_down(reference(), sync()) -> {ok, sync()} | ignore.
+sync_down(Mref, Sync = #{pending := P, synced := Acc}) ->
+    case [S || {S, M} <- maps:to_list(P), M =:= Mref] of
+        [Src] -> {ok, Sync#{pending := maps:remove(Src, P), synced := [{Src, undefined, none} | Acc]}};
+        [] -> ignore
+    end.
+
+%% @doc The wait is over: sources still unanswered come with no latch (an
+%% answer that comes later is taken as a late state).
+-spec sync_expire(sync()) -> sync().
+sync_expire(Sync = #{pending := P, synced := Acc}) ->
+    maps:foreach(fun(_, M) -> erlang:demonitor(M, [flush]) end, P),
+    Sync#{pending := #{}, synced := Acc ++ [{S, undefined, none} || S <- maps:keys(P)]}.
+
+-spec sync_done(sync()) -> boolean().
+sync_done(#{pending := P}) -> map_size(P) =:= 0.
+
+%% @doc Whether `Src' (tagged `Tag') is one this sync brings in: its events
+%% wait until the sync is applied.
+-spec sync_fresh(emitter | gate, source(), sync()) -> boolean().
+sync_fresh(Tag, Src, #{fresh := Fresh}) ->
+    case Fresh of
+        #{Src := {Tag, _}} -> true;
+        #{} -> false
+    end.
+
+%% @doc Applies a finished sync to the links: the synced latches, and the
+%% sources whose state starts afresh (the new ones, and those that now come
+%% through a gate that inhibits them). A source that only moved between its
+%% emitter and a gate that lets it through keeps its hold.
+-spec finish_sync(sync(), links()) -> {links(), [{source(), latch()}], [source()]}.
+finish_sync(#{ups := NewUps, old := OldUps, synced := Synced}, Links) ->
+    L1 = lists:foldl(fun({S, Pid, _}, Acc) when is_pid(Pid) -> listen(S, Pid, Acc);
+                        (_, Acc) -> Acc
+                     end, Links#{ups := NewUps}, Synced),
+    Reset = [S || {S, _, Latch} <- Synced, Latch =:= inhibited orelse not maps:is_key(S, OldUps)],
+    {L1, [{S, latch(Latch)} || {S, _, Latch} <- Synced], Reset}.
+
+%% A gate answers `inhibited' for a member it holds back: no latch gets through.
+latch(inhibited) -> none;
+latch(Latch) -> Latch.
+
+%% @doc Unsubscribes from every upstream (the consumer is going away).
+-spec detach_all(links(), address()) -> ok.
+detach_all(#{ups := Ups}, Me) ->
+    maps:foreach(fun(S, Up) -> unsubscribe(S, Up, Me) end, Ups).
+
+%% @doc A new incarnation of an upstream announced itself: listen to it. Its
+%% source starts with no latch and no hold (the caller applies an `unset').
+-spec hello(emitter | gate, source(), pid(), links()) -> {ok, links()} | ignore.
+hello(Tag, Src, Pid, Links = #{ups := Ups}) ->
+    case Ups of
+        #{Src := {Tag, _}} -> {ok, listen(Src, Pid, Links)};
+        #{} -> ignore
+    end.
+
+%% @doc An answer to a subscription that came after the wait gave up on it
+%% (or from the caller of the wiring change, which was not waited for).
+-spec late_state(emitter | gate, source(), pid(), links()) -> {ok, links()} | ignore.
+late_state(Tag, Src, Pid, Links = #{ups := Ups, pids := Pids}) ->
+    case {Ups, Pids} of
+        {#{Src := {Tag, _}}, #{Src := _}} -> ignore;
+        {#{Src := {Tag, _}}, #{}} -> {ok, listen(Src, Pid, Links)};
+        _ -> ignore
+    end.
+
+%% @doc An upstream process died (monitor `Ref'): the sources it carried,
+%% and the links without it; `ignore' if it is not a monitor of the links.
+-spec down(reference(), pid(), links()) -> {[source()], links()} | ignore.
+down(Ref, Pid, Links = #{pids := Pids, mons := Mons}) ->
+    case Mons of
+        #{Pid := Ref} ->
+            Srcs = [S || {S, P} <- maps:to_list(Pids), P =:= Pid],
+            {Srcs, Links#{pids := maps:without(Srcs, Pids), mons := maps:remove(Pid, Mons)}};
+        #{} ->
+            ignore
+    end.
+
+%% @doc Whether an event tagged `Tag' (`emitter' for `WIRE_EVENT', `gate'
+%% for `WIRE_GATED') for `Src' is one this consumer listens to; while a
+%% source moves between its emitter and a gate, events from the side it
+%% left are ignored.
+-spec carries(emitter | gate, source(), links()) -> boolean().
+carries(Tag, Src, #{ups := Ups}) ->
+    case Ups of
+        #{Src := {Tag, _}} -> true;
+        #{} -> false
+    end.
+
+%% @doc The consumer's one hold timer (the gen_statem timeout `{timeout,
+%% hold}'), moved only when the earliest deadline changed; deadlines are
+%% in `toroco_clock' time.
+-spec hold_timer(infinity | integer(), infinity | integer()) ->
+          {infinity | integer(), [gen_statem:action()]}.
+hold_timer(Same, Same) -> {Same, []};
+hold_timer(infinity, _) -> {infinity, [{{timeout, hold}, cancel}]};
+hold_timer(Next, _) ->
+    {Next, [{{timeout, hold}, toroco_clock:real_deadline(Next), expire, [{abs, true}]}]}.
+
+listen(Src, Pid, Links) ->
+    L1 = #{pids := Pids, mons := Mons} = forget(Src, Links),
+    Mons1 = case Mons of
+                #{Pid := _} -> Mons;
+                #{} -> Mons#{Pid => erlang:monitor(process, Pid)}
+            end,
+    L1#{pids := Pids#{Src => Pid}, mons := Mons1}.
+
+%% Drops a source's pid, and the monitor of that pid if no other source uses it.
+forget(Src, Links = #{pids := Pids, mons := Mons}) ->
+    case Pids of
+        #{Src := Pid} ->
+            Pids1 = maps:remove(Src, Pids),
+            case lists:member(Pid, maps:values(Pids1)) of
+                true -> Links#{pids := Pids1};
+                false ->
+                    case Mons of
+                        #{Pid := Ref} -> erlang:demonitor(Ref, [flush]);
+                        #{} -> ok
+                    end,
+                    Links#{pids := Pids1, mons := maps:remove(Pid, Mons)}
+            end;
+        #{} -> Links
+    end.
+
+subscribe(Src, {_Tag, Up}, Me) ->
+    send(address(Up), ?WIRE_SUB(Src, Me)).
+
+unsubscribe(Src, {_Tag, Up}, Me) ->
+    send(address(Up), ?WIRE_UNSUB(Src, Me)).
+
+%%====================================================================
+%% Settings
+%%====================================================================
+
+%% @doc Start options of the network's processes (behaviors, devices,
+%% routers, gates): a process idle for `hibernate_after_ms' (app env, default
+%% 5000) hibernates, which shrinks an idle behavior with its router to a few
+%% kilobytes; one that is busy, even at 1 Hz, never does.
+-spec start_opts() -> [gen_statem:start_opt()].
+start_opts() ->
+    [{hibernate_after, application:get_env(toroco, hibernate_after_ms, 5000)}].

@@ -1,0 +1,24 @@
+%% The messages of the event path, defined once. `toroco_wire' documents
+%% them (who sends each, to whom, when, and what answers it); these macros
+%% are the only way the runtime builds and matches them, so that they can
+%% appear in function heads at no cost.
+
+%% emitter -> consumer (a router or a gate): one emission of Src.
+-define(WIRE_EVENT(Src, Op), {'$toroco', Src, Op}).
+%% gate -> consumer: an emission of a gated output, let through.
+-define(WIRE_GATED(Src, Op), {'$toroco_gate', Src, Op}).
+%% consumer -> upstream: attach Consumer (an address) to Src.
+-define(WIRE_SUB(Src, Consumer), {'$toroco_sub', Src, Consumer}).
+%% consumer -> upstream: detach.
+-define(WIRE_UNSUB(Src, Consumer), {'$toroco_unsub', Src, Consumer}).
+%% upstream -> consumer: the answer to a subscription, Src's current state.
+-define(WIRE_STATE(Kind, Src, Pid, Latch), {'$toroco_state', Kind, Src, Pid, Latch}).
+%% upstream -> its consumers: a new incarnation is running.
+-define(WIRE_HELLO(Kind, Src, Pid), {'$toroco_hello', Kind, Src, Pid}).
+%% receiver -> router: (re)started, resumed or asking for a redelivery.
+-define(WIRE_RX(Input, Pid), {'$toroco_rx', Input, Pid}).
+%% router -> receiver: a delivery; with `buffer => latest' it names the
+%% router, which waits for the ack before sending the next.
+-define(WIRE_IN(Input, Value), {'$toroco_in', Input, Value}).
+-define(WIRE_IN(Input, Value, Router), {'$toroco_in', Input, Value, Router}).
+-define(WIRE_ACK(Input), {'$toroco_ack', Input}).

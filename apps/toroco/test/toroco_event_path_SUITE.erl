@@ -1,0 +1,356 @@
+%% The event path: the observer tap (SPEC §10), and the runtime's own
+%% resilience around it: the wiring server's crashes, self-calls, inject's
+%% errors, reset and the engine's defaults.
+-module(toroco_event_path_SUITE).
+-include_lib("common_test/include/ct.hrl").
+-compile([export_all, nowarn_export_all]).
+
+-import(toroco_test_lib, [sensor/2, actuator/2, await_values/2, wait_until/2]).
+
+all() ->
+    [{group, tap}, {group, resilience}].
+
+groups() ->
+    [{tap, [], [event_shapes, names_filter, kinds_filter, lifecycle_events,
+                slow_subscriber_loses_and_counts, dropped_reported_without_later_events,
+                per_source_order, unsubscribe_stops_events, dead_subscriber_is_unsubscribed,
+                bad_options_refused, no_subscriber_no_tap_state]},
+     {resilience, [], [wiring_server_crashes_100_times_under_load, inject_into_own_output_is_refused,
+                       inject_unknown_and_stopped_names, restarts_counted_from_lifecycle,
+                       reset_cancels_named_timeouts, unknown_events_fall_to_the_engine]}].
+
+init_per_testcase(_Case, Config) ->
+    ok = toroco_test_lib:start(),
+    Config.
+
+end_per_testcase(_Case, _Config) ->
+    toroco_test_lib:stop().
+
+%%====================================================================
+%% The tap
+%%====================================================================
+
+%% s.v -> b.in ; b.out -> a.in
+chain() ->
+    sensor(s, [v]),
+    ok = toroco:add_behavior(b, tb_relay, #{layer => 1}),
+    actuator(a, [in]),
+    ok = toroco:set_inputs(b, #{in => [{s, v}]}),
+    ok = toroco:set_inputs(a, #{in => [{b, out}]}).
+
+%% Every event that comes until none has come for `Gap' ms.
+events(Ref, Gap) ->
+    receive {toroco_event, Ref, E} -> [E | events(Ref, Gap)]
+    after Gap -> []
+    end.
+
+await_event(Ref, Pred, Timeout) ->
+    Deadline = erlang:monotonic_time(millisecond) + Timeout,
+    await_event_until(Ref, Pred, Deadline).
+
+await_event_until(Ref, Pred, Deadline) ->
+    Left = max(0, Deadline - erlang:monotonic_time(millisecond)),
+    receive
+        {toroco_event, Ref, E} ->
+            case Pred(E) of
+                true -> E;
+                false -> await_event_until(Ref, Pred, Deadline)
+            end
+    after Left -> ct:fail({no_event_matching, Pred})
+    end.
+
+event_shapes() ->
+    [{doc, "Emit, deliver and router events have the shapes of SPEC §10, with nanosecond system times."}].
+event_shapes(_Config) ->
+    chain(),
+    {ok, Ref} = toroco:subscribe_events(#{}),
+    T0 = erlang:system_time(nanosecond),
+    ok = toroco:inject({s, v}, {set, 7}),
+    {emit, T1, {s, v}, send, {set, 7}} =
+        await_event(Ref, fun(E) -> element(1, E) =:= emit andalso element(3, E) =:= {s, v} end, 2000),
+    true = T1 >= T0 andalso T1 =< erlang:system_time(nanosecond),
+    {emit, _, {b, out}, set, 7} =
+        await_event(Ref, fun(E) -> element(1, E) =:= emit andalso element(3, E) =:= {b, out} end, 2000),
+    {deliver, _, {a, in}, 7} =
+        await_event(Ref, fun(E) -> element(1, E) =:= deliver andalso element(3, E) =:= {a, in} end, 2000),
+    {router, _, {a, in}, #{winner := {b, out}, holds := [{{b, out}, infinity}],
+                           latches := [{{b, out}, 7}]}} =
+        await_event(Ref, fun(E) -> element(1, E) =:= router andalso element(3, E) =:= {a, in} end, 2000),
+    ok = toroco:inject({s, v}, unset),
+    {emit, _, {b, out}, unset, none} =
+        await_event(Ref, fun(E) -> element(1, E) =:= emit andalso element(3, E) =:= {b, out} end, 2000),
+    {router, _, {a, in}, #{winner := none, holds := [], latches := []}} =
+        await_event(Ref, fun(E) -> element(1, E) =:= router andalso element(3, E) =:= {a, in} end, 2000).
+
+names_filter() ->
+    [{doc, "names keeps the events emitted by, delivered to, routed for or happening to those names."}].
+names_filter(_Config) ->
+    chain(),
+    {ok, Ref} = toroco:subscribe_events(#{names => [a]}),
+    ok = toroco:inject({s, v}, hello),
+    {deliver, _, {a, in}, hello} = await_event(Ref, fun(E) -> element(1, E) =:= deliver end, 2000),
+    All = events(Ref, 200),
+    [] = [E || E <- All, element(1, E) =:= emit],
+    [] = [E || E <- All, element(1, E) =/= emit, element(1, element(3, E)) =/= a].
+
+kinds_filter() ->
+    [{doc, "kinds keeps only the events of those kinds."}].
+kinds_filter(_Config) ->
+    chain(),
+    {ok, Ref} = toroco:subscribe_events(#{kinds => [deliver]}),
+    ok = toroco:inject({s, v}, x),
+    ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= 1 end, 2000),
+    Events = events(Ref, 200),
+    [{deliver, _, {a, in}, x}, {deliver, _, {b, in}, x}] =
+        lists:sort(fun(A, B) -> element(3, A) =< element(3, B) end, Events).
+
+lifecycle_events() ->
+    [{doc, "Starts, suspends, resumes, resets, crashes and stops are lifecycle events."}].
+lifecycle_events(_Config) ->
+    chain(),
+    {ok, Ref} = toroco:subscribe_events(#{kinds => [lifecycle]}),
+    ok = toroco:suspend_behavior(b),
+    {lifecycle, _, b, suspended} = await_event(Ref, fun(_) -> true end, 2000),
+    ok = toroco:resume_behavior(b),
+    {lifecycle, _, b, resumed} = await_event(Ref, fun(_) -> true end, 2000),
+    ok = toroco:add_behavior(c, tb_relay, #{}),
+    {lifecycle, _, c, started} = await_event(Ref, fun(_) -> true end, 2000),
+    ok = toroco:inject({s, v}, crash),
+    {lifecycle, _, b, stopped} = await_event(Ref, fun(_) -> true end, 2000),
+    {lifecycle, _, b, restarted} = await_event(Ref, fun(_) -> true end, 2000),
+    ok = toroco:set_reset(c, [{s, v}]),
+    ok = toroco:inject({s, v}, go),
+    {lifecycle, _, c, reset} = await_event(Ref, fun(E) -> element(3, E) =:= c end, 2000),
+    ok = toroco:remove_behavior(c),
+    {lifecycle, _, c, stopped} = await_event(Ref, fun(E) -> element(3, E) =:= c end, 2000).
+
+slow_subscriber_loses_and_counts() ->
+    [{doc, "A subscriber that does not read keeps at most about `buffer' events; every event is received or counted."}].
+slow_subscriber_loses_and_counts(_Config) ->
+    sensor(s, [v]),
+    Parent = self(),
+    N = 5000,
+    Buffer = 100,
+    Sub = spawn_link(fun() ->
+                             {ok, Ref} = toroco:subscribe_events(#{kinds => [emit], buffer => Buffer}),
+                             Parent ! {subscribed, self()},
+                             receive read -> ok end,
+                             Parent ! {counted, self(), count(Ref, 0, 0, [])}
+                     end),
+    receive {subscribed, Sub} -> ok end,
+    [ok = toroco:inject({s, v}, I) || I <- lists:seq(1, N)],
+    %% The subscriber's mailbox stays bounded while it does not read.
+    ok = wait_until(fun() -> element(2, process_info(Sub, message_queue_len)) > 0 end, 2000),
+    {message_queue_len, Len} = process_info(Sub, message_queue_len),
+    true = Len =< Buffer + 1,
+    Sub ! read,
+    receive {counted, Sub, {Received, Dropped, Seq}} ->
+            ct:pal("received ~b, dropped ~b of ~b (buffer ~b)", [Received, Dropped, N, Buffer]),
+            N = Received + Dropped,
+            true = Dropped > 0,
+            Seq = lists:sort(Seq)                       % in emission order
+    after 10000 -> ct:fail(no_count)
+    end.
+
+count(_Ref, R, D, Seq) when R + D >= 5000 ->
+    {R, D, lists:reverse(Seq)};
+count(Ref, R, D, Seq) ->
+    receive
+        {toroco_event, Ref, {dropped, K}} -> count(Ref, R, D + K, Seq);
+        {toroco_event, Ref, {emit, _, _, send, I}} -> count(Ref, R + 1, D, [I | Seq])
+    after 3000 -> {R, D, lists:reverse(Seq)}
+    end.
+
+dropped_reported_without_later_events() ->
+    [{doc, "{dropped, N} reaches a subscriber as soon as it reads again, even if no later event comes."}].
+dropped_reported_without_later_events(_Config) ->
+    sensor(s, [v]),
+    {ok, Ref} = toroco:subscribe_events(#{kinds => [emit], buffer => 5}),
+    [ok = toroco:inject({s, v}, I) || I <- lists:seq(1, 50)],
+    %% Read what is there, then nothing more is emitted.
+    Got = fun Loop(R, D) ->
+                  receive
+                      {toroco_event, Ref, {dropped, K}} -> Loop(R, D + K);
+                      {toroco_event, Ref, {emit, _, _, _, _}} -> Loop(R + 1, D)
+                  after 1000 -> {R, D}
+                  end
+          end(0, 0),
+    {Received, Dropped} = Got,
+    50 = Received + Dropped,
+    true = Dropped > 0.
+
+per_source_order() ->
+    [{doc, "Per source, events arrive in emission order."}].
+per_source_order(_Config) ->
+    chain(),
+    {ok, Ref} = toroco:subscribe_events(#{kinds => [deliver], names => [a]}),
+    [ok = toroco:inject({s, v}, I) || I <- lists:seq(1, 500)],
+    ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= 500 end, 5000),
+    Values = [V || {deliver, _, {a, in}, V} <- events(Ref, 500)],
+    Values = lists:seq(1, 500).
+
+unsubscribe_stops_events() ->
+    [{doc, "After unsubscribe_events/1, no event of that subscription is sent."}].
+unsubscribe_stops_events(_Config) ->
+    chain(),
+    {ok, Ref} = toroco:subscribe_events(#{}),
+    ok = toroco:unsubscribe_events(Ref),
+    _ = events(Ref, 100),
+    ok = toroco:inject({s, v}, x),
+    ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= 1 end, 2000),
+    [] = events(Ref, 200),
+    ok = toroco:unsubscribe_events(Ref).
+
+dead_subscriber_is_unsubscribed() ->
+    [{doc, "A subscriber that dies is unsubscribed: the network's processes drop its sinks."}].
+dead_subscriber_is_unsubscribed(_Config) ->
+    chain(),
+    Sub = spawn(fun() -> {ok, _} = toroco:subscribe_events(#{}), receive stop -> ok end end),
+    ok = wait_until(fun() -> toroco_tap:current() =/= [] end, 2000),
+    Sub ! stop,
+    ok = wait_until(fun() -> toroco_tap:current() =:= [] end, 2000),
+    ok = wait_until(fun() -> tap_of(b) =:= #{} end, 2000).
+
+bad_options_refused() ->
+    [{doc, "Bad subscription options are refused with a reason naming them."}].
+bad_options_refused(_Config) ->
+    {error, {bad_kind, bogus}} = toroco:subscribe_events(#{kinds => [bogus]}),
+    {error, {bad_buffer, 0}} = toroco:subscribe_events(#{buffer => 0}),
+    {error, {bad_names, x}} = toroco:subscribe_events(#{names => x}),
+    {error, {bad_option, colour}} = toroco:subscribe_events(#{colour => red}),
+    {error, {bad_options, nope}} = toroco:subscribe_events(nope),
+    [] = toroco_tap:current().
+
+no_subscriber_no_tap_state() ->
+    [{doc, "With no subscriber the network's processes hold no sink: nothing to send, nothing to look up."}].
+no_subscriber_no_tap_state(_Config) ->
+    chain(),
+    #{} = tap_of(b),
+    0 = map_size(tap_of(b)),
+    {ok, Ref} = toroco:subscribe_events(#{}),
+    ok = wait_until(fun() -> map_size(tap_of(b)) > 0 end, 2000),
+    ok = toroco:unsubscribe_events(Ref),
+    ok = wait_until(fun() -> tap_of(b) =:= #{} end, 2000).
+
+%% The sinks the engine of `Name' holds (the engine's record, field `tap').
+tap_of(Name) ->
+    {_, E} = sys:get_state(toroco_names:process(Name)),
+    lists:last([F || F <- tuple_to_list(E), is_map(F)]).
+
+%%====================================================================
+%% Resilience
+%%====================================================================
+
+wiring_server_crashes_100_times_under_load() ->
+    [{doc, "Killing the wiring server 100 times under 1 kHz input: the actuator obeys the same wiring, inspect() unchanged."}].
+wiring_server_crashes_100_times_under_load(_Config) ->
+    sensor(s, [v]),
+    sensor(low, [v]),
+    ok = toroco:add_behavior(b, tb_relay, #{layer => 1}),
+    actuator(a, [in]),
+    ok = toroco:set_inputs(b, #{in => [{s, v}]}),
+    ok = toroco:set_inputs(a, #{in => [{b, out}, {low, v}]}),
+    ok = toroco:inject({low, v}, floor, #{latch => true}),
+    Before = toroco:inspect(),
+    BeforeA = maps:without([inputs, device], toroco:inspect(a)),
+    Feeder = spawn_link(fun() -> feed(1) end),
+    Kills = [begin
+                 Pid = whereis(toroco_wiring),
+                 exit(Pid, kill),
+                 ok = wait_until(fun() -> is_pid(whereis(toroco_wiring)) andalso whereis(toroco_wiring) =/= Pid end, 2000),
+                 timer:sleep(10),
+                 1
+             end || _ <- lists:seq(1, 100)],
+    100 = lists:sum(Kills),
+    unlink(Feeder),
+    exit(Feeder, kill),
+    Before = toroco:inspect(),
+    BeforeA = maps:without([inputs, device], toroco:inspect(a)),
+    %% The robot kept obeying the wiring: b's events won over low's latch,
+    %% and when b lets go, low's latch comes back.
+    H = toroco_fake_actuator:history(a),
+    Relayed = [V || {in, V, _} <- H, is_integer(V)],
+    ct:pal("~b values relayed to the actuator while the wiring server was killed 100 times",
+           [length(Relayed)]),
+    true = length(Relayed) > 100,
+    Relayed = lists:sort(Relayed),
+    ok = toroco:inject({s, v}, {hold, last, 10}),
+    ok = toroco_fake_actuator:await(a, fun(Hs) -> element(2, lists:last(Hs)) =:= floor end, 2000),
+    %% And the wiring server still works.
+    ok = toroco:add_behavior(c, tb_relay, #{}),
+    ok = toroco:set_inputs(c, #{in => [{s, v}]}).
+
+feed(I) ->
+    ok = toroco:inject({s, v}, I),
+    timer:sleep(1),
+    feed(I + 1).
+
+inject_into_own_output_is_refused() ->
+    [{doc, "A behavior injecting into its own output from a callback gets {error, {self_call, Name}}, not a deadlock."}].
+inject_into_own_output_is_refused(_Config) ->
+    sensor(s, [v]),
+    ok = toroco:add_behavior(b, tb_self_injector, #{}),
+    ok = toroco:set_inputs(b, #{in => [{s, v}]}),
+    actuator(a, [in]),
+    ok = toroco:set_inputs(a, #{in => [{b, out}]}),
+    ok = toroco:inject({s, v}, go),
+    ok = toroco_fake_actuator:await(a, fun(H) -> [V || {_, V, _} <- H] =:= [{error, {self_call, b}}] end, 2000).
+
+inject_unknown_and_stopped_names() ->
+    [{doc, "inject names an unknown emitter or output in its error."}].
+inject_unknown_and_stopped_names(_Config) ->
+    sensor(s, [v]),
+    {error, {unknown_name, nobody}} = toroco:inject({nobody, v}, 1),
+    {error, {unknown_output, {s, w}}} = toroco:inject({s, w}, 1),
+    {error, {bad_source, oops}} = toroco:inject(oops, 1).
+
+restarts_counted_from_lifecycle() ->
+    [{doc, "Restart counts come from lifecycle, whatever the log level."}].
+restarts_counted_from_lifecycle(_Config) ->
+    Level = maps:get(level, logger:get_primary_config()),
+    ok = logger:set_primary_config(level, emergency),
+    try
+        chain(),
+        0 = toroco_restarts:count(b),
+        [begin
+             Pid = whereis(toroco_names:process(b)),
+             ok = toroco:inject({s, v}, crash),
+             ok = wait_until(fun() -> is_pid(whereis(toroco_names:process(b))) andalso
+                                          whereis(toroco_names:process(b)) =/= Pid end, 2000)
+         end || _ <- [1, 2]],
+        2 = toroco_restarts:count(b)
+    after
+        logger:set_primary_config(level, Level)
+    end.
+
+reset_cancels_named_timeouts() ->
+    [{doc, "Reset cancels the generic named timeouts the old run set: they never fire after it."}].
+reset_cancels_named_timeouts(_Config) ->
+    sensor(s, [v]),
+    sensor(r, [go]),
+    ok = toroco:add_behavior(b, tb_timer, #{params => #{ms => 300}}),
+    ok = toroco:set_inputs(b, #{in => [{s, v}]}),
+    actuator(a, [in]),
+    ok = toroco:set_inputs(a, #{in => [{b, out}]}),
+    ok = toroco:set_reset(b, [{r, go}]),
+    %% Without a reset the timer fires.
+    ok = toroco:inject({s, v}, arm),
+    ok = toroco_fake_actuator:await(a, fun(H) -> [V || {_, V, _} <- H] =:= [ticked] end, 2000),
+    %% Armed, then reset: it must not fire.
+    ok = toroco:inject({s, v}, arm),
+    ok = toroco:inject({r, go}, now),
+    {error, timeout} = toroco_fake_actuator:await(a, fun(H) -> length(H) > 1 end, 800),
+    [ticked] = toroco_test_lib:values(a).
+
+unknown_events_fall_to_the_engine() ->
+    [{doc, "A handle_event/4 without a clause for an event leaves it to the engine: calls get unknown_call."}].
+unknown_events_fall_to_the_engine(_Config) ->
+    ok = toroco:add_behavior(b, tb_timer, #{}),
+    actuator(a, [in]),
+    ok = toroco:set_inputs(a, #{in => [{b, out}]}),
+    Pid = whereis(toroco_names:process(b)),
+    {error, {unknown_call, {b, what}}} = gen_statem:call(Pid, what, 1000),
+    Pid ! something_else,
+    Pid ! ping,
+    ok = toroco_fake_actuator:await(a, fun(H) -> [V || {_, V, _} <- H] =:= [pong] end, 2000),
+    Pid = whereis(toroco_names:process(b)).

@@ -1,0 +1,178 @@
+%% @doc The public API of `toroco_live' (SPEC §11): starts and stops the
+%% dashboard, the HTTP + WebSocket server a person opens in a browser.
+%%
+%% {@link start/1} adds one child to `toroco_live_sup', the dashboard's own
+%% supervisor (`toroco_live_dashboard_sup': the hub that feeds the pages and
+%% the HTTP listener), and then the Foxglove bridge when it is asked for and
+%% its module (`toroco_live_foxglove') is part of the node: see {@link
+%% foxglove/2}, the one place the bridge is started from. {@link stop/0}
+%% takes both away again. The application `toroco_live' calls {@link
+%% start/1} with its app env (the same keys).
+%%
+%% Options (SPEC §11): `ip' (default `{127,0,0,1}'), `http' (default 8080,
+%% 0 = any free port), `foxglove' (default 8765, 0 = any free port, or
+%% `off'), `token' (a binary, or `auto', the default: a random one). Two
+%% more keys of this implementation: `max_clients' (WebSocket clients at
+%% once, default 64) and `max_body' (bytes of a control request or frame,
+%% default 16384).
+-module(toroco_live).
+
+-export([start/1, stop/0, info/0, url/0]).
+
+-export_type([opts/0, info/0]).
+
+-type opts() :: #{ip => inet:ip_address(),
+                  http => inet:port_number(),
+                  foxglove => inet:port_number() | off,
+                  token => binary() | auto,
+                  max_clients => pos_integer(),
+                  max_body => pos_integer()}.
+-type info() :: #{http := inet:port_number(), foxglove := inet:port_number() | off,
+                  token := binary()}.
+
+-define(DEFAULTS, #{ip => {127, 0, 0, 1}, http => 8080, foxglove => 8765, token => auto,
+                    max_clients => 64, max_body => 16384}).
+-define(DASHBOARD, toroco_live_dashboard_sup).
+-define(FOXGLOVE, toroco_live_foxglove).
+
+%% @doc Starts the dashboard (and the Foxglove bridge, if present and not
+%% `off') and returns the ports it listens on and the token controls need.
+%% `{error, already_started}' when it runs already; `{error, {bad_option,
+%% {Key, Value}}}' for an option it cannot use; `{error, {http, Reason}}'
+%% when the port cannot be opened.
+-spec start(opts()) -> {ok, info()} | {error, term()}.
+start(Opts) when is_map(Opts) ->
+    case options(maps:merge(?DEFAULTS, Opts)) of
+        {ok, Config} -> start_dashboard(Config);
+        {error, _} = Error -> Error
+    end;
+start(Other) ->
+    {error, {bad_option, Other}}.
+
+%% @doc Stops the dashboard and the bridge; `ok' also when nothing ran.
+-spec stop() -> ok.
+stop() ->
+    _ = [begin
+             _ = supervisor:terminate_child(toroco_live_sup, Id),
+             supervisor:delete_child(toroco_live_sup, Id)
+         end || Id <- [?FOXGLOVE, ?DASHBOARD]],
+    toroco_live_config:clear(),
+    ok.
+
+%% @doc What {@link start/1} returned, while the dashboard runs.
+-spec info() -> info() | not_running.
+info() ->
+    case toroco_live_config:current() of
+        undefined -> not_running;
+        #{http := Http, foxglove := Fox, token := Token} ->
+            #{http => Http, foxglove => Fox, token => Token}
+    end.
+
+%% @doc The page's address with the token, for a person to open.
+-spec url() -> binary() | not_running.
+url() ->
+    case toroco_live_config:current() of
+        undefined -> not_running;
+        #{ip := Ip, http := Port, token := Token} ->
+            Host = case Ip of
+                       {0, 0, 0, 0} -> "127.0.0.1";
+                       _ -> inet:ntoa(Ip)
+                   end,
+            iolist_to_binary(io_lib:format("http://~s:~b/?token=~s", [Host, Port, Token]))
+    end.
+
+%%====================================================================
+%% Starting
+%%====================================================================
+
+start_dashboard(Config0) ->
+    Config = Config0#{token := token(maps:get(token, Config0))},
+    Spec = #{id => ?DASHBOARD, start => {?DASHBOARD, start_link, [Config]},
+             type => supervisor, restart => permanent},
+    case supervisor:start_child(toroco_live_sup, Spec) of
+        {ok, _} ->
+            Http = toroco_live_http:port(),
+            case foxglove(maps:get(foxglove, Config), Config) of
+                {ok, Fox} ->
+                    Info = #{http => Http, foxglove => Fox, token => maps:get(token, Config)},
+                    toroco_live_config:set(maps:merge(Config, Info)),
+                    {ok, Info};
+                {error, Reason} ->
+                    stop(),
+                    {error, {foxglove, Reason}}
+            end;
+        {error, {already_started, _}} ->
+            {error, already_started};
+        {error, already_present} ->
+            _ = supervisor:delete_child(toroco_live_sup, ?DASHBOARD),
+            start_dashboard(Config0);
+        {error, {{shutdown, {failed_to_start_child, _, Reason}}, _}} ->
+            {error, {http, listen_reason(Reason)}};
+        {error, Reason} ->
+            {error, {http, listen_reason(Reason)}}
+    end.
+
+listen_reason({shutdown, {failed_to_start_child, _, R}}) -> listen_reason(R);
+listen_reason({{shutdown, {failed_to_start_child, _, R}}, _}) -> listen_reason(R);
+listen_reason(R) -> R.
+
+%% The Foxglove bridge (SPEC §12) is its own child of `toroco_live_sup',
+%% started here when its module is in the node: `toroco_live_foxglove'
+%% exports `child_spec(Config)' (Config as here, with `foxglove' the port
+%% asked for) and `port()', the port it listens on once started.
+foxglove(off, _Config) ->
+    {ok, off};
+foxglove(_Port, Config) ->
+    Bridge = bridge(),
+    case code:ensure_loaded(Bridge) of
+        {module, Bridge} ->
+            case supervisor:start_child(toroco_live_sup, Bridge:child_spec(Config)) of
+                {ok, _} -> {ok, Bridge:port()};
+                {error, Reason} -> {error, Reason}
+            end;
+        {error, _} ->
+            {ok, off}
+    end.
+
+%% Named at run time: a node built without the bridge is a normal case.
+bridge() -> ?FOXGLOVE.
+
+token(auto) ->
+    base64url(crypto:strong_rand_bytes(18));
+token(Token) ->
+    Token.
+
+base64url(Bytes) ->
+    << <<(case C of $+ -> $-; $/ -> $_; _ -> C end)>> || <<C>> <= base64:encode(Bytes) >>.
+
+%%====================================================================
+%% Options
+%%====================================================================
+
+options(Opts) ->
+    Bad = [{K, V} || {K, V} <- maps:to_list(Opts), not option(K, V)],
+    case Bad of
+        [] -> {ok, Opts};
+        [First | _] -> {error, {bad_option, First}}
+    end.
+
+option(ip, Ip) -> is_tuple(Ip) andalso inet:ntoa(Ip) =/= {error, einval};
+option(http, P) -> is_port_number(P);
+option(foxglove, off) -> true;
+option(foxglove, P) -> is_port_number(P);
+option(token, auto) -> true;
+option(token, T) -> is_binary(T) andalso byte_size(T) >= 8 andalso byte_size(T) =< 256
+                        andalso url_safe(T);
+option(max_clients, N) -> is_integer(N) andalso N > 0;
+option(max_body, N) -> is_integer(N) andalso N >= 256;
+option(enabled, B) -> is_boolean(B);
+option(flight_seconds, _) -> true;
+option(_, _) -> false.
+
+is_port_number(P) -> is_integer(P) andalso P >= 0 andalso P =< 65535.
+
+%% A token rides in a URL and a header unescaped: letters, digits, - _ . ~
+url_safe(T) ->
+    lists:all(fun(C) -> (C >= $a andalso C =< $z) orelse (C >= $A andalso C =< $Z)
+                            orelse (C >= $0 andalso C =< $9) orelse lists:member(C, "-_.~")
+              end, binary_to_list(T)).

@@ -1,0 +1,33 @@
+%% @doc The dashboard for `scripts/run' (`make run'): started before the
+%% simulated run, from the command line (`erl -s toroco_live_cli start'),
+%% with its address and token printed on stdout before anything else.
+%% When the configured port is taken (another run, another program), it
+%% takes any free port instead and says so.
+-module(toroco_live_cli).
+
+-export([start/0]).
+
+%% @doc Starts `toroco_live' and prints the dashboard's URL.
+-spec start() -> ok.
+start() ->
+    case application:ensure_all_started(toroco_live) of
+        {ok, _} -> print();
+        {error, Reason} -> io:format(standard_error, "dashboard: not started: ~0p~n", [Reason])
+    end.
+
+print() ->
+    case toroco_live:url() of
+        not_running ->
+            %% The app env's port is taken: any free one will do for a run.
+            Env = maps:from_list(application:get_all_env(toroco_live)),
+            Opts = (maps:with([ip, token, foxglove], Env))#{http => 0},
+            case toroco_live:start(Opts#{foxglove => free(maps:get(foxglove, Opts, off))}) of
+                {ok, _} -> print();
+                {error, Reason} -> io:format(standard_error, "dashboard: not started: ~0p~n", [Reason])
+            end;
+        Url ->
+            io:format("dashboard: ~ts~n", [Url])
+    end.
+
+free(off) -> off;
+free(_) -> 0.

@@ -1,0 +1,72 @@
+%% @doc `GET /metrics': the robot in the Prometheus text format (version
+%% 0.0.4), every name prefixed `toroco_'.
+%%
+%% <table>
+%% <tr><th>metric</th><th>type</th><th>labels</th></tr>
+%% <tr><td>`toroco_emits_total'</td><td>counter</td><td>`emitter', `output': events emitted (from the tap, since the dashboard started)</td></tr>
+%% <tr><td>`toroco_deliveries_total'</td><td>counter</td><td>`receiver', `input': events delivered</td></tr>
+%% <tr><td>`toroco_restarts_total'</td><td>counter</td><td>`name'</td></tr>
+%% <tr><td>`toroco_mailbox_length'</td><td>gauge</td><td>`name'</td></tr>
+%% <tr><td>`toroco_up'</td><td>gauge</td><td>`name', `kind', `status' (1 running, 0.5 suspended, 0 down)</td></tr>
+%% <tr><td>`toroco_device_counter'</td><td>gauge</td><td>`device', `counter': each numeric device counter</td></tr>
+%% <tr><td>`toroco_vm_memory_bytes'</td><td>gauge</td><td>`kind' (`erlang:memory/0')</td></tr>
+%% <tr><td>`toroco_live_clients'</td><td>gauge</td><td>dashboard WebSocket clients</td></tr>
+%% <tr><td>`toroco_live_skipped_total'</td><td>counter</td><td>states a slow client did not get (coalesced)</td></tr>
+%% <tr><td>`toroco_live_tap_dropped_total'</td><td>counter</td><td>tap events the dashboard fell behind on</td></tr>
+%% </table>
+-module(toroco_live_metrics).
+
+-export([text/0]).
+
+%% @doc The whole exposition.
+-spec text() -> iodata().
+text() ->
+    {_Overview, Readings} = toroco_live_state:readings(),
+    Stats = toroco_live_hub:stats(),
+    [family(toroco_emits_total, counter, "Events emitted per output.",
+            [{[{emitter, E}, {output, O}], N}
+             || {{E, O}, N} <- lists:sort(maps:to_list(maps:get(emits, Stats, #{})))]),
+     family(toroco_deliveries_total, counter, "Events delivered per input.",
+            [{[{receiver, R}, {input, I}], N}
+             || {{R, I}, N} <- lists:sort(maps:to_list(maps:get(delivers, Stats, #{})))]),
+     family(toroco_restarts_total, counter, "Restarts of each behavior and device.",
+            [{[{name, N}], R} || #{name := N, restarts := R} <- Readings]),
+     family(toroco_mailbox_length, gauge, "Message queue length of each behavior and device.",
+            [{[{name, N}], Q} || #{name := N, mailbox := Q} <- Readings, is_integer(Q)]),
+     family(toroco_up, gauge, "1 running, 0.5 suspended, 0 down.",
+            [{[{name, N}, {kind, maps:get(kind, I, unknown)}, {status, S}], up(S)}
+             || #{name := N, info := I} <- Readings, S <- [maps:get(status, I, down)]]),
+     family(toroco_device_counter, gauge, "Counters a device keeps.",
+            [{[{device, N}, {counter, K}], V}
+             || #{name := N, info := #{device := C}} <- Readings, is_map(C),
+                {K, V} <- lists:sort(maps:to_list(C)), is_number(V)]),
+     family(toroco_vm_memory_bytes, gauge, "Memory of the Erlang VM.",
+            [{[{kind, K}], V} || {K, V} <- erlang:memory()]),
+     family(toroco_live_clients, gauge, "Dashboard WebSocket clients.",
+            [{[], maps:get(clients, Stats, 0)}]),
+     family(toroco_live_skipped_total, counter, "States coalesced away for slow clients.",
+            [{[], maps:get(skipped, Stats, 0)}]),
+     family(toroco_live_tap_dropped_total, counter, "Tap events the dashboard fell behind on.",
+            [{[], maps:get(tap_dropped, Stats, 0)}])].
+
+up(running) -> 1;
+up(suspended) -> 0.5;
+up(_) -> 0.
+
+family(Name, Type, Help, Samples) ->
+    [io_lib:format("# HELP ~s ~s~n# TYPE ~s ~s~n", [Name, Help, Name, Type]),
+     [[atom_to_list(Name), labels(Ls), " ", number(V), "\n"] || {Ls, V} <- Samples]].
+
+labels([]) -> "";
+labels(Ls) ->
+    ["{", lists:join(",", [[atom_to_list(K), "=\"", escape(label(V)), "\""] || {K, V} <- Ls]), "}"].
+
+label(V) when is_atom(V) -> atom_to_list(V);
+label(V) -> io_lib:format("~0tp", [V]).
+
+escape(S) ->
+    lists:flatmap(fun($\\) -> "\\\\"; ($") -> "\\\""; ($\n) -> "\\n"; (C) -> [C] end,
+                  lists:flatten(S)).
+
+number(V) when is_integer(V) -> integer_to_list(V);
+number(V) when is_float(V) -> float_to_list(V, [short]).

@@ -1,0 +1,141 @@
+%% @doc What the dashboard shows, read from the runtime: `toroco:inspect/0,1'
+%% for every name, plus each process's restarts, mailbox and state. Every
+%% term becomes JSON through `toroco_live_json', and every value a person
+%% may want back carries both `value' and `term'.
+%%
+%% {@link api/0} is the body of `GET /api/state' (inspect/0 and inspect/1
+%% as they are); {@link page/1} is the state frame the page draws, shaped
+%% for drawing (lists in priority order, sources as `[Emitter, Output]').
+%% {@link readings/0} is the raw reading both are made from, also used by
+%% `toroco_live_metrics'.
+-module(toroco_live_state).
+
+-export([api/0, page/1, readings/0]).
+
+-export_type([node_reading/0, rates/0]).
+
+-type node_reading() :: #{name := atom(), info := map(), restarts := non_neg_integer(),
+                          mailbox := non_neg_integer() | null, state := term()}.
+%% Events per second: per source (`{Emitter, Output}', what it emitted) and
+%% per input (`{Receiver, Input}', what was delivered).
+-type rates() :: #{emits := #{{atom(), atom()} => number()},
+                   delivers := #{{atom(), atom()} => number()}}.
+
+%% How long a busy process may take to tell its state before it shows as busy.
+-define(STATE_TIMEOUT, 100).
+%% Longest term text shown for a state.
+-define(STATE_TEXT, 300).
+
+%% @doc `GET /api/state': `{"inspect": inspect(), "nodes": {Name: inspect(Name)}}'.
+-spec api() -> jiffy:json_value().
+api() ->
+    Overview = toroco:inspect(),
+    Names = names(Overview),
+    Nodes = [{N, toroco:inspect(N)} || N <- Names],
+    toroco_live_json:value(#{inspect => Overview,
+                             nodes => maps:from_list([{N, I} || {N, I} <- Nodes, is_map(I)])}).
+
+%% @doc Every behavior and device with what the page and the metrics need.
+-spec readings() -> {map(), [node_reading()]}.
+readings() ->
+    Overview = toroco:inspect(),
+    {Overview, [reading(N) || N <- names(Overview)]}.
+
+names(#{behaviors := Bs, devices := Ds}) -> Bs ++ Ds.
+
+reading(Name) ->
+    Info = case toroco:inspect(Name) of
+               #{} = I -> I;
+               {error, _} -> #{name => Name, status => down}
+           end,
+    Pid = whereis(toroco_names:process(Name)),
+    #{name => Name, info => Info, restarts => toroco_restarts:count(Name),
+      mailbox => mailbox(Pid), state => user_state(Pid)}.
+
+mailbox(undefined) -> null;
+mailbox(Pid) ->
+    case erlang:process_info(Pid, message_queue_len) of
+        {message_queue_len, Q} -> Q;
+        undefined -> null
+    end.
+
+user_state(undefined) -> down;
+user_state(Pid) ->
+    try sys:get_state(Pid, ?STATE_TIMEOUT) of
+        {S, _Data} -> {value, S};
+        _ -> unknown
+    catch exit:_ -> busy
+    end.
+
+%% @doc The page's state frame.
+-spec page(rates()) -> jiffy:json_value().
+page(Rates) ->
+    {Overview, Readings} = readings(),
+    #{<<"type">> => <<"state">>,
+      <<"node">> => toroco_live_json:value(node()),
+      <<"t">> => erlang:system_time(millisecond),
+      <<"layers">> => layers(Overview),
+      <<"removed_layers">> => toroco_live_json:value(maps:get(removed_layers, Overview, [])),
+      <<"nodes">> => [node_json(R, Rates) || R <- Readings]}.
+
+layers(#{layers := Layers}) ->
+    [#{<<"layer">> => L, <<"names">> => toroco_live_json:value(Ns)}
+     || {L, Ns} <- lists:reverse(lists:sort(maps:to_list(Layers)))].
+
+node_json(#{name := N, info := Info, restarts := R, mailbox := Q, state := S}, Rates) ->
+    Base = #{<<"name">> => toroco_live_json:value(N),
+             <<"kind">> => toroco_live_json:value(maps:get(kind, Info, unknown)),
+             <<"module">> => toroco_live_json:value(maps:get(module, Info, unknown)),
+             <<"layer">> => toroco_live_json:value(maps:get(layer, Info, 0)),
+             <<"status">> => toroco_live_json:value(maps:get(status, Info, down)),
+             <<"restarts">> => R,
+             <<"mailbox">> => Q,
+             <<"state">> => state_json(S),
+             <<"inputs">> => [input_json(N, I, In, Rates)
+                              || {I, In} <- lists:sort(maps:to_list(maps:get(inputs, Info, #{})))],
+             <<"outputs">> => [output_json(N, O, Out, Rates)
+                               || {O, Out} <- lists:sort(maps:to_list(maps:get(outputs, Info, #{})))],
+             <<"reset">> => [src(Src) || Src <- maps:get(reset, Info, [])]},
+    case Info of
+        #{device := Counters} -> Base#{<<"device">> => toroco_live_json:value(Counters)};
+        #{} -> Base
+    end.
+
+state_json({value, S}) ->
+    Text = toroco_live_json:term_text(S),
+    #{<<"term">> => case byte_size(Text) > ?STATE_TEXT of
+                        true -> <<(binary:part(Text, 0, ?STATE_TEXT))/binary, "...">>;
+                        false -> Text
+                    end};
+state_json(Other) ->
+    #{<<"term">> => null, <<"note">> => toroco_live_json:value(Other)}.
+
+input_json(N, I, In, #{emits := Emits, delivers := Delivers}) ->
+    Sources = maps:get(sources, In, []),
+    #{<<"input">> => toroco_live_json:value(I),
+      <<"sources">> => [#{<<"source">> => src(S), <<"priority">> => P,
+                          <<"rate">> => maps:get(S, Emits, 0)}
+                        || {P, S} <- lists:zip(lists:seq(1, length(Sources)), Sources)],
+      <<"winner">> => src(maps:get(winner, In, none)),
+      <<"holds">> => [#{<<"source">> => src(S), <<"ms">> => toroco_live_json:value(Ms)}
+                      || {S, Ms} <- maps:get(holds, In, [])],
+      <<"latches">> => [(toroco_live_json:carry(V))#{<<"source">> => src(S)}
+                        || {S, V} <- maps:get(latches, In, [])],
+      <<"last">> => case maps:get(last, In, none) of
+                        {value, V} -> toroco_live_json:carry(V);
+                        none -> null
+                    end,
+      <<"rate">> => maps:get({N, I}, Delivers, 0)}.
+
+output_json(N, O, Out, #{emits := Emits}) ->
+    #{<<"output">> => toroco_live_json:value(O),
+      <<"inhibited">> => maps:get(inhibited, Out, false),
+      <<"inhibitors">> => [src(S) || S <- maps:get(inhibitors, Out, [])],
+      <<"latch">> => case maps:get(latch, Out, none) of
+                         {value, V} -> toroco_live_json:carry(V);
+                         none -> null
+                     end,
+      <<"rate">> => maps:get({N, O}, Emits, 0)}.
+
+src(none) -> null;
+src({E, O}) -> [toroco_live_json:value(E), toroco_live_json:value(O)].

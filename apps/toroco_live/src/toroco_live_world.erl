@@ -1,0 +1,150 @@
+%% @doc The simulated world as the dashboard and the Foxglove bridge see it:
+%% a registered process (`toroco_live_world') that a simulator tells about
+%% each step of its world, and that keeps the latest snapshot and each
+%% robot's trajectory for whoever draws them.
+%%
+%% A simulator does not depend on `toroco_live': it sends a plain message
+%% to the registered name when the name exists (`whereis/1'), and nothing
+%% when it does not (a board release without `toroco_live', or the
+%% application stopped). That message is the protocol, written down here:
+%%
+%% <table>
+%% <tr><th>message</th><th>from → to</th><th>when</th><th>answer</th></tr>
+%% <tr><td>`{toroco_live_world, snapshot, Snapshot}'</td>
+%%     <td>simulator (`torobot_sim') → `toroco_live_world'</td>
+%%     <td>after each step of the world</td><td>none</td></tr>
+%% <tr><td>`{toroco_live_world, changed}'</td>
+%%     <td>`toroco_live_world' → each subscriber</td>
+%%     <td>a new snapshot came, and the subscriber has read
+%%         ({@link latest/0}) since the last such message: at most one is
+%%         ever waiting in a subscriber's mailbox</td><td>none</td></tr>
+%% </table>
+%%
+%% `Snapshot' is a map (metres, degrees counter-clockwise from +x,
+%% milliseconds of world time):
+%%
+%% <table>
+%% <tr><th>key</th><th>value</th></tr>
+%% <tr><td>`run'</td><td>any term naming this run; a new one starts new trajectories</td></tr>
+%% <tr><td>`t_ms'</td><td>world time of the step</td></tr>
+%% <tr><td>`arena'</td><td>`{Width, Height}'; walls all around, origin bottom-left</td></tr>
+%% <tr><td>`walls'</td><td>`[{{X1, Y1}, {X2, Y2}}]', inside the arena</td></tr>
+%% <tr><td>`objects'</td><td>`[{red | blue, {X, Y}, Radius}]'</td></tr>
+%% <tr><td>`robots'</td><td>a list of maps, one per robot:
+%%   `name' (atom), `pose' `{X, Y, Heading}', `radius',
+%%   `winner' (the behavior winning the motors, or `none'),
+%%   `ir' `[#{side => left | right, from => {X, Y}, to => {X, Y}, adc => 0..1023}]'
+%%   (each ray from the sensor to what it hits, or to its range),
+%%   `camera' `#{fov_deg => F, range => R}' (looking along the heading)</td></tr>
+%% </table>
+%%
+%% The trajectory is not in the message: this process appends each
+%% robot's pose, with its winner, to that robot's trajectory (the last
+%% 4000 points), so a simulator sends a constant-size message per
+%% step. {@link latest/0} returns the last snapshot with `trajectories =>
+%% #{Name => [{X, Y, Winner}]}' (oldest first) added.
+-module(toroco_live_world).
+-behaviour(gen_server).
+
+-export([start_link/0, latest/0, subscribe/0, unsubscribe/0]).
+-export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
+
+-export_type([snapshot/0]).
+
+-type snapshot() :: #{run := term(), t_ms := non_neg_integer(),
+                      arena := {number(), number()}, walls := list(), objects := list(),
+                      robots := [map()], trajectories => map()}.
+
+%% Points kept per robot's trajectory.
+-define(TRAIL, 4000).
+
+-record(w, {latest = none :: snapshot() | none,
+            trails = #{} :: #{atom() => {non_neg_integer(), [tuple()]}},
+            subscribers = #{} :: #{pid() => {reference(), Notified :: boolean()}}}).
+
+-spec start_link() -> {ok, pid()} | {error, term()}.
+start_link() ->
+    gen_server:start_link({local, ?MODULE}, ?MODULE, [], []).
+
+%% @doc The last snapshot, with the trajectories; `none' before any.
+%% Re-arms the caller's `changed' notification.
+-spec latest() -> snapshot() | none.
+latest() ->
+    gen_server:call(?MODULE, latest).
+
+%% @doc The caller gets `{toroco_live_world, changed}' when a snapshot comes.
+-spec subscribe() -> ok.
+subscribe() ->
+    gen_server:call(?MODULE, subscribe).
+
+-spec unsubscribe() -> ok.
+unsubscribe() ->
+    gen_server:call(?MODULE, unsubscribe).
+
+-spec init([]) -> {ok, #w{}}.
+init([]) ->
+    {ok, #w{}}.
+
+-spec handle_call(term(), gen_server:from(), #w{}) -> {reply, term(), #w{}}.
+handle_call(latest, {Pid, _}, W = #w{latest = Latest, trails = Trails, subscribers = Subs}) ->
+    Subs1 = case Subs of
+                #{Pid := {Ref, _}} -> Subs#{Pid := {Ref, false}};
+                #{} -> Subs
+            end,
+    Reply = case Latest of
+                none -> none;
+                _ -> Latest#{trajectories => maps:map(fun(_, {_, Ps}) -> lists:reverse(Ps) end,
+                                                      Trails)}
+            end,
+    {reply, Reply, W#w{subscribers = Subs1}};
+handle_call(subscribe, {Pid, _}, W = #w{subscribers = Subs}) ->
+    case Subs of
+        #{Pid := _} -> {reply, ok, W};
+        #{} -> {reply, ok, W#w{subscribers = Subs#{Pid => {monitor(process, Pid), false}}}}
+    end;
+handle_call(unsubscribe, {Pid, _}, W = #w{subscribers = Subs}) ->
+    case Subs of
+        #{Pid := {Ref, _}} -> demonitor(Ref, [flush]);
+        #{} -> ok
+    end,
+    {reply, ok, W#w{subscribers = maps:remove(Pid, Subs)}};
+handle_call(_Request, _From, W) ->
+    {reply, {error, unknown_call}, W}.
+
+-spec handle_cast(term(), #w{}) -> {noreply, #w{}}.
+handle_cast(_Msg, W) ->
+    {noreply, W}.
+
+-spec handle_info(term(), #w{}) -> {noreply, #w{}}.
+handle_info({?MODULE, snapshot, #{run := Run, robots := Robots} = Snap}, W) when is_list(Robots) ->
+    Trails = case W#w.latest of
+                 #{run := Run} -> W#w.trails;
+                 _ -> #{}
+             end,
+    Trails1 = lists:foldl(fun trail/2, Trails, Robots),
+    {noreply, notify(W#w{latest = Snap, trails = Trails1})};
+handle_info({'DOWN', Ref, process, Pid, _}, W = #w{subscribers = Subs}) ->
+    case Subs of
+        #{Pid := {Ref, _}} -> {noreply, W#w{subscribers = maps:remove(Pid, Subs)}};
+        #{} -> {noreply, W}
+    end;
+handle_info(_Info, W) ->
+    {noreply, W}.
+
+trail(#{name := Name, pose := {X, Y, _}} = Robot, Trails) ->
+    Point = {X, Y, maps:get(winner, Robot, none)},
+    case maps:get(Name, Trails, {0, []}) of
+        {N, Ps} when N >= ?TRAIL -> Trails#{Name => {?TRAIL div 2 + 1,
+                                                     [Point | lists:sublist(Ps, ?TRAIL div 2)]}};
+        {N, Ps} -> Trails#{Name => {N + 1, [Point | Ps]}}
+    end;
+trail(_, Trails) ->
+    Trails.
+
+notify(W = #w{subscribers = Subs}) ->
+    Subs1 = maps:map(fun(Pid, {Ref, false}) ->
+                             Pid ! {?MODULE, changed},
+                             {Ref, true};
+                        (_, Sub) -> Sub
+                     end, Subs),
+    W#w{subscribers = Subs1}.
