@@ -259,12 +259,15 @@ memory_row(B, Show) ->
     settle_steady(erlang:memory(total), 10),
     Before = maps:from_list([{P, proc_mem(P)} || P <- processes()]),
     M0 = maps:from_list(erlang:memory()),
+    Mine0 = proc_mem(self()),
     Names = [list_to_atom("idle" ++ integer_to_list(I)) || I <- lists:seq(1, B)],
     Terms = [{behavior, Nm, toroco_bench_relay, #{layer => 0}} || Nm <- Names]
         ++ [{inputs, Nm, #{in => [{idle_src, v}]}} || Nm <- Names],
     ok = toroco_wiring:call({load, Terms}),
     settle_steady(erlang:memory(total), 10),
     M1 = maps:from_list(erlang:memory()),
+    %% This process holds the names: not the runtime's memory.
+    Mine = proc_mem(self()) - Mine0,
     Behaviors = [whereis(toroco_names:process(Nm)) || Nm <- Names],
     BehaviorSet = maps:from_keys(Behaviors, true),
     {New, Grown} = lists:foldl(
@@ -274,10 +277,10 @@ memory_row(B, Show) ->
                                  {error, true} -> {NewAcc, GrownAcc};
                                  {{ok, Was}, _} -> {NewAcc, GrownAcc + proc_mem(P) - Was}
                              end
-                     end, {0, 0}, processes()),
+                     end, {0, 0}, processes() -- [self()]),
     Beh = lists:sum([proc_mem(P) || P <- Behaviors]),
     D = fun(K) -> maps:get(K, M1) - maps:get(K, M0) end,
-    Total = D(total),
+    Total = D(total) - Mine,
     Rest = Total - Beh - New - Grown - D(ets) - D(atom_used),
     Per = fun(X) -> round(X / B) end,
     Show andalso io:format("| ~w | ~w | ~w | ~w | ~w | ~w | ~w | ~w | ~w |~n",
