@@ -1,9 +1,14 @@
 # The two commands of the README, and their parts.
-#   make run   - the Torobot in the simulated world (default config)
+#   make run   - the Torobot in the simulated world (default config);
+#                make run ROBOT=wall_follower runs a library robot of config/robots/
 #   make test  - every test suite: C port, detector, Common Test, PropEr, Dialyzer
-.PHONY: run test deps compile port port-test detector detector-test ct dialyzer bench release board-check clean
+.PHONY: run test deps compile port port-test detector detector-test ct dialyzer bench release board-check clean eval
 
 WORLD ?= config/worlds/default.world
+SPEED ?= 1
+N ?= 20
+SEED ?= 1
+WIRING ?= config/torobot.wiring
 
 deps:
 	@scripts/deps
@@ -35,7 +40,11 @@ test:
 	scripts/test
 
 run: compile
-	scripts/run $(WORLD)
+	SPEED=$(SPEED) scripts/run $(if $(ROBOT),config/worlds/$(ROBOT).world _build/$(ROBOT).svg config/robots/$(ROBOT).wiring,$(WORLD))
+
+# The simulated lab: the wiring on N generated worlds, scored (SPEC §14).
+eval: compile
+	scripts/eval $(N) $(SEED) $(WIRING)
 
 bench: compile
 	scripts/bench

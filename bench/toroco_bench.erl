@@ -6,6 +6,8 @@
 %% directory; env `TOROCO_BENCH_QUICK=1' runs shorter tests.
 -module(toroco_bench).
 -export([main/1]).
+%% The chain and its tables, for the recording section (toroco_bench_live).
+-export([chain/2, run/3, row/4, table/4]).
 
 -define(N, 10000).
 

@@ -69,22 +69,17 @@ gate_core_matches_oracle(_Config) ->
     check(prop_router:prop_gate_core(), 1000, 100).
 
 gate_core_untimed_matches_oracle() ->
-    [{doc, "The same with holds of 0 or infinity only, so that inhibition by set, unset "
-           "and pairs is checked even while timed holds fail (1000 random sequences)."}].
+    [{doc, "The same with holds of 0 or infinity only: inhibition by set, unset and "
+           "pairs, with no timer in the way (1000 random sequences)."}].
 gate_core_untimed_matches_oracle(_Config) ->
     check(prop_router:prop_gate_core_untimed(), 1000, 100).
 
 network_matches_model() ->
     [{doc, "Running networks (emitters in layers, a fake actuator, an inhibitor or a "
            "mutual pair) deliver, hold, latch and inhibit as the model says after every "
-           "command of 500 random command sequences."}].
+           "command of 500 random command sequences, timed inhibitor holds expiring."}].
 network_matches_model(_Config) ->
-    GateTimed = not prop_router:gate_core_hangs(),
-    GateTimed orelse
-        ct:pal("timed inhibitor holds are not left to expire in this run: "
-               "toroco_gate_core does not come back from the end of one "
-               "(see gate_core_matches_oracle)"),
-    check(prop_router:prop_network(#{gate_timed => GateTimed, regate_keeps_send_holds => true}), 500, 60).
+    check(prop_router:prop_network(), 500, 60).
 
 gate_attach_keeps_send_hold() ->
     [{doc, "Attaching an inhibitor that does not hold leaves the member's send hold at "

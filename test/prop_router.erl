@@ -26,9 +26,8 @@
 -define(PROPER_NO_TRANS, true).
 -include_lib("proper/include/proper.hrl").
 
--export([prop_router_core/0, prop_gate_core/0, prop_gate_core_untimed/0, prop_network/0,
-         prop_network/1]).
--export([run_router/1, run_gate/1, gate_core_hangs/0, counts/0]).
+-export([prop_router_core/0, prop_gate_core/0, prop_gate_core_untimed/0, prop_network/0]).
+-export([run_router/1, run_gate/1, counts/0]).
 %% proper_statem
 -export([initial_state/0, command/1, precondition/2, postcondition/3, next_state/3]).
 %% commands of the statem
@@ -268,19 +267,6 @@ catch_all(Fun) ->
     catch Class:Reason:Stack -> {crashed, {Class, Reason, Stack}}
     end.
 
-%% @doc True if `toroco_gate_core' does not come back from a tick after a timed
-%% inhibitor hold ended: the process model then keeps timed holds away from
-%% gates, so that one known fault does not hide every other one.
-gate_core_hangs() ->
-    G0 = toroco_gate_core:new(),
-    {G1, _} = toroco_gate_core:handle({rewire, [{e, out}], #{{e, out} => [{{i, out}, 0}]}, [], []},
-                                      0, G0),
-    {G2, _} = toroco_gate_core:handle({op, {i, out}, {send, v, 10}}, 0, G1),
-    case guarded(fun() -> toroco_gate_core:handle(tick, 10, G2) end) of
-        {ok, _} -> false;
-        _ -> true
-    end.
-
 %%====================================================================
 %% The process model
 %%====================================================================
@@ -462,12 +448,10 @@ network() ->
               begin
                   Srcs = lists:zip([list_to_atom("ps" ++ integer_to_list(I))
                                     || I <- lists:seq(1, N)], Layers),
-                  ?LET({Inhib, W, Idle, On, Timed},
-                       {inhibition(Srcs), wiring(Srcs), bool(), bool(), bool()},
+                  ?LET({Inhib, W, Idle, On},
+                       {inhibition(Srcs), wiring(Srcs), bool(), bool()},
                        #{srcs => Srcs, inhib => Inhib, wiring => W, idle => Idle,
-                         inhib_on => On andalso Inhib =/= none,
-                         %% timed holds at the gate, unless the gate core is known to hang
-                         gate_timed => Timed})
+                         inhib_on => On andalso Inhib =/= none})
               end)).
 
 inhibition(Srcs) ->
@@ -501,30 +485,14 @@ bad_wiring(Srcs) ->
 emitters(#{cfg := #{srcs := Srcs}}) -> [E || {E, _} <- Srcs] ++ [?INH].
 
 %% Emitters whose short hold may be left to expire with a deterministic
-%% outcome: not a pair member (gate and router timers would race), and not
-%% the inhibitor if the gate core is known to hang at the end of a hold.
+%% outcome: not a pair member (gate and router timers would race). The
+%% single inhibitor's hold expires at the gate, the member's at the router.
 expirable(S = #{cfg := Cfg}) ->
     [E || E <- emitters(S), not on_gate_path(S, E) orelse expirable_on_gate(Cfg, E)].
 
 expirable_on_gate(#{inhib := {single, T, _}}, T) -> true;
-expirable_on_gate(#{inhib := {single, _, _}, gate_timed := Timed}, ?INH) -> Timed;
+expirable_on_gate(#{inhib := {single, _, _}}, ?INH) -> true;
 expirable_on_gate(_, _) -> false.
-
-%% Known deviation (see the suite): adding or removing a gate re-subscribes
-%% the member's routers, which then drop a hold the member started with a
-%% send (SPEC: a router keeps the holds of the sources that stay, and only
-%% inhibition ends them). Until that is settled, inhibitors are not switched
-%% while a wired member holds by a send, so that this one fault does not mask
-%% the others. `prop_network(#{regate_keeps_send_holds => true})' lifts this.
-regate_ok(S = #{cfg := Cfg, router := R, vt := VT}) ->
-    case {maps:get(regate_keeps_send_holds, Cfg), R} of
-        {true, _} -> true;
-        {_, undefined} -> true;
-        {false, _} ->
-            #{holds := Hs, latches := Ls} = prop_router_model:router_info(R, VT),
-            [] =:= [M || M = {E, _} <- gate_members(Cfg), wired(S, E),
-                         lists:keymember(M, 1, Hs), not lists:keymember(M, 1, Ls)]
-    end.
 
 process_op() ->
     frequency([{4, {send, value(), oneof([default, 0, ?LONG, infinity])}},
@@ -542,13 +510,13 @@ command(S = #{cfg := Cfg = #{srcs := Srcs}, inhib_on := On}) ->
               [{2, {call, ?MODULE, hold_expire, [oneof(expirable(S)), value(), range(60, 100)]}}
                || expirable(S) =/= []] ++
               [{2, {call, ?MODULE, inhibit_on, [Cfg]}}
-               || maps:get(inhib, Cfg) =/= none, not On, regate_ok(S)] ++
-              [{2, {call, ?MODULE, inhibit_off, [Cfg]}} || On, regate_ok(S)] ++
+               || maps:get(inhib, Cfg) =/= none, not On] ++
+              [{2, {call, ?MODULE, inhibit_off, [Cfg]}} || On] ++
               [{1, {call, ?MODULE, bad_inputs, [bad_wiring(Srcs)]}} || bad_wiring(Srcs) =/= none]).
 
 precondition(S, {call, _, hold_expire, [E, _, _]}) -> lists:member(E, expirable(S));
-precondition(S = #{inhib_on := On}, {call, _, inhibit_on, _}) -> not On andalso regate_ok(S);
-precondition(S = #{inhib_on := On}, {call, _, inhibit_off, _}) -> On andalso regate_ok(S);
+precondition(#{inhib_on := On}, {call, _, inhibit_on, _}) -> not On;
+precondition(#{inhib_on := On}, {call, _, inhibit_off, _}) -> On;
 precondition(_S, _Call) -> true.
 
 next_state(S, _Res, {call, _, Fun, Args}) ->
@@ -598,18 +566,8 @@ agree(Fun, Want = #{history := H}, Obs, Tries) ->
 
 %% @doc The property: `numtests' sequences on networks built afresh each time.
 prop_network() ->
-    prop_network(#{}).
-
-%% @doc Options: `gate_timed' (default: unless {@link gate_core_hangs/0}) lets
-%% timed inhibitor holds expire; `regate_keeps_send_holds' (default false)
-%% switches inhibitors whatever the members hold.
-prop_network(Opts) ->
-    GateTimed = maps:get(gate_timed, Opts, not gate_core_hangs()),
-    Strict = maps:get(regate_keeps_send_holds, Opts, false),
-    ?FORALL(Cfg0, network(),
+    ?FORALL(Cfg, network(),
             begin
-                Cfg = Cfg0#{gate_timed := GateTimed andalso maps:get(gate_timed, Cfg0),
-                            regate_keeps_send_holds => Strict},
                 ?FORALL(Cmds, commands(?MODULE, initial_model(Cfg)),
                         begin
                             Start = start_network(Cfg),

@@ -162,7 +162,8 @@ board_tarball_is_minimal(Config) ->
     [] = [F || F <- Top, lists:prefix("erts-", F)],
     {ok, Libs} = file:list_dir(filename:join(Dir, "lib")),
     Apps = lists:sort([hd(string:split(L, "-")) || L <- Libs]),
-    ["torobot", "toroco", "toroco_hw"] = Apps,
+    %% the behavior library comes along: a robot of wiring files needs it
+    ["torobot", "toroco", "toroco_hw", "toroco_lib"] = Apps,
     [HwDir] = [L || L <- Libs, lists:prefix("toroco_hw-", L)],
     {ok, [{application, toroco_hw, Props}]} =
         file:consult(filename:join([Dir, "lib", HwDir, "ebin", "toroco_hw.app"])),

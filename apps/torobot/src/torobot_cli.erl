@@ -10,11 +10,14 @@
 
 -export([main/1, format_error/1]).
 
-%% @doc `[WorldFile, SvgFile, Status, WiringFile]', as `erl -run' passes
-%% them; `Status' is `tty' (rewrite one line) or `lines'. Never returns.
+%% @doc `[WorldFile, SvgFile, Status, WiringFile]' or the same and
+%% `Speed', as `erl -run' passes them; `Status' is `tty' (rewrite one line)
+%% or `lines'. Never returns.
 -spec main([string()]) -> no_return().
 main([World, Svg, Status, Wiring]) ->
-    Opts = #{svg => Svg, wiring => Wiring,
+    main([World, Svg, Status, Wiring, "1"]);
+main([World, Svg, Status, Wiring, Speed]) ->
+    Opts = #{svg => Svg, wiring => Wiring, speed => speed(Speed),
              status => case Status of
                            "tty" -> tty;
                            _ -> true
@@ -23,7 +26,8 @@ main([World, Svg, Status, Wiring]) ->
         {ok, Summary} ->
             io:format("svg: ~ts~n~s~n", [Svg, torobot_sim:summary_json(Summary)]),
             halt(0);
-        {error, {Kind, _, _} = Reason} when Kind =:= world; Kind =:= wiring ->
+        {error, Reason} when element(1, Reason) =:= world; element(1, Reason) =:= wiring;
+                             element(1, Reason) =:= speed ->
             io:format(standard_error, "torobot: ~ts~n", [format_error(Reason)]),
             halt(2);
         {error, Reason} ->
@@ -34,6 +38,13 @@ main(Args) ->
     io:format(standard_error, "torobot: bad arguments ~p~n", [Args]),
     halt(2).
 
+speed(Text) ->
+    case {string:to_integer(Text), string:to_float(Text)} of
+        {{I, ""}, _} -> I;
+        {_, {F, ""}} -> F;
+        _ -> Text
+    end.
+
 %% @doc A one-line human reading of a `torobot_sim:run/2' error.
 -spec format_error(term()) -> unicode:chardata().
 format_error({world, File, {file, Why}}) ->
@@ -42,6 +53,8 @@ format_error({world, File, Reason}) ->
     io_lib:format("bad world file ~ts: ~ts", [File, world_reason(Reason)]);
 format_error({wiring, File, Why}) ->
     io_lib:format("cannot read wiring file ~ts: ~ts", [File, file_reason(Why)]);
+format_error({speed, Speed}) ->
+    io_lib:format("bad speed ~0p: a number above 0", [Speed]);
 format_error(Reason) ->
     io_lib:format("the run failed: ~0p", [Reason]).
 
@@ -56,6 +69,8 @@ world_reason({bad_term, Term}) -> io_lib:format("bad term ~0p", [Term]);
 world_reason({duplicate, Term}) -> io_lib:format("~0p given twice", [Term]);
 world_reason({missing, Key}) -> io_lib:format("no ~s term", [Key]);
 world_reason({outside_arena, Term}) -> io_lib:format("~0p lies outside the arena", [Term]);
+world_reason({several_robots, Names}) ->
+    io_lib:format("several robots ~0p where one is expected", [Names]);
 world_reason({blocked_start, Robot, Obstacle}) ->
     io_lib:format("~0p starts overlapping ~0p", [Robot, Obstacle]);
 world_reason(Other) -> io_lib:format("~0p", [Other]).

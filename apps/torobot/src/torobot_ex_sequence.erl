@@ -37,6 +37,4 @@ handle_input(_Button, _Event, _State, _Data) ->
 -spec handle_event(gen_statem:event_type(), term(), wait_left | wait_right, map()) ->
           toroco_behavior:result().
 handle_event(state_timeout, right, wait_right, D) ->
-    {next_state, wait_left, D, [{send, #{signal => timeout}}]};
-handle_event(_Type, _Content, _State, _Data) ->
-    keep_state_and_data.
+    {next_state, wait_left, D, [{send, #{signal => timeout}}]}.

@@ -36,6 +36,4 @@ handle_input(_Button, _Event, _State, _Data) ->
 -spec handle_event(gen_statem:event_type(), term(), idle | waiting, map()) ->
           toroco_behavior:result().
 handle_event(state_timeout, right, waiting, D) ->
-    {next_state, idle, D, [{send, #{signal => timeout}}]};
-handle_event(_Type, _Content, _State, _Data) ->
-    keep_state_and_data.
+    {next_state, idle, D, [{send, #{signal => timeout}}]}.

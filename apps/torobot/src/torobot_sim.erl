@@ -1,120 +1,150 @@
 %% @doc The Torobot in a simulated world: the real runtime, the real devices
 %% and the Torobot's wiring, with `torobot_world' standing in for the board
-%% and the arena.
+%% and the arena (SPEC §8, §14).
 %%
-%% {@link run/2} starts the applications, adds the devices the wiring file
-%% expects (SPEC §8), loads the wiring, and ticks the world in real time on
-%% a process of its own (this module's gen_server) until the world is done:
-%% <ul>
-%% <li>`ir' is a `toroco_pru_sensors' on the `pru_port' sim backend; each
-%%     tick's raw IR readings go in through `toroco_pru_sensors:sim_adc/3',
-%%     so near and far come out of the C program's own hysteresis, with the
-%%     world's thresholds;</li>
-%% <li>`motors' is a `toroco_servo_motors' on the sim backend (a fake sysfs
-%%     PWM tree in a temporary directory); the world moves with the
-%%     velocities the servos really apply, which the `wheels' device
-%%     (`torobot_sim_wheels', wired to `{motors, applied}') hands to the
-%%     simulator;</li>
-%% <li>`camera' is a `toroco_udp_camera' on a free local port; each tick the
-%%     simulator sends it the detector's datagrams for the frame
-%%     (`torobot_world:camera/1') over real UDP;</li>
-%% <li>`push' is a `toroco_gpio_button' on the sim backend; the simulator
-%%     presses it once at the start, as one would on the board, and the
-%%     `button' behavior switches the motors on.</li>
-%% </ul>
-%% Each step is tagged with the behavior that wins the motors' `setvel'
-%% input at that tick, read with `toroco:inspect(motors)': one call per tick
-%% to the wiring server, the motors device and its routers, about 65 us,
-%% so some 0.1% of a core at the default 20 ticks a second; it names the
-%% winner as the runtime sees it, which no cheaper reading of the velocities
-%% could (two behaviors may command the same pair).
+%% {@link run/2} loads the world, starts each robot's side
+%% (`torobot_sim_robot': the runtime, the devices the wiring file expects
+%% on their simulated backends, the wiring) and ticks the world on a
+%% process of its own (this module's gen_server) until the world is done.
+%% Each tick the world reads every robot's applied wheel velocities and the
+%% behavior winning its motors, steps the robots one after another (each
+%% sees the others where they are: they block moves, IR rays and the
+%% camera's line of sight), then hands each robot its IR readings (to the
+%% `pru_port' sim backend, only when they change) and its camera frame (the
+%% detector's datagrams, over real UDP).
+%% The sensors of the library's robots (`torobot_sensors': `range',
+%% `bumper', `odometry', `light', `beacon') are `torobot_sim_sensor'
+%% devices on each robot's node, fed each tick with the rest; a wiring that
+%% does not use them (the Torobot's) leaves them unwired.
 %%
-%% The world runs in real time only: every timer of the runtime (holds,
-%% watchdogs, debounce, restarts) runs on the node's clock, so a faster
-%% world would change what the robot does. At the end the SVG is written
-%% and everything the run started is stopped: the applications if it
-%% started them, else the nodes it added.
+%% Where robots run: the one-robot form of a world (`{robot, Pose}') runs
+%% in this node; a world of named robots (`{robot, Name, Pose}') runs each
+%% robot on a node of its own, an OTP `peer' over its standard I/O (not
+%% distributed: robots form no cluster, and no cookie is needed), while the
+%% world stays here. Option `nodes => peer' puts a one-robot world on a
+%% peer too (as {@link batch/1} does, to run worlds side by side).
+%%
+%% Speed: `speed => S' (default 1) runs the world S times faster than real
+%% time: a tick of `tick_ms' world milliseconds takes `tick_ms / S' real
+%% ones, and the robot's timers follow: the runtime's clock
+%% (`toroco_clock') runs at the same speed, so holds, gate timers and
+%% behaviors' timeouts count world milliseconds. What belongs to real
+%% hardware stays in real time: the servos' watchdog and its keepalive,
+%% the button's debounce. What limits the
+%% speed is the event path's real latency: a reaction that takes L real ms
+%% lands L * S world ms later, so it is on time while L * S stays under a
+%% tick (`make bench' finds the highest speed that keeps the outcome).
+%%
+%% At the end the SVG is written (one picture, every robot) and everything
+%% the run started is stopped: the peers, the applications if it started
+%% them in this node, else the behaviors and devices it added.
 %%
 %% Options of {@link run/2}: `svg' (a path; no picture without it),
 %% `wiring' (default: app env `wiring' of `torobot', else
-%% `config/torobot.wiring'), `status' (`false', the default; `true' prints a
-%% status line each world second; `tty' rewrites one line in place; or a fun
-%% called with each line). {@link simulate/2} is {@link run/2} returning the
-%% final world, trajectory included; {@link summary_json/1} is the summary
-%% as the run command prints it.
+%% `config/torobot.wiring'), `speed' (a number > 0, default 1), `nodes'
+%% (`local' or `peer'; see above), `status' (`false', the default; `true'
+%% prints a status line each world second; `tty' rewrites one line in
+%% place; or a fun called with each line). {@link simulate/2} is {@link
+%% run/2} returning the final world (a list of them for named robots),
+%% trajectory included; {@link summary_json/1} is the summary as the run
+%% command prints it; {@link batch/1} runs many worlds and scores them
+%% (`torobot_batch').
 -module(torobot_sim).
 -behaviour(gen_server).
 
--export([run/2, simulate/2, summary_json/1]).
+-export([run/2, simulate/2, summary_json/1, batch/1]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2, terminate/2]).
 
--export_type([opts/0, status/0]).
+-export_type([opts/0, status/0, world_spec/0, summary/0]).
 
 -type status() :: boolean() | tty | fun((iodata()) -> any()).
--type opts() :: #{svg => file:name_all(), wiring => file:name_all(), status => status()}.
+-type opts() :: #{svg => file:name_all(), wiring => file:name_all(), status => status(),
+                  speed => number(), nodes => local | peer}.
+%% A world file, or the terms of one (as `torobot_worlds:generate/2' makes).
+-type world_spec() :: file:name_all() | [tuple()].
+%% One robot's summary, or one per robot for a world of named robots.
+-type summary() :: torobot_world:summary() | #{atom() => torobot_world:summary()}.
 
--define(DEVICES, [ir, motors, camera, push]).
--define(PRESS_MS, 60).
-%% How long past the world's duration the caller waits before giving up.
+%% How long past the world's duration (in real time) the caller waits
+%% before giving up.
 -define(GRACE_MS, 30000).
 
--record(sim, {world :: torobot_world:world(),
+-record(bot, {world :: torobot_world:world(),
+              handle :: torobot_sim_robot:handle(),
+              port :: inet:port_number(),
+              ir = #{} :: map(),
+              sensors :: torobot_sensors:state(),
+              readings = #{} :: map(),
+              winner = none :: atom()}).
+
+-record(sim, {bots = [] :: [#bot{}],
               caller :: pid(),
               status :: status(),
+              speed :: number(),
               tick :: pos_integer(),
               t0 :: integer() | undefined,
               ticks = 0 :: non_neg_integer(),
-              wheels = {0, 0} :: {number(), number()},
               sock :: gen_udp:socket() | undefined,
-              camera :: inet:port_number() | undefined,
-              ir = #{} :: map(),
               next_status = 1000 :: non_neg_integer()}).
 
 %%====================================================================
 %% API
 %%====================================================================
 
-%% @doc Runs the Torobot in the world of `WorldFile' to the world's end and
-%% returns the summary (`torobot_world:summary/1'). Fails with
-%% `{error, {world, File, Reason}}' for a bad world file, `{error, {wiring,
-%% File, Reason}}' for a bad wiring file, or `{error, {Step, Reason}}' when
-%% the applications, a device or the run itself fail.
--spec run(file:name_all(), opts()) -> {ok, torobot_world:summary()} | {error, term()}.
-run(WorldFile, Opts) ->
-    case simulate(WorldFile, Opts) of
-        {ok, World} -> {ok, torobot_world:summary(World)};
-        {error, _} = Error -> Error
+%% @doc Runs the Torobot in a world to the world's end and returns the
+%% summary (`torobot_world:summary/1'; for a world of named robots, a map
+%% of robot name to summary). Fails with `{error, {world, World, Reason}}'
+%% for a bad world, `{error, {wiring, File, Reason}}' for a bad wiring
+%% file, `{error, {speed, S}}' for a bad speed, or `{error, {Step,
+%% Reason}}' when the applications, a device, a node or the run fail.
+-spec run(world_spec(), opts()) -> {ok, summary()} | {error, term()}.
+run(WorldSpec, Opts) ->
+    case simulate(WorldSpec, Opts) of
+        {ok, Worlds} when is_list(Worlds) ->
+            {ok, maps:from_list([{torobot_world:name(W), torobot_world:summary(W)}
+                                 || W <- Worlds])};
+        {ok, World} ->
+            {ok, torobot_world:summary(World)};
+        {error, _} = Error ->
+            Error
     end.
 
 %% @doc As {@link run/2}, returning the final world (with its trajectory)
-%% instead of its summary.
--spec simulate(file:name_all(), opts()) -> {ok, torobot_world:world()} | {error, term()}.
-simulate(WorldFile, Opts) when is_map(Opts) ->
+%% instead of its summary: one world for the one-robot form, a list of
+%% worlds (one per robot, in file order) for named robots.
+-spec simulate(world_spec(), opts()) ->
+          {ok, torobot_world:world() | [torobot_world:world()]} | {error, term()}.
+simulate(WorldSpec, Opts) when is_map(Opts) ->
     WiringFile = maps:get(wiring, Opts,
                           application:get_env(torobot, wiring, "config/torobot.wiring")),
-    case {torobot_world:load(WorldFile), file:consult(WiringFile)} of
+    Speed = maps:get(speed, Opts, 1),
+    case {load(WorldSpec), file:consult(WiringFile)} of
         {{error, Reason}, _} ->
-            {error, {world, WorldFile, Reason}};
+            {error, {world, WorldSpec, Reason}};
         {_, {error, Reason}} ->
             {error, {wiring, WiringFile, Reason}};
-        {{ok, World}, {ok, Terms}} ->
-            Behaviors = [Name || {behavior, Name, _, _} <- Terms],
-            case application:ensure_all_started(torobot) of
-                {ok, Started} ->
-                    try
-                        with_network(World, WiringFile, Opts)
-                    after
-                        stop(Started, Behaviors)
-                    end;
-                {error, Reason} ->
-                    {error, {applications, Reason}}
+        {_, _} when not is_number(Speed); Speed =< 0 ->
+            {error, {speed, Speed}};
+        {{ok, Worlds}, {ok, _}} ->
+            Named = torobot_world:name(hd(Worlds)) =/= undefined,
+            Nodes = maps:get(nodes, Opts, case Named of
+                                              true -> peer;
+                                              false -> local
+                                          end),
+            case with_robots(Worlds, Nodes, Opts#{wiring => WiringFile, speed => Speed}) of
+                {ok, [Final]} when not Named -> {ok, Final};
+                {ok, Finals} -> {ok, Finals};
+                {error, _} = Error -> Error
             end
     end.
 
-%% @doc The summary as one JSON object (`none' as `null').
--spec summary_json(torobot_world:summary()) -> binary().
+%% @doc The summary as one JSON object (`none' as `null'); a world's own
+%% figures (`torobot_sensors', and `robot_contacts' for a named robot)
+%% follow the Torobot's keys. A world of named robots gives one object
+%% with a member per robot.
+-spec summary_json(summary()) -> binary().
 summary_json(#{red_touched_ms := Red, wall_contacts := Walls, blue_contacts := Blue,
-               distance_m := Distance}) ->
+               distance_m := Distance} = Summary) ->
     iolist_to_binary(
       ["{\"red_touched_ms\":", case Red of
                                    none -> "null";
@@ -123,120 +153,125 @@ summary_json(#{red_touched_ms := Red, wall_contacts := Walls, blue_contacts := B
        ",\"wall_contacts\":", integer_to_list(Walls),
        ",\"blue_contacts\":", integer_to_list(Blue),
        ",\"distance_m\":", float_to_list(float(Distance), [{decimals, 3}, compact]),
+       [[",\"", atom_to_list(K), "\":", figure_json(V)]
+        || {K, V} <- lists:sort(maps:to_list(maps:without([red_touched_ms, wall_contacts,
+                                                            blue_contacts, distance_m],
+                                                           Summary)))],
+       "}"]);
+summary_json(PerRobot) when is_map(PerRobot) ->
+    iolist_to_binary(
+      ["{", lists:join(",", [["\"", atom_to_binary(Name), "\":", summary_json(S)]
+                             || {Name, S} <- lists:sort(maps:to_list(PerRobot))]),
        "}"]).
+
+figure_json(none) -> "null";
+figure_json(V) when is_integer(V) -> integer_to_list(V);
+figure_json(V) when is_float(V) -> float_to_list(V, [{decimals, 3}, compact]);
+figure_json(V) -> io_lib:format("\"~0p\"", [V]).
+
+%% @doc Runs many worlds, several at once, and scores them: see
+%% `torobot_batch:run/1'.
+-spec batch(torobot_batch:opts()) -> {ok, torobot_batch:report()} | {error, term()}.
+batch(Opts) ->
+    torobot_batch:run(Opts).
 
 %%====================================================================
 %% Setting up and tearing down
 %%====================================================================
 
-with_network(World, WiringFile, Opts) ->
-    {ok, Sim} = gen_server:start(?MODULE, {World, self(), maps:get(status, Opts, false)}, []),
+load(Terms) when is_list(Terms), Terms =/= [], is_tuple(hd(Terms)) ->
+    torobot_world:from_terms_all(Terms);
+load(File) ->
+    torobot_world:load_all(File).
+
+with_robots(Worlds, Nodes, Opts) ->
+    #{wiring := WiringFile, speed := Speed} = Opts,
+    {ok, Sim} = gen_server:start(?MODULE, {self(), maps:get(status, Opts, false), Speed,
+                                           torobot_world:tick_ms(hd(Worlds))}, []),
     MRef = monitor(process, Sim),
+    RobotOpts = #{wiring => WiringFile, speed => Speed,
+                  thresholds => torobot_world:ir_thresholds(hd(Worlds)),
+                  sensors => [{Name, Outputs(hd(Worlds))}
+                              || {Name, Outputs} <- torobot_sensors:devices()]},
+    Started = start_robots(Worlds, Nodes, RobotOpts),
     try
-        ok = step(devices, add_devices(World)),
-        ok = step(wheels, toroco:add_device(wheels, torobot_sim_wheels, #{sim => Sim})),
-        ok = step({wiring, WiringFile}, toroco:load_wiring(WiringFile)),
-        ok = step(wheels, toroco:set_inputs(wheels, #{applied => [{motors, applied}]})),
-        ok = step(camera, gen_server:call(Sim, {go, camera_port()})),
-        Timeout = torobot_world:duration_ms(World) + ?GRACE_MS,
+        Bots = [case Result of
+                    {ok, Handle, Port} -> #bot{world = W, handle = Handle, port = Port,
+                                               sensors = torobot_sensors:new(W)};
+                    {error, Reason} -> throw({failed, Reason})
+                end || {W, Result} <- lists:zip(Worlds, Started)],
+        ok = case gen_server:call(Sim, {go, Bots}, infinity) of
+                 ok -> ok;
+                 {error, GoFailed} -> throw({failed, {go, GoFailed}})
+             end,
+        Timeout = round(torobot_world:duration_ms(hd(Worlds)) / Speed) + ?GRACE_MS,
         receive
-            {?MODULE, Sim, {done, Final}} ->
+            {?MODULE, Sim, {done, Finals}} ->
                 demonitor(MRef, [flush]),
-                warn_safety_stops(),
-                ok = step(svg, svg(Final, Opts)),
-                {ok, Final};
+                case svg(Finals, Opts) of
+                    ok -> {ok, Finals};
+                    {error, SvgFailed} -> {error, {svg, SvgFailed}}
+                end;
             {'DOWN', MRef, process, Sim, Why} ->
                 {error, {simulator, Why}}
         after Timeout ->
                 {error, {simulator, timeout}}
         end
     catch
-        throw:{step, Step, Failure} -> {error, {Step, Failure}}
+        throw:{failed, Failure} -> {error, Failure}
     after
         demonitor(MRef, [flush]),
-        exit(Sim, shutdown)
+        exit(Sim, shutdown),
+        _ = [torobot_sim_robot:stop_peer(Handle) || {ok, Handle, _} <- Started]
     end.
 
-step(_Step, ok) -> ok;
-step(Step, {error, Reason}) -> throw({step, Step, Reason});
-step(Step, Other) -> throw({step, Step, Other}).
+%% Peers boot side by side, each linked to the caller once up; the robot
+%% in this node starts in it.
+start_robots([_], local, RobotOpts) ->
+    case torobot_sim_robot:start(RobotOpts) of
+        {ok, Port} -> [{ok, local, Port}];
+        {error, _} = Error -> [Error]
+    end;
+start_robots(Worlds, _Peer, RobotOpts) ->
+    Self = self(),
+    Pids = [spawn_link(fun() -> Self ! {self(), torobot_sim_robot:start_peer(RobotOpts)} end)
+            || _ <- Worlds],
+    [receive
+         {Pid, {ok, {peer, Peer}, _} = Result} -> link(Peer), Result;
+         {Pid, Result} -> Result
+     end || Pid <- Pids].
 
-add_devices(World) ->
-    #{threshold_high := High, threshold_low := Low} = torobot_world:ir_thresholds(World),
-    Ir = fun(Channel) -> #{channel => Channel, mode => analog_threshold,
-                           threshold_high => High, threshold_low => Low} end,
-    Devices = [{ir, toroco_pru_sensors, #{sensors => [{left, Ir(0)}, {right, Ir(1)}],
-                                          backend => sim}},
-               {motors, toroco_servo_motors, #{backend => sim}},
-               {camera, toroco_udp_camera, #{port => 0, ip => {127, 0, 0, 1}}},
-               {push, toroco_gpio_button, #{line => 0, backend => sim}}],
-    lists:foldl(fun({Name, Module, DevOpts}, ok) ->
-                        case toroco:add_device(Name, Module, DevOpts) of
-                            ok -> ok;
-                            {error, Reason} -> {error, {Name, Reason}}
-                        end;
-                   (_, Error) -> Error
-                end, ok, Devices).
-
-camera_port() ->
-    case toroco:inspect(camera) of
-        #{device := #{port := Port}} when is_integer(Port) -> Port;
-        Other -> {error, {no_camera_port, Other}}
-    end.
-
-%% A servo watchdog or a restart of the servos' program stops the robot
-%% until a behavior commands a new velocity, which a latched command never
-%% does: the run is not what the behaviors made of the world, so say so.
-warn_safety_stops() ->
-    case toroco:inspect(motors) of
-        #{device := #{watchdogs := W, port_restarts := R}} when W > 0; R > 0 ->
-            logger:warning("torobot_sim: the servos stopped for safety during the run "
-                           "(~b watchdog stops, ~b program restarts); the robot stood "
-                           "still until its next new velocity", [W, R]);
-        _ ->
-            ok
-    end.
-
-svg(World, #{svg := Path}) ->
+svg(Worlds, #{svg := Path}) ->
     ok = filelib:ensure_dir(Path),
-    torobot_svg:write(World, Path);
-svg(_World, #{}) ->
-    ok.
-
-%% The applications this run started are stopped whole; in a node where
-%% they were already running, only the nodes it added are removed.
-stop([], Behaviors) ->
-    _ = [toroco:remove_behavior(B) || B <- Behaviors],
-    _ = [toroco:remove_device(D) || D <- [wheels | lists:reverse(?DEVICES)]],
-    ok;
-stop(Started, _Behaviors) ->
-    _ = [application:stop(App) || App <- lists:reverse(Started)],
+    case Worlds of
+        [World] -> torobot_svg:write(World, Path);
+        _ -> torobot_svg:write_all(Worlds, Path)
+    end;
+svg(_Worlds, #{}) ->
     ok.
 
 %%====================================================================
 %% The world's process
 %%====================================================================
 
--spec init({torobot_world:world(), pid(), status()}) -> {ok, #sim{}}.
-init({World, Caller, Status}) ->
+-spec init({pid(), status(), number(), pos_integer()}) -> {ok, #sim{}}.
+init({Caller, Status, Speed, Tick}) ->
     monitor(process, Caller),
-    {ok, #sim{world = World, caller = Caller, status = Status,
-              tick = torobot_world:tick_ms(World)}}.
+    {ok, #sim{caller = Caller, status = Status, speed = Speed, tick = Tick}}.
 
 -spec handle_call(term(), gen_server:from(), #sim{}) -> {reply, term(), #sim{}}.
-handle_call({go, Port}, _From, S) when is_integer(Port) ->
+handle_call({go, Bots}, _From, S) ->
     {ok, Sock} = gen_udp:open(0, [binary, {ip, {127, 0, 0, 1}}]),
-    case toroco_gpio_button:sim_button(push, 0) of
-        ok ->
-            erlang:send_after(?PRESS_MS, self(), release),
-            S1 = sense(S#sim{sock = Sock, camera = Port}),
-            T0 = erlang:monotonic_time(millisecond),
+    case lists:filter(fun(R) -> R =/= ok end,
+                      [torobot_sim_robot:go(B#bot.handle) || B <- Bots]) of
+        [] ->
+            S1 = sense(S#sim{sock = Sock, bots = Bots}),
+            T0 = erlang:monotonic_time(microsecond),
             {reply, ok, schedule(S1#sim{t0 = T0})};
-        {error, _} = Error ->
+        [Error | _] ->
+            gen_udp:close(Sock),
             {reply, Error, S}
     end;
-handle_call({go, Error}, _From, S) ->
-    {reply, Error, S};
 handle_call(_Request, _From, S) ->
     {reply, {error, unknown_call}, S}.
 
@@ -245,22 +280,21 @@ handle_cast(_Msg, S) ->
     {noreply, S}.
 
 -spec handle_info(term(), #sim{}) -> {noreply, #sim{}} | {stop, term(), #sim{}}.
-handle_info({timeout, _Ref, tick}, S = #sim{world = W, wheels = Wheels, tick = Tick}) ->
-    Winner = winner(),
-    S1 = status(sense(S#sim{world = torobot_world:step(W, Tick, Wheels, Winner)}), Winner),
-    publish(S1, Winner),
-    case torobot_world:done(S1#sim.world) of
+handle_info({timeout, _Ref, tick}, S = #sim{bots = Bots, tick = Tick}) ->
+    Commands = [case torobot_world:done(W) of
+                    true -> done;
+                    false -> torobot_sim_robot:wheels(H)
+                end || #bot{world = W, handle = H} <- Bots],
+    S1 = status(sense(S#sim{bots = move(Bots, Commands, Tick)})),
+    publish(S1),
+    Worlds = [W || #bot{world = W} <- S1#sim.bots],
+    case lists:all(fun torobot_world:done/1, Worlds) of
         true ->
-            S1#sim.caller ! {?MODULE, self(), {done, S1#sim.world}},
+            S1#sim.caller ! {?MODULE, self(), {done, Worlds}},
             {stop, normal, S1};
         false ->
             {noreply, schedule(S1)}
     end;
-handle_info({torobot_sim_wheels, Wheels}, S) ->
-    {noreply, S#sim{wheels = Wheels}};
-handle_info(release, S) ->
-    _ = toroco_gpio_button:sim_button(push, 1),
-    {noreply, S};
 handle_info({'DOWN', _, process, Caller, _}, S = #sim{caller = Caller}) ->
     {stop, normal, S};
 handle_info(_Info, S) ->
@@ -279,61 +313,100 @@ terminate(_Reason, #sim{sock = Sock, status = Status}) ->
 
 %% Ticks are scheduled on the absolute clock from the start, so a late tick
 %% does not delay the ones after it.
-schedule(S = #sim{t0 = T0, ticks = N, tick = Tick}) ->
-    erlang:start_timer(T0 + (N + 1) * Tick, self(), tick, [{abs, true}]),
+schedule(S = #sim{t0 = T0, ticks = N, tick = Tick, speed = Speed}) ->
+    Due = (T0 + round((N + 1) * Tick * 1000 / Speed)) div 1000,
+    erlang:start_timer(Due, self(), tick, [{abs, true}]),
     S#sim{ticks = N + 1}.
 
+%% The robots move one after another, each among the others where they
+%% are at that moment, so no two ever overlap. A robot that is done (it
+%% touched red) stays where it is.
+move(Bots, Commands, Tick) ->
+    move_each(lists:zip(Bots, Commands), Tick, []).
+
+move_each([], _Tick, Moved) ->
+    lists:reverse(Moved);
+move_each([{Bot, done} | Rest], Tick, Moved) ->
+    move_each(Rest, Tick, [Bot | Moved]);
+move_each([{Bot = #bot{world = W}, {Wheels, Winner}} | Rest], Tick, Moved) ->
+    Others = [B#bot.world || B <- Moved] ++ [B#bot.world || {B, _} <- Rest],
+    Among = torobot_world:set_others(W, [torobot_world:body(O) || O <- Others]),
+    Stepped = torobot_world:step(Among, Tick, Wheels, Winner),
+    move_each(Rest, Tick, [Bot#bot{world = Stepped, winner = Winner} | Moved]).
+
 %% The sensors read the world as it is now: IR samples go to the PRU sim
-%% only when they change, camera frames are sent every tick, as the
-%% detector sends every frame.
-sense(S = #sim{world = W, ir = Last, sock = Sock, camera = Port}) ->
-    Ir = torobot_world:ir(W),
-    _ = [ok = toroco_pru_sensors:sim_adc(ir, Side, Raw)
-         || {Side, Raw} <- maps:to_list(Ir), maps:get(Side, Last, undefined) =/= Raw],
-    _ = [gen_udp:send(Sock, {127, 0, 0, 1}, Port, Datagram)
-         || Datagram <- torobot_world:camera(W)],
-    S#sim{ir = Ir}.
+%% and the library's sensors to their devices only when they change,
+%% camera frames are sent every tick, as the detector sends every frame.
+sense(S = #sim{bots = Bots, sock = Sock}) ->
+    S#sim{bots = [sense(B, [O || O <- Bots, O =/= B], Sock) || B <- Bots]}.
+
+sense(B = #bot{world = W0, handle = H, ir = Last, port = Port, readings = LastReadings},
+      Others, Sock) ->
+    W = torobot_world:set_others(W0, [torobot_world:body(O#bot.world) || O <- Others]),
+    case torobot_world:done(W) of
+        true ->
+            B#bot{world = W};
+        false ->
+            Ir = torobot_world:ir(W),
+            {Readings, Sensors} = torobot_sensors:read(W, B#bot.sensors),
+            Changed = fun(Now, Before) ->
+                              maps:filter(fun(K, V) -> maps:get(K, Before, undefined) =/= V end,
+                                          Now)
+                      end,
+            _ = torobot_sim_robot:sense(H, Changed(Ir, Last), Changed(Readings, LastReadings)),
+            _ = [gen_udp:send(Sock, {127, 0, 0, 1}, Port, Datagram)
+                 || Datagram <- torobot_world:camera(W)],
+            B#bot{world = W, ir = Ir, sensors = Sensors, readings = Readings}
+    end.
 
 %% The dashboard's view of the world (toroco_live_world's message, written
 %% down there): a plain send, and only when toroco_live runs in this node.
-publish(#sim{world = W, t0 = T0}, Winner) ->
+%% A robot of the one-robot form is named `torobot'.
+publish(#sim{bots = Bots, t0 = T0}) ->
     case whereis(toroco_live_world) of
         undefined ->
             ok;
         Viewer ->
-            #{ir := Ir, camera := Camera} = torobot_world:view(W),
-            Robot = #{name => torobot, pose => torobot_world:pose(W),
-                      radius => torobot_world:robot_radius(W), winner => Winner,
-                      ir => Ir, camera => Camera},
+            [#bot{world = W} | _] = Bots,
+            Robots = [begin
+                          #{ir := Ir, camera := Camera} = torobot_world:view(R),
+                          #{name => case torobot_world:name(R) of
+                                        undefined -> torobot;
+                                        Name -> Name
+                                    end,
+                            pose => torobot_world:pose(R),
+                            radius => torobot_world:robot_radius(R), winner => Winner,
+                            ir => Ir, camera => Camera}
+                      end || #bot{world = R, winner = Winner} <- Bots],
             Viewer ! {toroco_live_world, snapshot,
-                      #{run => {self(), T0}, t_ms => torobot_world:time_ms(W),
+                      #{run => {self(), T0},
+                        t_ms => lists:max([torobot_world:time_ms(B#bot.world) || B <- Bots]),
                         arena => torobot_world:arena(W), walls => torobot_world:walls(W),
-                        objects => torobot_world:objects(W), robots => [Robot]}},
+                        objects => torobot_world:objects(W), robots => Robots}},
             ok
     end.
 
-winner() ->
-    try toroco:inspect(motors) of
-        #{inputs := #{setvel := #{winner := {Emitter, _}}}} -> Emitter;
-        _ -> none
-    catch
-        _:_ -> none
-    end.
-
-status(S = #sim{status = false}, _Winner) ->
+status(S = #sim{status = false}) ->
     S;
-status(S = #sim{world = W, next_status = Next, status = How}, Winner) ->
-    case torobot_world:time_ms(W) >= Next of
+status(S = #sim{bots = Bots, next_status = Next, status = How}) ->
+    case lists:max([torobot_world:time_ms(B#bot.world) || B <- Bots]) >= Next of
         true ->
-            {X, Y, H} = torobot_world:pose(W),
-            Line = io_lib:format("t ~5.1f s  ~-13s x ~4.2f  y ~4.2f  heading ~4b",
-                                 [torobot_world:time_ms(W) / 1000, Winner, X, Y, round(H)]),
-            case How of
-                true -> io:put_chars([Line, "\n"]);
-                tty -> io:put_chars(["\r", Line]);
-                Fun when is_function(Fun, 1) -> Fun(Line)
-            end,
+            _ = [line(How, Bot) || Bot <- Bots],
             S#sim{next_status = Next + 1000};
         false ->
             S
+    end.
+
+line(How, #bot{world = W, winner = Winner}) ->
+    {X, Y, H} = torobot_world:pose(W),
+    Name = case torobot_world:name(W) of
+               undefined -> "";
+               N -> io_lib:format("~s  ", [N])
+           end,
+    Line = io_lib:format("~st ~5.1f s  ~-13s x ~4.2f  y ~4.2f  heading ~4b",
+                         [Name, torobot_world:time_ms(W) / 1000, Winner, X, Y, round(H)]),
+    case How of
+        true -> io:put_chars([Line, "\n"]);
+        tty -> io:put_chars(["\r", Line]);
+        Fun when is_function(Fun, 1) -> Fun(Line)
     end.

@@ -1,13 +1,13 @@
 %% @doc The simulated robot's wheels: an actuator device that hands each
-%% velocity pair it receives to the simulator.
+%% velocity pair it receives to the robot's side of the simulator.
 %%
-%% `torobot_sim' adds it (as `wheels') and wires its `applied' input to the
+%% `torobot_sim_robot' adds it (as `wheels') and wires its `applied' input to the
 %% servo device's `applied' output, so the world moves with what the servos
 %% really do (nothing while disabled, neutral after a watchdog stop), not
-%% with what the behaviors ask for. Each delivery is sent to the simulator
+%% with what the behaviors ask for. Each delivery is sent to the `sim'
 %% process as `{torobot_sim_wheels, {Left, Right}}'.
 %%
-%% Options: `sim', the simulator's pid (required).
+%% Options: `sim', the pid to tell (required).
 -module(torobot_sim_wheels).
 -behaviour(toroco_device).
 

@@ -16,6 +16,12 @@
 %% <li>`{arena, {W, H}}': metres; walls all around, origin bottom-left.</li>
 %% <li>`{robot, {X, Y, HeadingDeg}}': start pose; heading 0 = +x,
 %%     counter-clockwise positive.</li>
+%% <li>or, for several robots, any number of `{robot, Name, {X, Y,
+%%     HeadingDeg}}' (optionally a fourth element `#{colour => red | blue}',
+%%     a colour the robot carries for the others' cameras): one world value
+%%     per robot, from {@link load_all/1} or {@link from_terms_all/1}, each
+%%     seeing the others as solid discs ({@link set_others/2}); contacts
+%%     with them are counted per robot as `robot_contacts'.</li>
 %% <li>`{duration_s, S}': the run ends at S seconds.</li>
 %% </ul>
 %% Any number of:
@@ -46,6 +52,11 @@
 %% <li>`{tick_ms, 50}': the period the simulator should step the world with.</li>
 %% <li>`{stop_on_red, true}': whether touching a red object ends the run.</li>
 %% </ul>
+%% The sensors and fixtures of the library's robots (range sensors,
+%% bumpers, odometry, lights and light sensors, a dock and its beacon) and
+%% the figures a run is measured by are terms of `torobot_sensors', all
+%% optional; their doc is there.
+%%
 %% A bad world gives `{error, Reason}' naming the culprit: `{file, Why}',
 %% `{bad_term, Term}', `{duplicate, Term}', `{missing, arena | robot |
 %% duration_s}', `{outside_arena, Term}' or `{blocked_start, RobotTerm,
@@ -81,15 +92,18 @@
 %% {@link tick_ms/1}, {@link duration_ms/1}).
 -module(torobot_world).
 
--export([load/1, from_terms/1]).
+-export([load/1, from_terms/1, load_all/1, from_terms_all/1]).
 -export([step/3, step/4]).
 -export([ir/1, ir_levels/2, ir_thresholds/1, camera/1, view/1]).
 -export([time_ms/1, pose/1, done/1, summary/1, trajectory/1]).
 -export([arena/1, walls/1, objects/1, start_pose/1, robot_radius/1,
          tick_ms/1, duration_ms/1]).
+-export([name/1, body/1, set_others/2]).
+%% For the sensor models of `torobot_sensors'.
+-export([extras/1, geometry/1, range/3, contact_bearings/1, line_of_sight/3, free/2]).
 
 -export_type([world/0, colour/0, point/0, pose/0, velocity/0, tag/0,
-              sample/0, summary/0, ir_reading/0, ir_levels/0, reason/0]).
+              sample/0, summary/0, ir_reading/0, ir_levels/0, reason/0, body/0]).
 
 -type colour() :: red | blue.
 -type point() :: {X :: float(), Y :: float()}.
@@ -102,7 +116,10 @@
 -type summary() :: #{red_touched_ms := non_neg_integer() | none,
                      wall_contacts := non_neg_integer(),
                      blue_contacts := non_neg_integer(),
-                     distance_m := float()}.
+                     distance_m := float(),
+                     robot_contacts => non_neg_integer(),
+                     %% the figures a world asks for (torobot_sensors)
+                     atom() => term()}.
 -type adc() :: 0..1023.
 -type ir_reading() :: #{left := adc(), right := adc()}.
 -type ir_levels() :: #{left := near | far, right := near | far}.
@@ -111,9 +128,13 @@
                 | {duplicate, term()}
                 | {missing, arena | robot | duration_s}
                 | {outside_arena, term()}
-                | {blocked_start, term(), term()}.
+                | {blocked_start, term(), term()}
+                | {several_robots, [atom()]}.
+%% A robot as the others see it: name, centre, radius and the colour it
+%% carries (`none' when it carries none).
+-type body() :: {atom() | undefined, point(), float(), colour() | none}.
 
--type key() :: {wall, pos_integer()} | {colour(), pos_integer()}.
+-type key() :: {wall, pos_integer()} | {colour(), pos_integer()} | {robot, atom()}.
 -type shape() :: {segment, point(), point()} | {disc, point(), float()}.
 -type obstacle() :: {key(), shape(), Source :: term()}.
 %% What the camera makes of an object: {Area, -Distance, X, Y}, so that
@@ -141,7 +162,15 @@
           blue_contacts = 0 :: non_neg_integer(),
           red_touched_ms = none :: non_neg_integer() | none,
           distance = 0.0 :: float(),
-          trajectory = [] :: [sample()]
+          trajectory = [] :: [sample()],
+          extras = #{} :: map(),
+          %% Several robots in one world: this robot's name and colour, the
+          %% other robots where the simulator last put them, and the
+          %% contacts with them.
+          name :: atom() | undefined,
+          colour = none :: colour() | none,
+          others = [] :: [body()],
+          robot_contacts = 0 :: non_neg_integer()
          }).
 
 -opaque world() :: #world{}.
@@ -175,15 +204,84 @@ load(File) ->
         {error, Why} -> {error, {file, Why}}
     end.
 
-%% @doc Builds a world from the terms of a world file.
+%% @doc Builds a world from the terms of a world file. A world of several
+%% robots is refused as `{several_robots, Names}': see {@link from_terms_all/1}.
 -spec from_terms([term()]) -> {ok, world()} | {error, reason()}.
-from_terms(Terms) when is_list(Terms) ->
-    case parse(Terms, #{wall => [], object => []}) of
-        {ok, Parsed} -> build(Parsed);
+from_terms(Terms) ->
+    case from_terms_all(Terms) of
+        {ok, [World]} -> {ok, World};
+        {ok, Worlds} -> {error, {several_robots, [name(W) || W <- Worlds]}};
         {error, _} = Error -> Error
+    end.
+
+%% @doc Reads a world file of any number of robots: one world per robot,
+%% in file order (see {@link from_terms_all/1}).
+-spec load_all(file:name_all()) -> {ok, [world(), ...]} | {error, reason()}.
+load_all(File) ->
+    case file:consult(File) of
+        {ok, Terms} -> from_terms_all(Terms);
+        {error, Why} -> {error, {file, Why}}
+    end.
+
+%% @doc Builds one world per robot of a world file: the same scene, each
+%% with its own robot and the others as bodies ({@link set_others/2}).
+%% Robots are either the one `{robot, Pose}' or any number of
+%% `{robot, Name, Pose}' / `{robot, Name, Pose, #{colour => red | blue}}'
+%% with distinct names; mixing the forms or repeating a name is
+%% `{duplicate, Term}', robots starting on each other `{blocked_start,
+%% RobotTerm, OtherRobotTerm}'.
+-spec from_terms_all([term()]) -> {ok, [world(), ...]} | {error, reason()}.
+from_terms_all(Terms) when is_list(Terms) ->
+    case parse(Terms, #{wall => [], object => [], robots => []}) of
+        {ok, #{robots := []} = Parsed} ->
+            case build(Parsed) of
+                {ok, World} -> {ok, [World]};
+                {error, _} = Error -> Error
+            end;
+        {ok, #{robots := Named} = Parsed} ->
+            fleet(lists:reverse(Named), Parsed);
+        {error, _} = Error ->
+            Error
     end;
-from_terms(Other) ->
+from_terms_all(Other) ->
     {error, {bad_term, Other}}.
+
+-spec fleet([{{atom(), pose(), colour() | none}, term()}], map()) ->
+          {ok, [world(), ...]} | {error, reason()}.
+fleet([{_, First} | _], #{robot := _}) ->
+    {error, {duplicate, First}};
+fleet(Named, Parsed) ->
+    {Repeated, _} = lists:foldl(fun({{Name, _, _}, T}, {Dups, Seen}) ->
+                                        case lists:member(Name, Seen) of
+                                            true -> {Dups ++ [T], Seen};
+                                            false -> {Dups, [Name | Seen]}
+                                        end
+                                end, {[], []}, Named),
+    Built = [{build(Parsed#{robot => {Pose, Term}}), Name, Colour, Term}
+             || {{Name, Pose, Colour}, Term} <- Named],
+    case {Repeated, [E || {{error, _} = E, _, _, _} <- Built]} of
+        {[Term | _], _} ->
+            {error, {duplicate, Term}};
+        {[], [Error | _]} ->
+            Error;
+        {[], []} ->
+            Worlds = [W#world{name = Name, colour = Colour}
+                      || {{ok, W}, Name, Colour, _} <- Built],
+            Terms = [T || {_, _, _, T} <- Built],
+            Overlaps = [{A, B} || {I, WA, A} <- lists:zip3(lists:seq(1, length(Worlds)), Worlds, Terms),
+                                  {J, WB, B} <- lists:zip3(lists:seq(1, length(Worlds)), Worlds, Terms),
+                                  I < J, overlapping(WA, WB)],
+            case Overlaps of
+                [{A, B} | _] -> {error, {blocked_start, A, B}};
+                [] -> {ok, [set_others(W, [body(O) || O <- Worlds, O =/= W]) || W <- Worlds]}
+            end
+    end.
+
+-spec overlapping(world(), world()) -> boolean().
+overlapping(A, B) ->
+    {_, Pa, Ra, _} = body(A),
+    {_, Pb, Rb, _} = body(B),
+    distance(Pa, Pb) - Ra - Rb < -?SLACK.
 
 -spec parse([term()] | term(), map()) -> {ok, map()} | {error, reason()}.
 parse([], Acc) ->
@@ -191,13 +289,14 @@ parse([], Acc) ->
 parse([Term | Terms], Acc) ->
     case term(Term) of
         {ok, Key, Value} ->
-            case lists:member(Key, ?SINGLE) of
+            case lists:member(Key, ?SINGLE ++ torobot_sensors:single_terms()) of
                 true when is_map_key(Key, Acc) ->
                     {error, {duplicate, Term}};
                 true ->
                     parse(Terms, Acc#{Key => {Value, Term}});
                 false ->
-                    parse(Terms, maps:update_with(Key, fun(L) -> [{Value, Term} | L] end, Acc))
+                    parse(Terms, maps:update_with(Key, fun(L) -> [{Value, Term} | L] end,
+                                                      [{Value, Term}], Acc))
             end;
         error ->
             {error, {bad_term, Term}}
@@ -222,6 +321,14 @@ term({object, Colour, C, R}) when (Colour =:= red orelse Colour =:= blue),
     end;
 term({robot, {X, Y, H}}) when is_number(X), is_number(Y), is_number(H) ->
     {ok, robot, {float(X), float(Y), float(H)}};
+term({robot, Name, {X, Y, H}}) when is_atom(Name), is_number(X), is_number(Y), is_number(H) ->
+    {ok, robots, {Name, {float(X), float(Y), float(H)}, none}};
+term({robot, Name, Pose, #{colour := Colour} = Opts})
+  when map_size(Opts) =:= 1, (Colour =:= red orelse Colour =:= blue) ->
+    case term({robot, Name, Pose}) of
+        {ok, robots, {Name, P, none}} -> {ok, robots, {Name, P, Colour}};
+        error -> error
+    end;
 term({duration_s, S}) when is_number(S), S > 0 ->
     {ok, duration_s, S};
 term({seed, N}) when is_integer(N) ->
@@ -240,8 +347,8 @@ term({Section, Opts}) when (Section =:= robot_geometry orelse Section =:= ir
         true -> {ok, Section, Merged};
         false -> error
     end;
-term(_) ->
-    error.
+term(Other) ->
+    torobot_sensors:term(Other).
 
 -spec point(term()) -> {ok, point()} | error.
 point({X, Y}) when is_number(X), is_number(Y) -> {ok, {float(X), float(Y)}};
@@ -322,7 +429,8 @@ build(#{arena := {{W, H}, ArenaTerm}, robot := {{X, Y, Hd}, RobotTerm},
                            seed = value(seed, P),
                            tick_ms = value(tick_ms, P),
                            stop_on_red = value(stop_on_red, P),
-                           trajectory = [{0, X, Y, start}]},
+                           trajectory = [{0, X, Y, start}],
+                           extras = torobot_sensors:build(P)},
             {ok, World#world{touching = contacts(World, Pos, [])}}
     end;
 build(P) ->
@@ -384,7 +492,7 @@ substep(#world{pos = {X, Y} = Prev, theta = Th} = W, V, Omega, Dt, TimeMs) ->
                            Y - R * (math:cos(Th1) - math:cos(Th))}
              end,
     Radius = robot_radius(W),
-    Pos = resolve(Prev, Wanted, W#world.obstacles, Radius, 8),
+    Pos = resolve(Prev, Wanted, obstacles(W), Radius, 8),
     Touching = contacts(W, Pos, W#world.touching),
     New = ordsets:subtract(Touching, W#world.touching),
     count(New, TimeMs, W#world{pos = Pos, theta = normalise_rad(Th1), touching = Touching,
@@ -419,10 +527,10 @@ push_out(Prev, Pos, [{_, Shape, _} | Rest], Radius, Pushed) ->
 %% The obstacles the robot at Pos touches, with hysteresis: one already
 %% touched stays touched until the robot is clearly away from it.
 -spec contacts(world(), point(), ordsets:ordset(key())) -> ordsets:ordset(key()).
-contacts(#world{obstacles = Obstacles} = W, Pos, Before) ->
+contacts(W, Pos, Before) ->
     Radius = robot_radius(W),
     ordsets:from_list(
-      [Key || {Key, Shape, _} <- Obstacles,
+      [Key || {Key, Shape, _} <- obstacles(W),
               gap(Pos, Radius, Shape) =< case ordsets:is_element(Key, Before) of
                                              true -> ?RELEASE;
                                              false -> ?TOUCH
@@ -437,7 +545,21 @@ count([{blue, _} | New], TimeMs, W) ->
 count([{red, _} | New], TimeMs, #world{red_touched_ms = none} = W) ->
     count(New, TimeMs, W#world{red_touched_ms = TimeMs});
 count([{red, _} | New], TimeMs, W) ->
-    count(New, TimeMs, W).
+    count(New, TimeMs, W);
+count([{robot, _} | New], TimeMs, W) ->
+    count(New, TimeMs, W#world{robot_contacts = W#world.robot_contacts + 1}).
+
+%% The scene's obstacles and the other robots.
+-spec obstacles(world()) -> [obstacle()].
+obstacles(#world{obstacles = Obstacles, others = []}) ->
+    Obstacles;
+obstacles(#world{obstacles = Obstacles, others = Others}) ->
+    Obstacles ++ [{{robot, Name}, {disc, Pos, R}, Name} || {Name, Pos, R, _} <- Others].
+
+%% The colours the other robots carry, as objects the camera may see.
+-spec carried(world()) -> [{colour(), point(), float()}].
+carried(#world{others = Others}) ->
+    [{Colour, Pos, R} || {_, Pos, R, Colour} <- Others, Colour =/= none].
 
 -spec gap(point(), float(), shape()) -> float().
 gap(Pos, Radius, {segment, A, B}) -> distance(Pos, closest(Pos, A, B)) - Radius;
@@ -454,14 +576,60 @@ ir(#world{ir = #{mount_deg := Mount}} = W) ->
       right => ir_reading(W, -deg_to_rad(Mount), right)}.
 
 -spec ir_reading(world(), float(), left | right) -> adc().
-ir_reading(#world{pos = Pos, theta = Th, ir = Ir} = W, Mount, Side) ->
+ir_reading(#world{ir = Ir} = W, Mount, Side) ->
     #{min_range := Min, max_range := Max, curve := {K, D0, C}, noise := Noise} = Ir,
-    Dir = {math:cos(Th + Mount), math:sin(Th + Mount)},
-    Origin = add(Pos, scale(Dir, robot_radius(W))),
-    Hits = [T || {_, Shape, _} <- W#world.obstacles, {hit, T} <- [ray(Origin, Dir, Shape)]],
-    D = clamp(lists:min([Max | Hits]), Min, Max),
+    D = clamp(range(W, Mount, Max), Min, Max),
     Value = K / (D * 100 + D0) + C + noise(W, {ir, Side}, Noise),
     clamp(round(Value), 0, 1023).
+
+%% @doc The distance in metres from the robot's rim, at `MountRad' from the
+%% heading (counter-clockwise), to the first wall, object or other robot
+%% along that direction; `Max' when there is none nearer.
+-spec range(world(), float(), number()) -> number().
+range(#world{pos = Pos, theta = Th} = W, MountRad, Max) ->
+    Dir = {math:cos(Th + MountRad), math:sin(Th + MountRad)},
+    Origin = add(Pos, scale(Dir, robot_radius(W))),
+    Hits = [T || {_, Shape, _} <- obstacles(W), {hit, T} <- [ray(Origin, Dir, Shape)]],
+    lists:min([Max | Hits]).
+
+%% @doc The bearings (degrees from the heading, counter-clockwise) of the
+%% walls, objects and other robots the robot touches now.
+-spec contact_bearings(world()) -> [float()].
+contact_bearings(#world{pos = Pos, theta = Th} = W) ->
+    Radius = robot_radius(W),
+    [rad_to_deg(normalise_rad(math:atan2(Dy, Dx) - Th))
+     || {_, Shape, _} <- obstacles(W), gap(Pos, Radius, Shape) =< ?RELEASE,
+        {Dx, Dy} <- [sub(case Shape of
+                             {segment, A, B} -> closest(Pos, A, B);
+                             {disc, C, _} -> C
+                         end, Pos)]].
+
+%% @doc Whether no wall (the arena's included) crosses the segment between
+%% two points.
+-spec line_of_sight(world(), point(), point()) -> boolean().
+line_of_sight(#world{obstacles = Obstacles}, From, To) ->
+    Sight = sub(To, From),
+    not lists:any(fun({_, {segment, _, _} = Wall, _}) ->
+                          case ray(From, Sight, Wall) of
+                              {hit, T} -> T < 1;
+                              miss -> false
+                          end;
+                     (_) -> false
+                  end, Obstacles).
+
+%% @doc Whether the robot could stand at a point without touching anything.
+-spec free(world(), point()) -> boolean().
+free(#world{obstacles = Obstacles} = W, Pos) ->
+    Radius = robot_radius(W),
+    lists:all(fun({_, Shape, _}) -> gap(Pos, Radius, Shape) >= 0 end, Obstacles).
+
+%% @doc What `torobot_sensors' parsed from the world file.
+-spec extras(world()) -> map().
+extras(#world{extras = Extras}) -> Extras.
+
+%% @doc The robot's geometry (`radius', `wheel_base', `max_wheel_speed').
+-spec geometry(world()) -> map().
+geometry(#world{geometry = G}) -> G.
 
 %% @doc What a viewer draws of the sensors now: each IR ray from its sensor
 %% to what it meets (or to its range) with its reading, and the camera's
@@ -475,7 +643,7 @@ view(#world{pos = Pos, theta = Th, ir = #{mount_deg := Mount, max_range := Max},
     Ray = fun(Side, Angle) ->
                   Dir = {math:cos(Th + Angle), math:sin(Th + Angle)},
                   Origin = add(Pos, scale(Dir, robot_radius(W))),
-                  Hits = [T || {_, Shape, _} <- W#world.obstacles,
+                  Hits = [T || {_, Shape, _} <- obstacles(W),
                                {hit, T} <- [ray(Origin, Dir, Shape)]],
                   #{side => Side, from => Origin,
                     to => add(Origin, scale(Dir, lists:min([Max | Hits]))),
@@ -505,7 +673,7 @@ ir_thresholds(#world{ir = Ir}) ->
 %% object of that colour or the `none' form.
 -spec camera(world()) -> [binary()].
 camera(W) ->
-    Seen = [{Colour, Blob} || {Colour, _, _} = Object <- W#world.objects,
+    Seen = [{Colour, Blob} || {Colour, _, _} = Object <- W#world.objects ++ carried(W),
                               {ok, Blob} <- [project(W, Object)]],
     [datagram(Colour, largest([Blob || {C, Blob} <- Seen, C =:= Colour]), W)
      || Colour <- [red, blue]].
@@ -537,17 +705,17 @@ project(#world{pos = Pos, theta = Th, camera = Cam} = W, {Colour, Centre, R}) ->
     end.
 
 -spec occluded(world(), point(), {colour(), point(), float()}) -> boolean().
-occluded(#world{obstacles = Obstacles}, Eye, {_, Centre, _} = Target) ->
+occluded(W, Eye, {_, Centre, Radius}) ->
     Sight = sub(Centre, Eye),
     lists:any(fun({_, {segment, _, _} = Wall, _}) ->
                       case ray(Eye, Sight, Wall) of
                           {hit, T} -> T < 1;
                           miss -> false
                       end;
-                 ({{Colour, _}, {disc, C, R}, _}) ->
-                      {Colour, C, R} =/= Target
+                 ({_, {disc, C, R}, _}) ->
+                      {C, R} =/= {Centre, Radius}
                           andalso distance(C, closest(C, Eye, Centre)) < R
-              end, Obstacles).
+              end, obstacles(W)).
 
 -spec largest([blob()]) -> blob() | none.
 largest([]) -> none;
@@ -590,13 +758,19 @@ pose(#world{pos = {X, Y}, theta = Th}) -> {X, Y, rad_to_deg(Th)}.
 done(#world{time_ms = T, duration_ms = D, stop_on_red = Stop, red_touched_ms = Red}) ->
     T >= D orelse (Stop andalso Red =/= none).
 
-%% @doc The run's outcome, as `torobot_sim:run/2' returns it.
+%% @doc The run's outcome, as `torobot_sim:run/2' returns it. A named robot
+%% (a world of several) also has `robot_contacts', counted as walls are.
 -spec summary(world()) -> summary().
 summary(#world{} = W) ->
-    #{red_touched_ms => W#world.red_touched_ms,
-      wall_contacts => W#world.wall_contacts,
-      blue_contacts => W#world.blue_contacts,
-      distance_m => W#world.distance}.
+    Summary = maps:merge(torobot_sensors:figures(W),
+                         #{red_touched_ms => W#world.red_touched_ms,
+                           wall_contacts => W#world.wall_contacts,
+                           blue_contacts => W#world.blue_contacts,
+                           distance_m => W#world.distance}),
+    case W#world.name of
+        undefined -> Summary;
+        _ -> Summary#{robot_contacts => W#world.robot_contacts}
+    end.
 
 %% @doc The robot's positions, oldest first: the start (tagged `start') and
 %% the end of every step with the step's tag.
@@ -634,6 +808,26 @@ tick_ms(#world{tick_ms = T}) -> T.
 %% @doc The run's duration in milliseconds.
 -spec duration_ms(world()) -> pos_integer().
 duration_ms(#world{duration_ms = D}) -> D.
+
+%%====================================================================
+%% Several robots
+%%====================================================================
+
+%% @doc The robot's name: `undefined' for the one-robot form of a world.
+-spec name(world()) -> atom() | undefined.
+name(#world{name = Name}) -> Name.
+
+%% @doc The robot as the other robots of the world see it now.
+-spec body(world()) -> body().
+body(#world{name = Name, pos = Pos, colour = Colour} = W) ->
+    {Name, Pos, robot_radius(W), Colour}.
+
+%% @doc Puts the other robots where they are now: they block this robot's
+%% moves, its IR rays and its camera's line of sight, and the camera sees
+%% the colours they carry. Touching one counts a robot contact.
+-spec set_others(world(), [body()]) -> world().
+set_others(W, Others) ->
+    W#world{others = Others}.
 
 %%====================================================================
 %% Geometry

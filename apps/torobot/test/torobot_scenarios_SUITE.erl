@@ -1,10 +1,13 @@
 %% The Torobot in its simulated worlds (test/worlds/*.world): each case runs
 %% the shipped wiring (config/torobot.wiring) on the real runtime and
-%% devices through torobot_sim, in real time, and checks the run's summary.
-%% The cases run one after another: each run starts and stops the
-%% applications, and one node holds one network. Summaries are logged (and
-%% put in each case's comment), the SVG of each run is in the case's
-%% priv_dir.
+%% devices through torobot_sim, ten times faster than real time (SPEC §14),
+%% and checks the run's summary. The speeds group checks that speed does not
+%% change the outcome: the same worlds at speeds 1 (one short world: the
+%% real-time check), 5, 10 and 20. The robots group runs two robots, each on
+%% its own peer node, in one world. The cases run one after another: each
+%% run starts and stops the applications, and one node holds one network.
+%% Summaries are logged (and put in each case's comment), the SVG of each
+%% run is in the case's priv_dir.
 -module(torobot_scenarios_SUITE).
 
 -include_lib("common_test/include/ct.hrl").
@@ -17,7 +20,18 @@ suite() ->
 
 all() ->
     [empty_arena, red_in_view, blue_on_path, blue_near_wall, blue_near_wall_without_holds,
-     red_behind_blue, red_follower_crashing].
+     red_behind_blue, red_follower_crashing, {group, speeds}, {group, robots}].
+
+groups() ->
+    [{speeds, [], [real_time_agrees, speeds_agree_red, speeds_agree_all]},
+     {robots, [], [two_robots_head_on, two_robots_dead_ahead]}].
+
+%% The speed of the scenario runs.
+-define(SPEED, 10).
+%% Worlds whose runs end at red, so cheap to repeat at low speeds.
+-define(RED_WORLDS, ["red_in_view.world", "red_behind_blue.world"]).
+-define(ALL_WORLDS, ["empty.world", "red_in_view.world", "blue_on_path.world",
+                     "blue_near_wall.world", "red_behind_blue.world", "red_crashing.world"]).
 
 init_per_suite(Config) ->
     Root = root(),
@@ -99,6 +113,10 @@ red_follower_crashing(Config) ->
     %% each second of the run, note whether red_follower's layer is out
     Self = self(),
     Watch = fun(TimeS) -> Self ! {layers_out, TimeS, maps:get(removed_layers, toroco:inspect())} end,
+    %% The crash timer counts world time (the runtime's clock); the layer's
+    %% restart intensity, a supervisor's, counts real time, so at speed 10
+    %% the crashes fall well within its window: the layer goes out after
+    %% the same number of crashes as in real time.
     {Summary, World} = run("red_crashing.world", [{wiring, Wiring}, {each_second, Watch} | Config]),
     N = counters:get(Crashes, 1),
     Out = [T || {T, Removed} <- flush_layers_out(), lists:member(4, Removed)],
@@ -132,13 +150,93 @@ first([]) -> none;
 first([X | _]) -> X.
 
 %%====================================================================
+%% Speeds
+%%====================================================================
+
+real_time_agrees() ->
+    [{doc, "red_in_view in real time and at speeds 5, 10 and 20: the same outcome, red "
+      "touched within 10 % of the same time, the same distance within 10 %."}].
+real_time_agrees(Config) ->
+    agree("red_in_view.world", [1, 5, 10, 20], Config).
+
+speeds_agree_red() ->
+    [{doc, "red_behind_blue at speeds 5, 10 and 20: the same outcome, times and distance "
+      "within 10 %."}].
+speeds_agree_red(Config) ->
+    agree("red_behind_blue.world", [5, 10, 20], Config).
+
+speeds_agree_all() ->
+    [{doc, "Every scenario world at speeds 10 and 20: the same outcome (red touched or not, "
+      "wall and blue contacts), times and distance within 10 %."}].
+speeds_agree_all(Config) ->
+    [agree(W, [10, 20], Config) || W <- ?ALL_WORLDS -- ?RED_WORLDS],
+    ok.
+
+%% The first speed is the reference; every other must give its outcome.
+agree(WorldName, [Reference | Speeds], Config) ->
+    {Expected, _} = run(WorldName, [{speed, Reference} | Config]),
+    [begin
+         {Got, _} = run(WorldName, [{speed, S} | Config]),
+         ct:log("~s at speed ~p: ~s (speed ~p: ~s)",
+                [WorldName, S, torobot_sim:summary_json(Got), Reference,
+                 torobot_sim:summary_json(Expected)]),
+         ?assertEqual({S, outcome(Expected)}, {S, outcome(Got)}),
+         within_10_percent(S, maps:get(red_touched_ms, Expected), maps:get(red_touched_ms, Got)),
+         within_10_percent(S, maps:get(distance_m, Expected), maps:get(distance_m, Got))
+     end || S <- Speeds],
+    ok.
+
+outcome(#{red_touched_ms := Red} = Summary) ->
+    {Red =/= none, maps:with([wall_contacts, blue_contacts], Summary)}.
+
+within_10_percent(_Speed, none, none) ->
+    ok;
+within_10_percent(Speed, Expected, Got) ->
+    case abs(Got - Expected) =< 0.1 * abs(Expected) of
+        true -> ok;
+        false -> ct:fail({speed, Speed, not_within_10_percent, Expected, Got})
+    end.
+
+%%====================================================================
+%% Several robots
+%%====================================================================
+
+two_robots_head_on() ->
+    [{doc, "Two robots on their own nodes drive at each other on paths 10 cm apart: each "
+      "sees the other with its IR and turns away, neither touches the other nor a wall."}].
+two_robots_head_on(Config) ->
+    {#{alpha := A, beta := B} = Summaries, Worlds} = run("head_on.world", Config),
+    [?assertMatch(#{robot_contacts := 0, wall_contacts := 0}, S) || S <- [A, B]],
+    %% both turned (the avoid or its hold won the motors), and both went on
+    [?assert(won(W, [hold_left, hold_right, avoid_left, avoid_right])) || W <- Worlds],
+    [?assert(maps:get(distance_m, S) > 2.0) || S <- [A, B]],
+    ct:comment("~s", [torobot_sim:summary_json(Summaries)]).
+
+two_robots_dead_ahead() ->
+    [{doc, "Exactly head-on, a robot falls between the other's two IR rays (30 degrees "
+      "out): they meet, and each counts the contact (robots do bump)."}].
+two_robots_dead_ahead(Config) ->
+    {ok, Terms} = file:consult(filename:join([?config(root, Config), "test", "worlds",
+                                              "head_on.world"])),
+    Ahead = [case T of
+                 {robot, beta, {X, _, H}} -> {robot, beta, {X, 2.0, H}};
+                 _ -> T
+             end || T <- Terms],
+    File = write_terms("dead_ahead.world", Ahead, Config),
+    {#{alpha := A, beta := B}, _} = run(File, Config),
+    [?assert(maps:get(robot_contacts, S) >= 1) || S <- [A, B]].
+
+%%====================================================================
 %% Helpers
 %%====================================================================
 
 run(WorldName, Config) ->
     Root = ?config(root, Config),
     World = filename:join([Root, "test", "worlds", WorldName]),
-    Svg = filename:join(?config(priv_dir, Config), filename:rootname(WorldName) ++ ".svg"),
+    Speed = proplists:get_value(speed, Config, ?SPEED),
+    Svg = filename:join(?config(priv_dir, Config),
+                        filename:basename(filename:rootname(WorldName))
+                        ++ "_x" ++ integer_to_list(Speed) ++ ".svg"),
     EachSecond = proplists:get_value(each_second, Config, fun(_) -> ok end),
     Second = counters:new(1, []),
     Status = fun(Line) ->
@@ -146,11 +244,15 @@ run(WorldName, Config) ->
                      counters:add(Second, 1, 1),
                      EachSecond(counters:get(Second, 1))
              end,
-    Opts = #{wiring => ?config(wiring, Config), svg => Svg, status => Status},
+    Opts = #{wiring => ?config(wiring, Config), svg => Svg, status => Status, speed => Speed},
     {ok, Final} = torobot_sim:simulate(World, Opts),
-    Summary = torobot_world:summary(Final),
+    Summary = case Final of
+                  [_ | _] -> maps:from_list([{torobot_world:name(W), torobot_world:summary(W)}
+                                             || W <- Final]);
+                  _ -> torobot_world:summary(Final)
+              end,
     Json = torobot_sim:summary_json(Summary),
-    ct:pal("~s: ~s (winners: ~p)", [WorldName, Json, winners(Final)]),
+    ct:pal("~s at speed ~p: ~s (winners: ~p)", [WorldName, Speed, Json, winners(Final)]),
     ct:comment("~s", [Json]),
     {Summary, Final}.
 
@@ -158,6 +260,8 @@ run(WorldName, Config) ->
 won(World, Tags) ->
     lists:any(fun(Tag) -> lists:member(Tag, Tags) end, winners(World)).
 
+winners(Worlds) when is_list(Worlds) ->
+    lists:usort(lists:append([winners(W) || W <- Worlds]));
 winners(World) ->
     lists:usort([Tag || {_, _, _, Tag} <- torobot_world:trajectory(World)]).
 

@@ -11,7 +11,7 @@
 
 all() ->
     [{group, loading}, {group, kinematics}, {group, collisions}, {group, ir},
-     {group, camera}, {group, run}, {group, svg}].
+     {group, camera}, {group, run}, {group, svg}, {group, several_robots}].
 
 groups() ->
     [{loading, [parallel],
@@ -26,6 +26,9 @@ groups() ->
        inner_wall_not_crossed, objects_are_solid, red_touch_time, stop_on_red]},
      {ir, [parallel],
       [ir_monotonic, ir_side, ir_sees_objects, ir_levels_hysteresis]},
+     {several_robots, [parallel],
+      [robots_load, robots_refused, robots_are_solid, robots_seen_by_ir,
+       robots_colour_seen, robots_summary_and_svg]},
      {camera, [parallel],
       [camera_ahead, camera_left_right, camera_behind_wall, camera_out_of_fov,
        camera_out_of_range, camera_occlusion_by_object, camera_largest,
@@ -151,8 +154,8 @@ shipped_worlds_load(_Config) ->
     Found = filelib:wildcard("{config,test}/worlds/*.world", Root),
     ?assertEqual([], Expected -- Found),
     [begin
-         {ok, W} = torobot_world:load(filename:join(Root, F)),
-         ?assertNot(torobot_world:done(W))
+         {ok, Ws} = torobot_world:load_all(filename:join(Root, F)),
+         [?assertNot(torobot_world:done(W)) || W <- Ws]
      end || F <- Found].
 
 %%====================================================================
@@ -489,6 +492,85 @@ svg_empty_run() -> [{doc, "A world that has not moved still draws as well-formed
 svg_empty_run(_Config) ->
     {Svg, []} = xmerl_scan:string(binary_to_list(iolist_to_binary(torobot_svg:render(world([]))))),
     ?assertEqual([], xmerl_xpath:string("//polyline", Svg)).
+
+%%====================================================================
+%% Several robots
+%%====================================================================
+
+robots_load() -> [{doc, "Named robots give one world each, in file order, each with the others as bodies; load/1 refuses several."}].
+robots_load(_Config) ->
+    Terms = [{arena, {6.0, 4.0}}, {duration_s, 10}, {robot, a, {1.0, 2.0, 0.0}},
+             {robot, b, {5.0, 2.0, 180.0}, #{colour => red}}],
+    {ok, [A, B]} = torobot_world:from_terms_all(Terms),
+    ?assertEqual({a, b}, {torobot_world:name(A), torobot_world:name(B)}),
+    assert_pose({5.0, 2.0, 180.0}, torobot_world:start_pose(B)),
+    ?assertMatch({b, {5.0, 2.0}, 0.12, red}, torobot_world:body(B)),
+    ?assertEqual({error, {several_robots, [a, b]}}, torobot_world:from_terms(Terms)),
+    %% one named robot is a world of one
+    {ok, One} = torobot_world:from_terms(lists:droplast(Terms)),
+    ?assertEqual(a, torobot_world:name(One)),
+    %% the one-robot form has no name
+    ?assertEqual(undefined, torobot_world:name(world([]))).
+
+robots_refused() -> [{doc, "A repeated name, both robot forms, or robots starting on each other are refused naming the term."}].
+robots_refused(_Config) ->
+    Base = [{arena, {6.0, 4.0}}, {duration_s, 10}],
+    A = {robot, a, {1.0, 2.0, 0.0}},
+    ?assertEqual({error, {duplicate, {robot, a, {3.0, 2.0, 0.0}}}},
+                 torobot_world:from_terms_all(Base ++ [A, {robot, a, {3.0, 2.0, 0.0}}])),
+    ?assertEqual({error, {duplicate, A}},
+                 torobot_world:from_terms_all(Base ++ [{robot, {3.0, 2.0, 0.0}}, A])),
+    Near = {robot, b, {1.2, 2.0, 0.0}},
+    ?assertEqual({error, {blocked_start, A, Near}}, torobot_world:from_terms_all(Base ++ [A, Near])),
+    Odd = {robot, c, {3.0, 2.0, 0.0}, #{colour => green}},
+    ?assertEqual({error, {bad_term, Odd}}, torobot_world:from_terms_all(Base ++ [A, Odd])).
+
+robots_are_solid() -> [{doc, "A robot driving into another stops touching it and counts one robot contact; the other counts none until it moves."}].
+robots_are_solid(_Config) ->
+    {ok, [A, B]} = torobot_world:from_terms_all(
+                     [{arena, {6.0, 4.0}}, {duration_s, 60},
+                      {robot, a, {1.0, 2.0, 0.0}}, {robot, b, {2.0, 2.0, 0.0}}]),
+    Among = torobot_world:set_others(A, [torobot_world:body(B)]),
+    Driven = drive(Among, {100, 100}, 8000),
+    {X, _, _} = torobot_world:pose(Driven),
+    assert_close(2.0 - 0.24, X),
+    ?assertMatch(#{robot_contacts := 1, wall_contacts := 0}, torobot_world:summary(Driven)).
+
+robots_seen_by_ir() -> [{doc, "Another robot ahead-left reads on the left IR sensor as an obstacle does."}].
+robots_seen_by_ir(_Config) ->
+    A = math:pi() / 6,
+    Other = {b, {3.0 + 0.4 * math:cos(A), 2.0 + 0.4 * math:sin(A)}, 0.12, none},
+    Clear = torobot_world:ir(world([])),
+    Seen = torobot_world:ir(torobot_world:set_others(world([]), [Other])),
+    ?assert(maps:get(left, Seen) > maps:get(left, Clear)),
+    ?assertEqual(maps:get(right, Clear), maps:get(right, Seen)).
+
+robots_colour_seen() -> [{doc, "The camera sees another robot's colour when it carries one, and nothing when it does not; robots hide objects behind them."}].
+robots_colour_seen(_Config) ->
+    W = world([{object, blue, {5.0, 2.0}, 0.1}]),
+    Red = {b, {4.0, 2.0}, 0.12, red},
+    Plain = {b, {4.0, 2.0}, 0.12, none},
+    [#{<<"color">> := <<"red">>, <<"x">> := 0}, #{<<"none">> := true}] =
+        camera(torobot_world:set_others(W, [Red])),
+    [#{<<"none">> := true}, #{<<"none">> := true}] =
+        camera(torobot_world:set_others(W, [Plain])),
+    [#{<<"none">> := true}, #{<<"color">> := <<"blue">>}] = camera(W).
+
+robots_summary_and_svg() -> [{doc, "A named robot's summary adds robot_contacts; one picture draws every robot with its name and caption."}].
+robots_summary_and_svg(_Config) ->
+    {ok, Ws} = torobot_world:from_terms_all(
+                 [{arena, {6.0, 4.0}}, {duration_s, 60},
+                  {robot, a, {1.0, 1.0, 0.0}}, {robot, b, {1.0, 3.0, 0.0}}]),
+    Driven = [drive(W, {80, 80}, 2000, 50, forward) || W <- Ws],
+    [?assertEqual([blue_contacts, distance_m, red_touched_ms, robot_contacts, wall_contacts],
+                  lists:sort(maps:keys(torobot_world:summary(W)))) || W <- Driven],
+    {Svg, []} = xmerl_scan:string(binary_to_list(iolist_to_binary(torobot_svg:render_all(Driven)))),
+    ?assertEqual(2, length(xmerl_xpath:string("//polyline", Svg))),
+    [_] = xmerl_xpath:string("//g[@id='final-a']", Svg),
+    [_] = xmerl_xpath:string("//g[@id='final-b']", Svg),
+    [#xmlText{value = "b: " ++ _}] = xmerl_xpath:string("//text[@id='caption-b']/text()", Svg),
+    Legend = [V || #xmlText{value = V} <- xmerl_xpath:string("//g[@id='legend']/text/text()", Svg)],
+    ?assertEqual(["forward"], Legend).
 
 %%====================================================================
 %% Helpers

@@ -31,9 +31,12 @@
 -export_type([spec/0, action/0, actions/0, result/0]).
 
 -callback interface() -> #{inputs := [atom()], outputs := [atom()]}.
+%% `{error, Reason}' refuses to start: `add_behavior' answers
+%% `{error, {start_failed, {Name, Reason}}}' (the library's bad parameters).
 -callback init(Params :: map()) ->
     {ok, State :: term(), Data :: term()} |
-    {ok, State :: term(), Data :: term(), Actions :: actions()}.
+    {ok, State :: term(), Data :: term(), Actions :: actions()} |
+    {error, Reason :: term()}.
 -callback handle_input(Input :: atom(), Value :: term(), State :: term(), Data :: term()) ->
     result().
 -callback handle_event(gen_statem:event_type(), Content :: term(), State :: term(),

@@ -16,9 +16,9 @@
 %% those of the sources being brought in, until every new upstream has
 %% answered with its latch, or died, or `sync_timeout_ms' has passed. Then
 %% the whole change enters the core at once, the wiring server's call is
-%% answered, and the held-back events follow. The wiring server's calls
-%% that need the change applied (`rewire', `ready', `unwire') wait in the
-%% mailbox meanwhile; `info' is answered at once.
+%% answered, and the held-back events follow. Calls (the wiring server's
+%% `rewire', `ready', `unwire', and inspection's `info') wait in the
+%% mailbox meanwhile, so what they see has the change in.
 -module(toroco_consumer).
 -behaviour(gen_statem).
 
@@ -174,11 +174,12 @@ handle_event(info, {'DOWN', Ref, process, Pid, _} = Down, _, C = #c{links = L, s
 handle_event({timeout, sync}, expire, syncing, C = #c{sync = {Sync, From, Cfg}}) ->
     {ready, C1, Actions} = finish(C#c{sync = {toroco_wire:sync_expire(Sync), From, Cfg}}),
     {next_state, ready, C1, Actions};
-%% The wiring server.
-handle_event({call, From}, info, _, #c{mod = Mod, data = D}) ->
-    {keep_state_and_data, [{reply, From, Mod:info(toroco_clock:now_ms(), D)}]};
+%% The wiring server, and inspection: answered once the change is in (a
+%% consumer that just restarted answers with its sources' state recovered).
 handle_event({call, _}, _Req, syncing, _C) ->
     {keep_state_and_data, [postpone]};
+handle_event({call, From}, info, ready, #c{mod = Mod, data = D}) ->
+    {keep_state_and_data, [{reply, From, Mod:info(toroco_clock:now_ms(), D)}]};
 handle_event({call, From}, {rewire, Caller}, ready, C = #c{mod = Mod, key = Key}) ->
     {ok, Cfg} = toroco_wiring:lookup({Mod:kind(), Key}),
     case start_sync(Cfg, Caller, From, C) of

@@ -138,6 +138,7 @@ handle_info(_Msg, S) ->
     {noreply, S}.
 
 reply({ok, S1}, S) -> {reply, ok, persist(S, S1)};
+reply({error, Reason, S1}, S) -> {reply, {error, Reason}, persist(S, S1)};
 reply({error, _} = Err, S) -> {reply, Err, S}.
 
 %%====================================================================
@@ -219,7 +220,13 @@ add_node(Kind, Name, Module, Opts, S = #s{wiring = W}) ->
                 {ok, Ports} ->
                     Info = Ports#{kind => Kind, module => Module, layer => L},
                     case toroco_wiring_core:add_node(W, Name, Info) of
-                        {ok, W1} -> start_node(Spec, S#s{wiring = W1});
+                        {ok, W1} ->
+                            case start_node(Spec, S#s{wiring = W1}) of
+                                {ok, _} = Ok -> Ok;
+                                %% the node is not in the wiring; a layer
+                                %% supervisor started for it stays known
+                                {error, Reason, S1} -> {error, Reason, S1#s{wiring = W}}
+                            end;
                         Err -> Err
                     end;
                 Err -> Err
@@ -264,7 +271,7 @@ start_node(Spec = #{kind := Kind, name := Name, layer := L, module := M}, S) ->
     case supervisor:start_child(Sup, toroco_behavior:child_spec(Spec)) of
         {ok, _} -> {ok, S1};
         {ok, _, _} -> {ok, S1};
-        {error, Reason} -> {error, {start_failed, {Name, start_reason(Reason)}}}
+        {error, Reason} -> {error, {start_failed, {Name, start_reason(Reason)}}, S1}
     end.
 
 %% The supervisor wraps an init failure with its own child record.
@@ -275,7 +282,10 @@ layer_sup(L, S = #s{layers = Layers, removed = Removed}) ->
     case Layers of
         #{L := {Pid, _}} -> {Pid, S};
         #{} ->
-            {ok, Pid} = toroco_layers_sup:start_layer(L),
+            Pid = case toroco_layers_sup:start_layer(L) of
+                      {ok, P} -> P;
+                      {error, {already_started, P}} -> P
+                  end,
             {Pid, S#s{layers = Layers#{L => {Pid, erlang:monitor(process, Pid)}},
                       removed = lists:delete(L, Removed)}}
     end.
@@ -435,9 +445,9 @@ start_nodes([{Kind, Name, Module, Opts} | Rest], S, Started) ->
     {ok, Spec} = node_spec(Kind, Name, Module, Opts),
     case start_node(Spec, S) of
         {ok, S1} -> start_nodes(Rest, S1, [{Kind, Name} | Started]);
-        Err ->
-            _ = [undo_start(K, N, S) || {K, N} <- Started],
-            Err
+        {error, Reason, S1} ->
+            _ = [undo_start(K, N, S1) || {K, N} <- Started],
+            {error, Reason, S1}
     end.
 
 undo_start(device, Name, _S) ->

@@ -17,7 +17,8 @@ groups() ->
                 bad_options_refused, no_subscriber_no_tap_state]},
      {resilience, [], [wiring_server_crashes_100_times_under_load, inject_into_own_output_is_refused,
                        inject_unknown_and_stopped_names, restarts_counted_from_lifecycle,
-                       reset_cancels_named_timeouts, unknown_events_fall_to_the_engine]}].
+                       reset_cancels_named_timeouts, unknown_events_fall_to_the_engine,
+                       failed_first_start_in_a_new_layer]}].
 
 init_per_testcase(_Case, Config) ->
     ok = toroco_test_lib:start(),
@@ -354,3 +355,15 @@ unknown_events_fall_to_the_engine(_Config) ->
     Pid ! ping,
     ok = toroco_fake_actuator:await(a, fun(H) -> [V || {_, V, _} <- H] =:= [pong] end, 2000),
     Pid = whereis(toroco_names:process(b)).
+
+failed_first_start_in_a_new_layer() ->
+    [{doc, "A behavior whose init fails, first in a new layer, is refused; the next add to that layer works."}].
+failed_first_start_in_a_new_layer(_Config) ->
+    %% tb_crasher needs `value' and `after_ms': without them init/1 fails.
+    {error, {start_failed, {c, _}}} = toroco:add_behavior(c, tb_crasher, #{layer => 7}),
+    #{behaviors := []} = toroco:inspect(),
+    ok = toroco:add_behavior(b, tb_relay, #{layer => 7}),
+    #{layers := #{7 := [b]}} = toroco:inspect(),
+    Wiring = whereis(toroco_wiring),
+    ok = toroco:add_behavior(d, tb_relay, #{layer => 7}),
+    Wiring = whereis(toroco_wiring).

@@ -72,9 +72,7 @@ handle_event({call, From}, {await, Pred, Deadline}, _S, D = #{rev := Rev, waiter
     case catch Pred(lists:reverse(Rev)) of
         true -> {keep_state_and_data, [{reply, From, ok}]};
         _ -> {keep_state, D#{waiters := [{From, Pred, Deadline} | Ws]}}
-    end;
-handle_event(_Type, _Content, _S, _D) ->
-    keep_state_and_data.
+    end.
 
 -spec info(recording, map()) -> map().
 info(_S, #{n := N, waiters := Ws}) ->

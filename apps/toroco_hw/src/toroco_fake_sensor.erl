@@ -35,9 +35,7 @@ handle_input(_Input, _Value, _State, _Data) ->
 
 -spec handle_event(gen_statem:event_type(), term(), sensing, map()) -> toroco_behavior:result().
 handle_event(state_timeout, step, _State, D = #{script := [Step | Rest], steps := N}) ->
-    {keep_state, D#{script := Rest, steps := N + 1}, [action(Step) | next(Rest)]};
-handle_event(_Type, _Content, _State, _Data) ->
-    keep_state_and_data.
+    {keep_state, D#{script := Rest, steps := N + 1}, [action(Step) | next(Rest)]}.
 
 action({_, Out, V}) -> {send, #{Out => V}};
 action({_, Out, V, #{latch := true}}) -> {set, #{Out => V}};

@@ -16,7 +16,7 @@
 -module(toroco_fun_actuator).
 -behaviour(toroco_device).
 
--export([interface/1, init/2, handle_input/4, handle_event/4, info/2]).
+-export([interface/1, init/2, handle_input/4, info/2]).
 
 -spec interface(map()) -> #{inputs := [atom()], outputs := []}.
 interface(Opts) ->
@@ -59,13 +59,6 @@ handle_input(Input, V, _State, D = #{fn := Fn, calls := N}) ->
 
 call({M, F, A}, Input, V) -> apply(M, F, [Input, V | A]);
 call(F, Input, V) -> F(Input, V).
-
--spec handle_event(gen_statem:event_type(), term(), acting, map()) ->
-          toroco_behavior:result().
-handle_event({call, From}, Request, _State, #{name := Name}) ->
-    {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
-handle_event(_Type, _Content, _State, _D) ->
-    keep_state_and_data.
 
 -spec info(acting, map()) -> map().
 info(_State, #{calls := N, bad := B}) ->

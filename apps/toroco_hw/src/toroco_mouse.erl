@@ -135,9 +135,7 @@ handle_event(info, {'EXIT', Reader, Reason}, _State,
         logger:warning("toroco_mouse ~p: cannot read ~ts (~p); retrying every ~p ms",
                        [Name, Path, Error, Retry]),
     {next_state, closed, D#{reader := undefined, error := Error, reopened := R + 1},
-     [{{timeout, open}, Retry, open}]};
-handle_event(_Type, _Content, _State, _Data) ->
-    keep_state_and_data.
+     [{{timeout, open}, Retry, open}]}.
 
 reader_error({open_failed, Reason}) -> Reason;
 reader_error({read_failed, Reason}) -> Reason;

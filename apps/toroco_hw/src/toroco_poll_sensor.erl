@@ -73,11 +73,7 @@ handle_event(state_timeout, poll, _State, D = #{fn := Fn, every_ms := Every, pol
         Class:Reason ->
             #{bad := B} = D1,
             {keep_state, D1#{bad := toroco_bad_input:count(crash, {Class, Reason}, B)}, [Next]}
-    end;
-handle_event({call, From}, Request, _State, #{name := Name}) ->
-    {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
-handle_event(_Type, _Content, _State, _D) ->
-    keep_state_and_data.
+    end.
 
 call({M, F, A}) -> apply(M, F, A);
 call(F) -> F().

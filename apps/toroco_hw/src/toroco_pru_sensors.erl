@@ -26,14 +26,17 @@
 %%
 %% `info/2' (under `device' in `toroco:inspect(Name)'): `sensors' (channel,
 %% mode, last value), `emitted', `foreign_events' (reports of channels that
-%% are not this device's), `reconnect_failures' and the attachment's `port',
-%% `port_status', `port_restarts', `port_losses'.
+%% are not this device's) and the attachment's keys (`port', `port_status',
+%% `port_restarts', `port_losses', `reconnect_failures').
 -module(toroco_pru_sensors).
 -behaviour(toroco_device).
+-behaviour(toroco_pru_client).
 
 -export([sim_adc/3]).
 -export([interface/1, init/2, handle_input/4, handle_event/4, info/2, terminate/3]).
+-export([configure/1, port_event/2]).
 
+%% What sim_adc/3 asks the device for: its owner and the sensor's channel.
 -define(SIM_CALL, '$toroco_pru_sensors_sim').
 
 %%====================================================================
@@ -45,17 +48,8 @@
 %% event it causes is on its way to the device when this returns.
 -spec sim_adc(atom(), atom(), 0..4095) -> ok | {error, term()}.
 sim_adc(Device, Sensor, Raw) ->
-    try gen_statem:call(toroco_names:process(Device), {?SIM_CALL, Sensor}, 5000) of
-        {ok, Port, Channel} ->
-            try toroco_pru_port:sim_adc(Port, Channel, Raw)
-            catch exit:{Reason, _} -> {error, {port_call, Reason}}
-            end;
-        {error, _} = Err ->
-            Err
-    catch
-        exit:{noproc, _} -> {error, {not_running, Device}};
-        exit:{Reason, _} -> {error, {Reason, Device}}
-    end.
+    toroco_pru_client:sim(Device, {?SIM_CALL, Sensor},
+                          fun(Port, Channel) -> toroco_pru_port:sim_adc(Port, Channel, Raw) end).
 
 %%====================================================================
 %% toroco_device
@@ -71,81 +65,53 @@ interface(Opts) ->
 
 -spec init(atom(), map()) -> {ok, up, map()} | {error, term()}.
 init(Name, Opts) ->
-    case options(Opts) of
-        {ok, Sensors, Client} ->
-            case toroco_pru_client:attach(Client, configure(Sensors)) of
-                {ok, C1} ->
-                    {ok, up, #{name => Name, client => C1, sensors => Sensors,
-                               by_channel => maps:from_list(
-                                               [{Ch, S} || {S, #{channel := Ch}} <- Sensors]),
-                               last => #{}, emitted => 0, foreign => 0, reconnect_failures => 0}};
-                {error, Reason, _} ->
-                    logger:warning("~p (toroco_pru_sensors) not started: ~0p", [Name, Reason],
-                                   #{domain => [toroco, hw]}),
-                    {error, Reason}
-            end;
-        {error, _} = Err ->
-            Err
-    end.
+    toroco_pru_client:init(?MODULE, Name, options(Opts)).
 
+%% The sensors are outputs only: nothing is ever delivered.
 -spec handle_input(atom(), term(), up | down, map()) -> toroco_behavior:result().
 handle_input(_Input, _Value, _State, _D) ->
     keep_state_and_data.
 
 -spec handle_event(gen_statem:event_type(), term(), up | down, map()) ->
           toroco_behavior:result().
-handle_event({call, From}, {?SIM_CALL, Sensor}, _State, #{name := Name, client := C,
-                                                          sensors := Sensors}) ->
-    Reply = case {lists:keyfind(Sensor, 1, Sensors), toroco_pru_client:server(C)} of
-                {false, _} -> {error, {unknown_sensor, {Name, Sensor}}};
-                {_, undefined} -> {error, {port_down, Name}};
-                {{_, #{channel := Ch}}, Pid} -> {ok, Pid, Ch}
+handle_event({call, From}, {?SIM_CALL, Sensor}, _State, D = #{name := Name,
+                                                              sensors := Sensors}) ->
+    Reply = case lists:keyfind(Sensor, 1, Sensors) of
+                false -> {error, {unknown_sensor, {Name, Sensor}}};
+                {_, #{channel := Ch}} -> toroco_pru_client:sim_reply(D, Ch)
             end,
     {keep_state_and_data, [{reply, From, Reply}]};
-handle_event({timeout, reconnect}, attach, down, D = #{name := Name, client := C,
-                                                       sensors := Sensors}) ->
-    case toroco_pru_client:attach(C, configure(Sensors)) of
-        {ok, C1} ->
-            logger:notice("~p attached to its pru_port again", [Name], #{domain => [toroco, hw]}),
-            {next_state, up, D#{client := C1}};
-        {error, Reason, C1} ->
-            retry(Reason, D#{client := C1})
-    end;
-handle_event(info, Msg, _State, D = #{name := Name, client := C}) ->
-    case toroco_pru_client:handle_info(Msg, C) of
-        {event, {adc, Ch, V, _T}} -> adc(Ch, V, D);
-        {event, _} -> keep_state_and_data;
-        {restarted, _Why, C1} -> {keep_state, D#{client := C1}};
-        {lost, Why, C1} ->
-            logger:warning("~p lost its pru_port (~0p); attaching again", [Name, Why],
-                           #{domain => [toroco, hw]}),
-            {Ms, C2} = toroco_pru_client:retry_ms(C1),
-            {next_state, down, D#{client := C2}, [{{timeout, reconnect}, Ms, attach}]};
-        unknown -> keep_state_and_data
-    end;
-handle_event({call, From}, Request, _State, #{name := Name}) ->
-    {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
-handle_event(_Type, _Content, _State, _D) ->
-    keep_state_and_data.
+handle_event(Type, Content, State, D) when Type =:= info; Type =:= {timeout, reconnect} ->
+    toroco_pru_client:handle_event(?MODULE, Type, Content, State, D).
 
 -spec info(up | down, map()) -> map().
-info(_State, #{client := C, sensors := Sensors, last := Last, emitted := E, foreign := F,
-               reconnect_failures := RF}) ->
+info(_State, #{client := C, sensors := Sensors, last := Last, emitted := E, foreign := F}) ->
     Ss = maps:from_list([{S, Cfg#{value => case Last of #{S := V} -> {value, V}; #{} -> none end}}
                          || {S, Cfg} <- Sensors]),
     maps:merge(toroco_pru_client:describe(C),
-               #{sensors => Ss, emitted => E, foreign_events => F, reconnect_failures => RF}).
+               #{sensors => Ss, emitted => E, foreign_events => F}).
 
 -spec terminate(term(), up | down, map()) -> ok.
 terminate(_Reason, _State, #{client := C}) ->
-    _ = toroco_pru_client:detach(C),
-    ok.
+    %% a shared owner keeps the channels: its next ADC device sets its own
+    toroco_pru_client:release(C, fun(_) -> ok end).
 
 %%====================================================================
-%% Internals
+%% toroco_pru_client
 %%====================================================================
 
-adc(Ch, V, D = #{by_channel := ByCh, last := Last, emitted := E, foreign := F}) ->
+%% @doc The whole ADC channel set of the program.
+-spec configure(map()) -> [{adc, fun((pid()) -> ok | {error, term()})}].
+configure(#{sensors := Sensors}) ->
+    Channels = [maps:with([channel, mode, threshold_high, threshold_low], Cfg)
+                || {_, Cfg} <- Sensors],
+    [{adc, fun(P) -> toroco_pru_port:configure_adc(P, Channels) end}].
+
+%% @doc A changed reading of one of this device's channels is sent on its
+%% sensor's output; other channels are counted as foreign.
+-spec port_event(toroco_pru_port:event(), map()) -> toroco_behavior:result().
+port_event({adc, Ch, V, _T}, D = #{by_channel := ByCh, last := Last, emitted := E,
+                                   foreign := F}) ->
     case ByCh of
         #{Ch := S} ->
             case Last of
@@ -157,22 +123,9 @@ adc(Ch, V, D = #{by_channel := ByCh, last := Last, emitted := E, foreign := F}) 
             {keep_state, D#{foreign := F + 1}}
     end.
 
-retry(Reason, D = #{name := Name, client := C, reconnect_failures := N}) ->
-    {Ms, C1} = toroco_pru_client:retry_ms(C),
-    logger:warning("~p could not attach to its pru_port (~0p); next try in ~b ms",
-                   [Name, Reason, Ms], #{domain => [toroco, hw]}),
-    {keep_state, D#{client := C1, reconnect_failures := N + 1},
-     [{{timeout, reconnect}, Ms, attach}]}.
-
-configure(Sensors) ->
-    Channels = [maps:with([channel, mode, threshold_high, threshold_low], Cfg)
-                || {_, Cfg} <- Sensors],
-    fun(Pid) ->
-            case toroco_pru_port:configure_adc(Pid, Channels) of
-                ok -> ok;
-                {error, R} -> {error, {adc, R}}
-            end
-    end.
+%%====================================================================
+%% Internals
+%%====================================================================
 
 options(Opts) ->
     Allowed = [port, sensors | toroco_pru_client:owner_keys()],
@@ -182,7 +135,10 @@ options(Opts) ->
             case sensors(maps:get(sensors, Opts, missing)) of
                 {ok, Sensors} ->
                     case toroco_pru_client:parse(Opts) of
-                        {ok, C} -> {ok, Sensors, C};
+                        {ok, C} ->
+                            ByChannel = [{Ch, S} || {S, #{channel := Ch}} <- Sensors],
+                            {ok, #{sensors => Sensors, by_channel => maps:from_list(ByChannel),
+                                   last => #{}, emitted => 0, foreign => 0}, C};
                         Err -> Err
                     end;
                 Err -> Err

@@ -31,7 +31,8 @@
 %% <li>`watchdog_ms' (default 500, 0 = off): the program puts the servos at
 %%     neutral when no servo command came for that long.</li>
 %% <li>`keepalive' (default `true'): while the device runs it repeats the
-%%     applied velocities every `watchdog_ms div 3', so the watchdog fires
+%%     applied velocities every `watchdog_ms div 3' of real time (at any
+%%     speed of the runtime's clock), so the watchdog fires
 %%     only when this side stalls, not when the wiring holds a latched
 %%     velocity. With `false' a velocity lasts `watchdog_ms' unless sent
 %%     again.</li>
@@ -46,13 +47,15 @@
 %%
 %% `info/2': `applied', `commanded', `enabled', `clamped', `watchdogs',
 %% `port_errors', `bad_input' (by reason), `sysfs_root', `watchdog_ms',
-%% `keepalive_ms', and the attachment's `port', `port_status',
-%% `port_restarts', `port_losses'.
+%% `keepalive_ms', and what `toroco_pru_client:describe/1' says of the
+%% attachment (`port_status', `port_losses', `reconnect_failures', ...).
 -module(toroco_servo_motors).
 -behaviour(toroco_device).
+-behaviour(toroco_pru_client).
 
 -export([default_servos/0]).
 -export([interface/1, init/2, handle_input/4, handle_event/4, info/2, terminate/3]).
+-export([configure/1, port_event/2, port_status/2]).
 
 -define(STOP, {0, 0}).
 -define(CALIB_KEYS, [pwmchip, channel, period_ns, neutral_ns, span_ns, reversed]).
@@ -87,19 +90,17 @@ init(Name, Opts) ->
 start(Name, Opts, S = #{servos := Servos}) ->
     {Opts1, Tmp} = own_sysfs(Name, Opts, Servos),
     {ok, Client} = toroco_pru_client:parse(Opts1),
-    D0 = maps:merge(S, #{name => Name, client => Client, tmp => Tmp,
+    D0 = maps:merge(S, #{tmp => Tmp,
                          sysfs_root => maps:get(sysfs_root, Opts1, "/sys"),
                          commanded => ?STOP, applied => ?STOP, clamped => 0,
-                         watchdogs => 0, port_errors => 0, reconnect_failures => 0,
+                         watchdogs => 0, port_errors => 0,
                          bad => toroco_bad_input:new(Name)}),
-    case toroco_pru_client:attach(Client, configure(D0)) of
-        {ok, C1} ->
-            {ok, up, D0#{client := C1}, keepalive(D0)};
-        {error, Reason, _} ->
+    case toroco_pru_client:init(?MODULE, Name, {ok, D0, Client}) of
+        {ok, up, D1} ->
+            {ok, up, D1, keepalive(D1)};
+        {error, _} = Err ->
             remove_tmp(Tmp),
-            logger:warning("~p (toroco_servo_motors) not started: ~0p", [Name, Reason],
-                           #{domain => [toroco, hw]}),
-            {error, Reason}
+            Err
     end.
 
 -spec handle_input(atom(), term(), up | down, map()) ->
@@ -136,65 +137,55 @@ handle_event({timeout, keepalive}, tick, up, D = #{applied := A}) ->
     {keep_state, D1, keepalive(D1)};
 handle_event({timeout, keepalive}, tick, down, _D) ->
     keep_state_and_data;
-handle_event({timeout, reconnect}, attach, down, D = #{name := Name, client := C}) ->
-    case toroco_pru_client:attach(C, configure(D)) of
-        {ok, C1} ->
-            logger:notice("~p attached to its pru_port again", [Name], #{domain => [toroco, hw]}),
-            {next_state, up, D#{client := C1}, keepalive(D) ++ [{redeliver, [setvel]}]};
-        {error, Reason, C1} ->
-            #{reconnect_failures := N} = D,
-            {Ms, C2} = toroco_pru_client:retry_ms(C1),
-            logger:warning("~p could not attach to its pru_port (~0p); next try in ~b ms",
-                           [Name, Reason, Ms], #{domain => [toroco, hw]}),
-            {keep_state, D#{client := C2, reconnect_failures := N + 1},
-             [{{timeout, reconnect}, Ms, attach}]}
-    end;
-handle_event(info, Msg, _State, D = #{name := Name, client := C}) ->
-    case toroco_pru_client:handle_info(Msg, C) of
-        {event, {watchdog, _T}} ->
-            watchdog(D);
-        {event, _} ->
-            keep_state_and_data;
-        {restarted, _Why, C1} ->
-            %% The owner re-applied the configuration: the servos are at
-            %% neutral. The wiring's current command (a latched setvel) is
-            %% asked for again, so the robot carries on once the port is back.
-            {keep_state, D1, Actions} = applied(?STOP, D#{client := C1, commanded := ?STOP}),
-            {keep_state, D1, Actions ++ [{redeliver, [setvel]}]};
-        {lost, Why, C1} ->
-            logger:warning("~p lost its pru_port (~0p); servos assumed at neutral, "
-                           "attaching again", [Name, Why], #{domain => [toroco, hw]}),
-            {Ms, C2} = toroco_pru_client:retry_ms(C1),
-            {keep_state, D1, Actions} = applied(?STOP, D#{client := C2, commanded := ?STOP}),
-            {next_state, down, D1, [{{timeout, reconnect}, Ms, attach} | Actions]};
-        unknown ->
-            keep_state_and_data
-    end;
-handle_event({call, From}, Request, _State, #{name := Name}) ->
-    {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
-handle_event(_Type, _Content, _State, _D) ->
-    keep_state_and_data.
+handle_event(Type, Content, State, D) when Type =:= info; Type =:= {timeout, reconnect} ->
+    toroco_pru_client:handle_event(?MODULE, Type, Content, State, D).
 
 -spec info(up | down, map()) -> map().
 info(_State, D = #{client := C, bad := B}) ->
     maps:merge(toroco_pru_client:describe(C),
                (maps:with([applied, commanded, enabled, clamped, watchdogs, port_errors,
-                           reconnect_failures, sysfs_root, watchdog_ms, servos], D))#{
+                           sysfs_root, watchdog_ms, servos], D))#{
                  bad_input => toroco_bad_input:counts(B),
                  keepalive_ms => keepalive_ms(D)}).
 
 -spec terminate(term(), up | down, map()) -> ok | {emit, toroco_behavior:actions()}.
 terminate(_Reason, _State, #{client := C, applied := A, tmp := Tmp}) ->
-    case toroco_pru_client:is_own(C) of
-        true -> ok;                 % stopping the own owner below puts them at neutral
-        false -> _ = toroco_pru_client:call(C, fun(P) -> toroco_pru_port:call(P, neutral, 1000) end)
-    end,
-    _ = toroco_pru_client:detach(C),
+    %% stopping an own owner puts the servos at neutral; a shared one is told
+    ok = toroco_pru_client:release(C, fun(P) -> toroco_pru_port:call(P, neutral, 1000) end),
     remove_tmp(Tmp),
     case A of
         ?STOP -> ok;
         _ -> {emit, [{send, #{applied => ?STOP}}]}
     end.
+
+%%====================================================================
+%% toroco_pru_client
+%%====================================================================
+
+%% @doc The whole servo set of the program, its watchdog and enable state.
+-spec configure(map()) -> [{atom(), fun((pid()) -> ok | {error, term()})}].
+configure(#{servos := Servos, watchdog_ms := W, enabled := On}) ->
+    [{servos, fun(P) -> toroco_pru_port:configure_servos(P, Servos) end},
+     {watchdog, fun(P) -> toroco_pru_port:configure_watchdog(P, W) end},
+     {enabled, fun(P) -> toroco_pru_port:enable_servos(P, On) end}].
+
+%% @doc The program's watchdog put the servos at neutral.
+-spec port_event(toroco_pru_port:event(), map()) -> toroco_behavior:result().
+port_event({watchdog, _T}, D) ->
+    watchdog(D).
+
+%% @doc A restarted program or a lost owner leaves the servos at neutral.
+%% Once the port is back (restarted, or attached again) the wiring's current
+%% command (a latched setvel) is asked for again, so the robot carries on.
+-spec port_status(attached | restarted | lost, map()) -> {map(), toroco_behavior:actions()}.
+port_status(attached, D) ->
+    {D, keepalive(D) ++ [{redeliver, [setvel]}]};
+port_status(restarted, D) ->
+    {keep_state, D1, Actions} = applied(?STOP, D#{commanded := ?STOP}),
+    {D1, Actions ++ [{redeliver, [setvel]}]};
+port_status(lost, D) ->
+    {keep_state, D1, Actions} = applied(?STOP, D#{commanded := ?STOP}),
+    {D1, Actions}.
 
 %%====================================================================
 %% Driving
@@ -233,24 +224,14 @@ port(D = #{client := C, port_errors := N, name := Name}, F) ->
             {error, D#{port_errors := N + 1}}
     end.
 
-configure(#{servos := Servos, watchdog_ms := W, enabled := On}) ->
-    fun(P) ->
-            Steps = [{servos, fun() -> toroco_pru_port:configure_servos(P, Servos) end},
-                     {watchdog, fun() -> toroco_pru_port:configure_watchdog(P, W) end},
-                     {enabled, fun() -> toroco_pru_port:enable_servos(P, On) end}],
-            lists:foldl(fun({Section, F}, ok) ->
-                                case F() of
-                                    ok -> ok;
-                                    {error, R} -> {error, {Section, R}}
-                                end;
-                           (_, Err) -> Err
-                        end, ok, Steps)
-    end.
-
+%% The watchdog it feeds counts real time, so the keepalive does too: an
+%% absolute deadline on the monotonic clock, which the engine passes as is
+%% whatever the runtime clock's speed (toroco_clock scales relative ones).
 keepalive(D) ->
     case keepalive_ms(D) of
         off -> [];
-        Ms -> [{{timeout, keepalive}, Ms, tick}]
+        Ms -> [{{timeout, keepalive}, erlang:monotonic_time(millisecond) + Ms, tick,
+                [{abs, true}]}]
     end.
 
 keepalive_ms(#{keepalive := true, watchdog_ms := W}) when W > 0 -> max(10, W div 3);

@@ -119,6 +119,9 @@ handle_event(info, {tcp, Sock, Data}, _State, D = #{clients := Cs}) when is_map_
     {Actions, D1} = lines(Sock, Data, D),
     _ = inet:setopts(Sock, [{active, once}]),
     {keep_state, D1, Actions};
+handle_event(info, {tcp, _Sock, _Data}, _State, _D) ->
+    %% a client dropped since: its last data was already on its way
+    keep_state_and_data;
 handle_event(info, {tcp_closed, Sock}, _State, D) ->
     {keep_state, drop_client(Sock, closed, D)};
 handle_event(info, {tcp_error, Sock, _Reason}, _State, D) ->
@@ -136,11 +139,7 @@ handle_event(info, {'EXIT', Pid, Reason}, _State, D = #{acceptor := Pid, lsock :
             logger:warning("~p: acceptor ended (~0p); starting another", [Name, Reason],
                            #{domain => [toroco, hw]}),
             {keep_state, D#{acceptor := start_acceptor(L), acceptor_restarts := N + 1}}
-    end;
-handle_event({call, From}, Request, _State, #{name := Name}) ->
-    {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
-handle_event(_Type, _Content, _State, _D) ->
-    keep_state_and_data.
+    end.
 
 accepted(Sock, D = #{clients := Cs, allow := Allow, max_clients := Max, refusals := R,
                      connections := N}) ->

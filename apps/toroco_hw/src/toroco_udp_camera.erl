@@ -83,10 +83,6 @@ handle_event(info, {udp, S, Ip, _Port, Data}, _State,
     end;
 handle_event(info, {udp_passive, S}, _State, #{socket := S}) ->
     toroco_net:udp_rearm(S),
-    keep_state_and_data;
-handle_event({call, From}, Request, _State, #{name := Name}) ->
-    {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
-handle_event(_Type, _Content, _State, _D) ->
     keep_state_and_data.
 
 -spec info(receiving, map()) -> map().

@@ -17,7 +17,8 @@
          button_edges/1,
          camera_datagrams/1, camera_allow_list/1,
          poll_on_change/1, poll_crashes/1, fun_actuator_calls/1,
-         bad_options/1, missing_device_files/1]).
+         bad_options/1, missing_device_files/1,
+         unknown_requests/1]).
 
 -define(NEUTRAL, "1500000").
 -define(WAIT, 5000).
@@ -27,7 +28,7 @@ suite() ->
 
 all() ->
     [{group, pru_sensors}, {group, servo_motors}, {group, button}, {group, camera},
-     {group, adapters}, {group, options}].
+     {group, adapters}, {group, options}, {group, engine_defaults}].
 
 groups() ->
     [{pru_sensors, [], [threshold_crossings, raw_analog_changes, sim_adc_errors,
@@ -38,7 +39,8 @@ groups() ->
      {button, [], [button_edges]},
      {camera, [], [camera_datagrams, camera_allow_list]},
      {adapters, [], [poll_on_change, poll_crashes, fun_actuator_calls]},
-     {options, [], [bad_options, missing_device_files]}].
+     {options, [], [bad_options, missing_device_files]},
+     {engine_defaults, [], [unknown_requests]}].
 
 init_per_suite(Config) ->
     Exe = filename:join(code:priv_dir(toroco_hw), "pru_port"),
@@ -530,6 +532,34 @@ missing_device_files(Config) ->
     ?assertEqual([], maps:get(devices, toroco:inspect())).
 
 %%% ---------------------------------------------------------------------
+%%% What no device handles
+%%% ---------------------------------------------------------------------
+
+unknown_requests(doc) ->
+    ["Every device answers a call it does not know with unknown_call naming it and the "
+     "request, and keeps running after a message it does not know"];
+unknown_requests(_Config) ->
+    Devices = [{ir, toroco_pru_sensors, #{sensors => ir_sensors()}},
+               {motors, toroco_servo_motors, #{}},
+               {btn, toroco_gpio_button, #{line => 7}},
+               {cam, toroco_udp_camera, #{port => 0}},
+               {gauge, toroco_poll_sensor, #{fn => fun() -> 1 end, every_ms => 50,
+                                             output => level}},
+               {act, toroco_fun_actuator, #{fn => fun(_, _) -> ok end, inputs => [x]}},
+               {fake_in, toroco_fake_sensor, #{outputs => [v]}},
+               {fake_out, toroco_fake_actuator, #{inputs => [x]}}],
+    [ok = toroco:add_device(N, M, Opts) || {N, M, Opts} <- Devices],
+    lists:foreach(
+      fun({N, _, _}) ->
+              Pid = whereis(toroco_names:process(N)),
+              Pid ! {no_such, message},
+              ?assertEqual({error, {unknown_call, {N, {no_such, request}}}},
+                           gen_statem:call(Pid, {no_such, request}, ?WAIT)),
+              ?assertEqual(Pid, whereis(toroco_names:process(N))),
+              ?assertMatch(#{status := running}, toroco:inspect(N))
+      end, Devices).
+
+%%% ---------------------------------------------------------------------
 %%% Helpers
 %%% ---------------------------------------------------------------------
 
@@ -595,7 +625,16 @@ fake_pwm(Root, Chip, Ch) ->
     [ok = file:write_file(filename:join(Dir, F), "0\n") || F <- ["period", "duty_cycle", "enable"]],
     ok.
 
+%% An attribute of the fake sysfs tree. The program rewrites a file in
+%% place (truncate, then write), as sysfs is written; a read between the two
+%% sees it empty, which a real sysfs file never is: read again then.
 pwm(Root, Ch, Attr) ->
+    pwm(Root, Ch, Attr, 100).
+
+pwm(Root, Ch, Attr, Tries) ->
     Path = filename:join([Root, "class/pwm/pwmchip0", "pwm" ++ integer_to_list(Ch), Attr]),
     {ok, Bin} = file:read_file(Path),
-    string:trim(binary_to_list(Bin)).
+    case string:trim(binary_to_list(Bin)) of
+        "" when Tries > 1 -> pwm(Root, Ch, Attr, Tries - 1);
+        Value -> Value
+    end.

@@ -1,6 +1,7 @@
 %% @doc The dashboard for `scripts/run' (`make run'): started before the
 %% simulated run, from the command line (`erl -s toroco_live_cli start'),
-%% with its address and token printed on stdout before anything else.
+%% with its address and token printed on stdout before anything else, and
+%% the Foxglove bridge's address after it.
 %% When the configured port is taken (another run, another program), it
 %% takes any free port instead and says so.
 -module(toroco_live_cli).
@@ -26,7 +27,12 @@ print() ->
                 {error, Reason} -> io:format(standard_error, "dashboard: not started: ~0p~n", [Reason])
             end;
         Url ->
-            io:format("dashboard: ~ts~n", [Url])
+            io:format("dashboard: ~ts~n", [Url]),
+            case toroco_live:info() of
+                #{foxglove := Port} when is_integer(Port) ->
+                    io:format("foxglove: ws://localhost:~b~n", [Port]);
+                _ -> ok
+            end
     end.
 
 free(off) -> off;

@@ -26,8 +26,9 @@ value(B) when is_binary(B) ->
         _ -> printed(B)
     end;
 value(L) when is_list(L) ->
-    try [value(X) || X <- L]
-    catch error:function_clause -> printed(L)      % an improper list
+    case is_proper(L) of
+        true -> [value(X) || X <- L];
+        false -> printed(L)
     end;
 value(T) when is_tuple(T) -> [value(X) || X <- tuple_to_list(T)];
 value(M) when is_map(M) ->
@@ -36,6 +37,10 @@ value(M) when is_map(M) ->
         false -> printed(M)
     end;
 value(Other) -> printed(Other).
+
+is_proper([_ | T]) -> is_proper(T);
+is_proper([]) -> true;
+is_proper(_) -> false.
 
 key(K) when is_atom(K) -> atom_to_binary(K, utf8);
 key(K) when is_binary(K) -> value(K).

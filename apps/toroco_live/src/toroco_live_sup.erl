@@ -3,6 +3,7 @@
 %% ```
 %% toroco_live_sup (one_for_one)
 %%   toroco_live_world            the simulated world's latest snapshot (always there)
+%%   toroco_live_flight           the flight recorder (always on) and the recording
 %%   toroco_live_dashboard_sup    the dashboard, added by toroco_live:start/1
 %%   toroco_live_foxglove         the Foxglove bridge, added by toroco_live:start/1
 %% '''
@@ -22,4 +23,6 @@ start_link() ->
 init([]) ->
     Flags = #{strategy => one_for_one, intensity => 5, period => 10},
     World = #{id => toroco_live_world, start => {toroco_live_world, start_link, []}},
-    {ok, {Flags, [World]}}.
+    Flight = #{id => toroco_live_flight, start => {toroco_live_flight, start_link, []},
+               shutdown => 30000},
+    {ok, {Flags, [World, Flight]}}.

@@ -1,0 +1,323 @@
+%% @doc The simulated world's sensors and fixtures beyond the Torobot's:
+%% what the library's robots (`config/robots/') sense, as pure functions of
+%% a `torobot_world' value, and the figures their runs are measured by.
+%% `torobot_world' hands the terms it does not know to {@link term/1} and
+%% calls {@link figures/1} for its summary; `torobot_sim' adds one
+%% `torobot_sim_sensor' device per entry of {@link devices/0} and feeds
+%% each tick's {@link read/2} to them.
+%%
+%% <h3>World-file terms</h3>
+%% All optional, at most once each unless said (defaults in brackets):
+%% <ul>
+%% <li>`{range, #{sensors => #{Name => MountDeg}, max_range => 1.5}}':
+%%     range sensors (time-of-flight style) on the robot's rim, reading the
+%%     distance in metres to the first wall or object along their mount
+%%     direction (degrees from the heading, counter-clockwise), rounded to
+%%     the centimetre, `max_range' when nothing is nearer. Default sensors:
+%%     `front' 0, `front_left' 45, `front_right' -45, `left' 90, `right'
+%%     -90, `rear' 180. Device `range', one output per sensor.</li>
+%% <li>`{bumper, #{front_deg => 25, side_deg => 110}}': a bumper all
+%%     round; a contact within `front_deg' of the heading is `front', up to
+%%     `side_deg' `left' or `right', beyond that `rear'. Device `bumper',
+%%     output `contact': `none' or the side of the contact nearest the
+%%     front.</li>
+%% <li>Wheel odometry, always there: device `odometry', output `wheels',
+%%     the wheel velocities measured from the robot's real motion since the
+%%     previous tick, in servo units (so a wheel pushing against a wall
+%%     reads 0 while commanded 80: a stall).</li>
+%% <li>`{light, {X, Y}, Power}', any number: lamps. `{light_sensor,
+%%     #{mount_deg => 45, half_distance => 0.5}}': two light sensors on the
+%%     rim at +-`mount_deg'; each reads, per lamp in line of sight (walls
+%%     block light), `Power' x cos(angle off the sensor's axis) / (1 +
+%%     (distance / `half_distance')^2), summed and clamped to 0..1023.
+%%     Device `light', outputs `left', `right'.</li>
+%% <li>`{dock, {X, Y}}': a charging dock, a pad on the floor with a beacon.
+%%     `{beacon, #{range => 6.0, dock_radius => 0.10}}': the robot's beacon
+%%     receiver sees the dock all round within `range' when no wall is in
+%%     between; it is as wide as the robot (a receiver on each side), so the
+%%     dock is seen only when the robot could drive straight to it without
+%%     clipping a wall's end. Device `beacon', outputs `bearing' (`{BearingDeg,
+%%     DistanceM}' from the robot's centre, bearing counter-clockwise from
+%%     the heading, or `none') and `docked' (`true' while the robot's
+%%     centre is within `dock_radius' of the dock).</li>
+%% <li>`{figures, [Figure]}': what the summary measures besides the
+%%     Torobot's keys: `laps' (turns of the trajectory round the arena's
+%%     centre, or round `{lap_centre, {X, Y}}'), `coverage' (the fraction of
+%%     the 0.2 m cells the robot could stand in that its body swept),
+%%     `docked_ms' (first time on the dock, or `none'), `light_distance_m'
+%%     (the centre's distance to the nearest lamp at the end),
+%%     `light_mean_m' (that distance averaged over the run).</li>
+%% </ul>
+-module(torobot_sensors).
+
+-export([single_terms/0, term/1, build/1]).
+-export([devices/0, new/1, read/2]).
+-export([figures/1, lights/1, dock/1]).
+-export_type([state/0, readings/0]).
+
+-type readings() :: #{atom() => #{atom() => term()}}.
+-opaque state() :: {torobot_world:pose(), non_neg_integer()}.
+
+-define(RANGE, #{sensors => #{front => 0, front_left => 45, front_right => -45,
+                              left => 90, right => -90, rear => 180},
+                 max_range => 1.5}).
+-define(BUMPER, #{front_deg => 25, side_deg => 110}).
+-define(LIGHT_SENSOR, #{mount_deg => 45, half_distance => 0.5}).
+-define(BEACON, #{range => 6.0, dock_radius => 0.10}).
+-define(FIGURES, [laps, coverage, docked_ms, light_distance_m, light_mean_m]).
+-define(CELL, 0.2).
+
+%%====================================================================
+%% World-file terms
+%%====================================================================
+
+%% @doc The terms of this module a world may give once only.
+-spec single_terms() -> [atom()].
+single_terms() -> [range, bumper, light_sensor, dock, beacon, figures, lap_centre].
+
+%% @doc Checks one world-file term; `{ok, Key, Value}' or `error'.
+-spec term(term()) -> {ok, atom(), term()} | error.
+term({range, #{} = Opts}) ->
+    options(range, Opts, ?RANGE, fun(sensors, M) when is_map(M) ->
+                                         lists:all(fun({K, V}) -> is_atom(K) andalso is_number(V) end,
+                                                   maps:to_list(M));
+                                    (max_range, V) -> positive(V);
+                                    (_, _) -> false
+                                 end);
+term({bumper, #{} = Opts}) ->
+    options(bumper, Opts, ?BUMPER, fun(_, V) -> positive(V) andalso V =< 180 end);
+term({light_sensor, #{} = Opts}) ->
+    options(light_sensor, Opts, ?LIGHT_SENSOR, fun(mount_deg, V) -> is_number(V) andalso V >= 0 andalso V < 180;
+                                                  (half_distance, V) -> positive(V)
+                                               end);
+term({beacon, #{} = Opts}) ->
+    options(beacon, Opts, ?BEACON, fun(_, V) -> positive(V) end);
+term({light, P, Power}) when is_number(Power), Power >= 0 ->
+    case point(P) of
+        {ok, Pt} -> {ok, light, {Pt, float(Power)}};
+        error -> error
+    end;
+term({dock, P}) ->
+    case point(P) of
+        {ok, Pt} -> {ok, dock, Pt};
+        error -> error
+    end;
+term({lap_centre, P}) ->
+    case point(P) of
+        {ok, Pt} -> {ok, lap_centre, Pt};
+        error -> error
+    end;
+term({figures, L}) when is_list(L) ->
+    case lists:all(fun(F) -> lists:member(F, ?FIGURES) end, L) of
+        true -> {ok, figures, L};
+        false -> error
+    end;
+term(_) ->
+    error.
+
+options(Key, Opts, Defaults, Valid) ->
+    case lists:all(fun({K, V}) -> is_map_key(K, Defaults) andalso Valid(K, V) end,
+                   maps:to_list(Opts)) of
+        true -> {ok, Key, maps:merge(Defaults, Opts)};
+        false -> error
+    end.
+
+point({X, Y}) when is_number(X), is_number(Y) -> {ok, {float(X), float(Y)}};
+point(_) -> error.
+
+positive(V) -> is_number(V) andalso V > 0.
+
+%% @doc This module's part of a world, from `torobot_world''s parsed terms
+%% (`#{Key => {Value, Term}}', lists of them for repeated terms).
+-spec build(map()) -> map().
+build(Parsed) ->
+    One = fun(Key, Default) ->
+                  case Parsed of
+                      #{Key := {V, _}} -> V;
+                      #{} -> Default
+                  end
+          end,
+    #{range => One(range, ?RANGE), bumper => One(bumper, ?BUMPER),
+      light_sensor => One(light_sensor, ?LIGHT_SENSOR), beacon => One(beacon, ?BEACON),
+      lights => lists:reverse([L || {L, _} <- maps:get(light, Parsed, [])]),
+      dock => One(dock, none), figures => One(figures, []), lap_centre => One(lap_centre, none)}.
+
+%% @doc The lamps, `{Centre, Power}'.
+-spec lights(torobot_world:world()) -> [{torobot_world:point(), float()}].
+lights(W) -> maps:get(lights, torobot_world:extras(W)).
+
+%% @doc The dock's place, or `none'.
+-spec dock(torobot_world:world()) -> torobot_world:point() | none.
+dock(W) -> maps:get(dock, torobot_world:extras(W)).
+
+%%====================================================================
+%% Sensing
+%%====================================================================
+
+%% @doc The sensor devices and their outputs, for the given world.
+-spec devices() -> [{atom(), fun((torobot_world:world()) -> [atom()])}].
+devices() ->
+    [{range, fun(W) -> lists:sort(maps:keys(maps:get(sensors, cfg(range, W)))) end},
+     {bumper, fun(_) -> [contact] end},
+     {odometry, fun(_) -> [wheels] end},
+     {light, fun(_) -> [left, right] end},
+     {beacon, fun(_) -> [bearing, docked] end}].
+
+%% @doc The sensing state at the start of a run.
+-spec new(torobot_world:world()) -> state().
+new(W) -> {torobot_world:pose(W), torobot_world:time_ms(W)}.
+
+%% @doc Every sensor's reading now, by device and output.
+-spec read(torobot_world:world(), state()) -> {readings(), state()}.
+read(W, {Pose0, T0}) ->
+    Pose = torobot_world:pose(W),
+    T = torobot_world:time_ms(W),
+    Readings = #{range => ranges(W), bumper => #{contact => bumper(W)},
+                 odometry => #{wheels => odometry(W, Pose0, Pose, T - T0)},
+                 light => light(W), beacon => beacon(W)},
+    {Readings, {Pose, T}}.
+
+cfg(Key, W) -> maps:get(Key, torobot_world:extras(W)).
+
+ranges(W) ->
+    #{sensors := Sensors, max_range := Max} = cfg(range, W),
+    maps:map(fun(_Name, Deg) ->
+                     round(torobot_world:range(W, Deg * math:pi() / 180, Max) * 100) / 100
+             end, Sensors).
+
+bumper(W) ->
+    #{front_deg := Front, side_deg := Side} = cfg(bumper, W),
+    case lists:sort([{abs(B), B} || B <- torobot_world:contact_bearings(W)]) of
+        [] -> none;
+        [{A, _} | _] when A =< Front -> front;
+        [{A, B} | _] when A =< Side, B > 0 -> left;
+        [{A, _} | _] when A =< Side -> right;
+        _ -> rear
+    end.
+
+odometry(_W, _Pose0, _Pose, Dt) when Dt =< 0 ->
+    {0, 0};
+odometry(W, {X0, Y0, H0}, {X, Y, H}, DtMs) ->
+    #{wheel_base := Base, max_wheel_speed := Vmax} = torobot_world:geometry(W),
+    Dt = DtMs / 1000,
+    Th0 = H0 * math:pi() / 180,
+    V = ((X - X0) * math:cos(Th0) + (Y - Y0) * math:sin(Th0)) / Dt,
+    Turned = math:atan2(math:sin((H - H0) * math:pi() / 180), math:cos((H - H0) * math:pi() / 180)),
+    Omega = Turned / Dt,
+    Servo = fun(Speed) -> round(Speed / Vmax * 100) end,
+    {Servo(V - Omega * Base / 2), Servo(V + Omega * Base / 2)}.
+
+light(W) ->
+    #{mount_deg := Mount, half_distance := Half} = cfg(light_sensor, W),
+    {X, Y, H} = torobot_world:pose(W),
+    R = torobot_world:robot_radius(W),
+    Reading = fun(Deg) ->
+                      Axis = (H + Deg) * math:pi() / 180,
+                      At = {X + R * math:cos(Axis), Y + R * math:sin(Axis)},
+                      Sum = lists:sum([lamp(W, At, Axis, Lamp, Half) || Lamp <- lights(W)]),
+                      max(0, min(1023, round(Sum)))
+              end,
+    #{left => Reading(Mount), right => Reading(-Mount)}.
+
+lamp(W, {Sx, Sy} = At, Axis, {{Lx, Ly} = Centre, Power}, Half) ->
+    Dx = Lx - Sx,
+    Dy = Ly - Sy,
+    D = math:sqrt(Dx * Dx + Dy * Dy),
+    Cos = case D < 1.0e-9 of
+              true -> 1.0;
+              false -> (Dx * math:cos(Axis) + Dy * math:sin(Axis)) / D
+          end,
+    case Cos > 0 andalso torobot_world:line_of_sight(W, At, Centre) of
+        true -> Power * Cos / (1 + (D / Half) * (D / Half));
+        false -> 0.0
+    end.
+
+beacon(W) ->
+    #{range := Range, dock_radius := DockR} = cfg(beacon, W),
+    case dock(W) of
+        none ->
+            #{bearing => none, docked => false};
+        {Dx, Dy} ->
+            {X, Y, H} = torobot_world:pose(W),
+            D = math:sqrt((Dx - X) * (Dx - X) + (Dy - Y) * (Dy - Y)),
+            Bearing = math:atan2(Dy - Y, Dx - X) * 180 / math:pi() - H,
+            R = torobot_world:robot_radius(W),
+            Across = case D < 1.0e-9 of
+                         true -> {0.0, 0.0};
+                         false -> {-(Dy - Y) / D * R, (Dx - X) / D * R}
+                     end,
+            Seen = D =< Range andalso
+                lists:all(fun({Ox, Oy}) ->
+                                  torobot_world:line_of_sight(W, {X + Ox, Y + Oy}, {Dx + Ox, Dy + Oy})
+                          end, [{0.0, 0.0}, Across, {-element(1, Across), -element(2, Across)}]),
+            #{bearing => case Seen of
+                             true -> {round(normalise_deg(Bearing)), round(D * 100) / 100};
+                             false -> none
+                         end,
+              docked => D =< DockR}
+    end.
+
+normalise_deg(D) ->
+    R = D * math:pi() / 180,
+    math:atan2(math:sin(R), math:cos(R)) * 180 / math:pi().
+
+%%====================================================================
+%% Figures
+%%====================================================================
+
+%% @doc The figures the world asks for (`{figures, [...]}'), measured on
+%% the run so far.
+-spec figures(torobot_world:world()) -> map().
+figures(W) ->
+    maps:from_list([{F, figure(F, W)} || F <- cfg(figures, W)]).
+
+figure(laps, W) ->
+    {Cx, Cy} = case cfg(lap_centre, W) of
+                   none -> {Aw, Ah} = torobot_world:arena(W), {Aw / 2, Ah / 2};
+                   C -> C
+               end,
+    Angles = [math:atan2(Y - Cy, X - Cx) || {_, X, Y, _} <- torobot_world:trajectory(W)],
+    Turned = lists:sum([math:atan2(math:sin(B - A), math:cos(B - A))
+                        || {A, B} <- lists:zip(lists:droplast(Angles), tl(Angles))]),
+    round(abs(Turned) / (2 * math:pi()) * 100) / 100;
+figure(coverage, W) ->
+    {Aw, Ah} = torobot_world:arena(W),
+    R = torobot_world:robot_radius(W),
+    Cells = [{(I + 0.5) * ?CELL, (J + 0.5) * ?CELL}
+             || I <- lists:seq(0, trunc(Aw / ?CELL) - 1), J <- lists:seq(0, trunc(Ah / ?CELL) - 1)],
+    Free = [C || C <- Cells, torobot_world:free(W, C)],
+    Swept = lists:usort([{trunc(X / ?CELL), trunc(Y / ?CELL)} || {_, X, Y, _} <- torobot_world:trajectory(W)]
+                        ++ [{trunc(X / ?CELL), trunc(Y / ?CELL)}
+                            || {_, X0, Y0, _} <- torobot_world:trajectory(W),
+                               {Ox, Oy} <- [{R, 0}, {-R, 0}, {0, R}, {0, -R}],
+                               {X, Y} <- [{X0 + Ox, Y0 + Oy}], X >= 0, Y >= 0]),
+    Visited = [C || {X, Y} = C <- Free, lists:member({trunc(X / ?CELL), trunc(Y / ?CELL)}, Swept)],
+    case Free of
+        [] -> 0.0;
+        _ -> round(length(Visited) / length(Free) * 100) / 100
+    end;
+figure(docked_ms, W) ->
+    #{dock_radius := DockR} = cfg(beacon, W),
+    case dock(W) of
+        none -> none;
+        {Dx, Dy} ->
+            case [T || {T, X, Y, _} <- torobot_world:trajectory(W),
+                       (X - Dx) * (X - Dx) + (Y - Dy) * (Y - Dy) =< DockR * DockR] of
+                [] -> none;
+                [T | _] -> T
+            end
+    end;
+figure(light_distance_m, W) ->
+    {X, Y, _} = torobot_world:pose(W),
+    lamp_distance(W, X, Y);
+figure(light_mean_m, W) ->
+    case [lamp_distance(W, X, Y) || {_, X, Y, _} <- torobot_world:trajectory(W)] of
+        [none | _] -> none;
+        Ds -> round(lists:sum(Ds) / length(Ds) * 100) / 100
+    end.
+
+lamp_distance(W, X, Y) ->
+    case [math:sqrt((Lx - X) * (Lx - X) + (Ly - Y) * (Ly - Y)) || {{Lx, Ly}, _} <- lights(W)] of
+        [] -> none;
+        Ds -> round(lists:min(Ds) * 100) / 100
+    end.

@@ -1,0 +1,193 @@
+%% The simulated lab (SPEC §14): generated worlds (torobot_worlds), batch
+%% evaluation (torobot_batch through torobot_sim:batch/1) and what make eval
+%% writes (torobot_eval). Speed and several robots are run in
+%% torobot_scenarios_SUITE, with the Torobot's scenarios.
+-module(torobot_lab_SUITE).
+
+-include_lib("common_test/include/ct.hrl").
+-include_lib("stdlib/include/assert.hrl").
+-include_lib("xmerl/include/xmerl.hrl").
+
+-compile([export_all, nowarn_export_all]).
+
+suite() ->
+    [{timetrap, {minutes, 3}}].
+
+all() ->
+    [{group, generated}, {group, batch}].
+
+groups() ->
+    [{generated, [parallel], [generate_1000_seeds, generate_options, percentiles, bad_speed]},
+     {batch, [], [batch_refuses_bad_world, batch_refuses_bad_wiring, batch_20_generated]}].
+
+init_per_suite(Config) ->
+    Root = root(),
+    [{root, Root}, {wiring, filename:join([Root, "config", "torobot.wiring"])} | Config].
+
+end_per_suite(_Config) ->
+    ok.
+
+%%====================================================================
+%% Generated worlds
+%%====================================================================
+
+generate_1000_seeds() ->
+    [{doc, "Over 1,000 seeds every generated world loads, is not over, keeps objects off "
+      "walls and each other, starts the robot clear, has red reachable, and comes out "
+      "the same for the same seed."}].
+generate_1000_seeds(_Config) ->
+    Worlds = [{Seed, torobot_worlds:generate(Seed, #{})} || Seed <- lists:seq(1, 1000)],
+    [begin
+         ?assertEqual({Seed, Terms}, {Seed, torobot_worlds:generate(Seed, #{})}),
+         {ok, W} = torobot_world:from_terms(Terms),
+         ?assertNot(torobot_world:done(W)),
+         ?assert(torobot_worlds:reachable(Terms)),
+         check_clear(Seed, Terms)
+     end || {Seed, Terms} <- Worlds],
+    %% seeds make different worlds
+    ?assert(length(lists:usort([T || {_, T} <- Worlds])) > 990),
+    %% and the generator uses its range: walls and blue objects occur
+    ?assert(lists:any(fun({_, T}) -> lists:keymember(wall, 1, T) end, Worlds)),
+    ?assert(lists:any(fun({_, T}) -> lists:member(blue, [C || {object, C, _, _} <- T]) end,
+                      Worlds)).
+
+generate_options() ->
+    [{doc, "Options fix the arena, the number of walls and blue objects, and the duration."}].
+generate_options(_Config) ->
+    Opts = #{arena => {5, 4}, walls => 0, blue => 0, duration_s => 12, stop_on_red => false},
+    [begin
+         T = torobot_worlds:generate(Seed, Opts),
+         ?assertEqual({arena, {5.0, 4.0}}, lists:keyfind(arena, 1, T)),
+         ?assertEqual([], [W || {wall, _} = W <- T]),
+         ?assertEqual([red], [C || {object, C, _, _} <- T]),
+         ?assertEqual({duration_s, 12}, lists:keyfind(duration_s, 1, T)),
+         ?assertEqual({stop_on_red, false}, lists:keyfind(stop_on_red, 1, T))
+     end || Seed <- lists:seq(1, 50)].
+
+percentiles() ->
+    [{doc, "Time-to-red percentiles are nearest-rank, none for no value."}].
+percentiles(_Config) ->
+    ?assertEqual(none, torobot_batch:percentile([], 50)),
+    ?assertEqual(7, torobot_batch:percentile([7], 90)),
+    L = lists:seq(1, 10),
+    ?assertEqual(5, torobot_batch:percentile(lists:reverse(L), 50)),
+    ?assertEqual(9, torobot_batch:percentile(L, 90)),
+    ?assertEqual(10, torobot_batch:percentile(L, 100)).
+
+bad_speed() ->
+    [{doc, "A speed that is not a number above 0 is refused before anything starts."}].
+bad_speed(Config) ->
+    World = filename:join([?config(root, Config), "test", "worlds", "red_in_view.world"]),
+    Wiring = ?config(wiring, Config),
+    ?assertEqual({error, {speed, 0}}, torobot_sim:run(World, #{speed => 0, wiring => Wiring})),
+    ?assertEqual({error, {speed, fast}}, torobot_sim:run(World, #{speed => fast, wiring => Wiring})),
+    ?assertEqual({error, {speed, -1}}, torobot_sim:batch(#{worlds => [World], speed => -1})).
+
+%%====================================================================
+%% Batch
+%%====================================================================
+
+batch_refuses_bad_world() ->
+    [{doc, "A batch with one bad world file is refused naming that file and its reason."}].
+batch_refuses_bad_world(Config) ->
+    Good = filename:join([?config(root, Config), "test", "worlds", "red_in_view.world"]),
+    Bad = write_file(Config, "bad.world", [{arena, {6.0, 4.0}}, {duration_s, 10}]),
+    ?assertEqual({error, {world, Bad, {missing, robot}}},
+                 torobot_sim:batch(#{worlds => [Good, Bad], wiring => ?config(wiring, Config)})).
+
+batch_refuses_bad_wiring() ->
+    [{doc, "A wiring that does not parse, or names an unknown input, is refused naming the "
+      "file, before any run."}].
+batch_refuses_bad_wiring(Config) ->
+    Worlds = {generated, 3, 1},
+    Garbled = filename:join(?config(priv_dir, Config), "garbled.wiring"),
+    ok = file:write_file(Garbled, "{behavior, forward, torobot_forward"),
+    ?assertMatch({error, {wiring, Garbled, _}},
+                 torobot_sim:batch(#{worlds => Worlds, wiring => Garbled})),
+    {ok, Terms} = file:consult(?config(wiring, Config)),
+    Wrong = write_file(Config, "wrong.wiring",
+                       Terms ++ [{inputs, forward, #{nowhere => [{ir, left}]}}]),
+    {error, {wiring, Wrong, Reason}} = torobot_sim:batch(#{worlds => Worlds, wiring => Wrong}),
+    ct:log("refused: ~p", [Reason]),
+    ?assertNotEqual(nomatch, string:find(io_lib:format("~p", [Reason]), "nowhere")).
+
+batch_20_generated() ->
+    [{doc, "batch/1 on 20 generated worlds, two at a time at speed 20: a row per world and "
+      "an overall row whose figures agree with the runs, and make eval's files."}].
+batch_20_generated(Config) ->
+    {ok, Report} = torobot_sim:batch(#{worlds => {generated, 20, 100}, speed => 20,
+                                       parallel => 2, wiring => ?config(wiring, Config),
+                                       generate => #{duration_s => 20}}),
+    #{worlds := Rows, overall := Overall, runs := Runs, failures := Failures} = Report,
+    ct:log("~s", [torobot_eval:markdown(Report)]),
+    ?assertEqual([], Failures),
+    ?assertEqual(20, length(Rows)),
+    ?assertEqual(20, length(Runs)),
+    ?assertMatch(#{runs := 20, failed := 0}, Overall),
+    Reds = [Ms || #{summary := #{red_touched_ms := Ms}} <- Runs, Ms =/= none],
+    ?assertEqual(length(Reds) / 20, maps:get(success_rate, Overall)),
+    [?assert(Ms =< 20000) || Ms <- Reds],
+    case Reds of
+        [] -> ok;
+        _ -> ?assert(maps:get(red_p50_ms, Overall) =< maps:get(red_p90_ms, Overall))
+    end,
+    %% the runs are the worlds it was given: the same arena as the generator's
+    [#{final := First} | _] = Runs,
+    {arena, Arena} = lists:keyfind(arena, 1, torobot_worlds:generate(100, #{duration_s => 20})),
+    ?assertEqual(Arena, torobot_world:arena(First)),
+    %% make eval's files
+    Dir = filename:join(?config(priv_dir, Config), "eval"),
+    ok = torobot_eval:write(Report, Dir),
+    {ok, Md} = file:read_file(filename:join(Dir, "report.md")),
+    ?assertEqual(2 + 20 + 1, length([L || L <- binary:split(Md, <<"\n">>, [global]),
+                                          binary:first(<<L/binary, " ">>) =:= $|])),
+    {ok, Csv} = file:read_file(filename:join(Dir, "runs.csv")),
+    ?assertEqual(21, length(binary:split(Csv, <<"\n">>, [global, trim]))),
+    [begin
+         {Svg, []} = xmerl_scan:file(filename:join(Dir, F)),
+         ?assertMatch(#xmlElement{name = svg}, Svg)
+     end || F <- ["time_to_red.svg", "success.svg", "trajectories.svg"]],
+    {Grid, []} = xmerl_scan:file(filename:join(Dir, "trajectories.svg")),
+    ?assertEqual(20, length(xmerl_xpath:string("//polyline", Grid))).
+
+%%====================================================================
+%% Helpers
+%%====================================================================
+
+%% Objects clear of every wall (the arena's too) and of each other; the
+%% robot clear of everything.
+check_clear(Seed, Terms) ->
+    {arena, {W, H}} = lists:keyfind(arena, 1, Terms),
+    {robot, {X, Y, _}} = lists:keyfind(robot, 1, Terms),
+    Walls = [{{0.0, 0.0}, {W, 0.0}}, {{W, 0.0}, {W, H}}, {{W, H}, {0.0, H}}, {{0.0, H}, {0.0, 0.0}}]
+        ++ [S || {wall, S} <- Terms],
+    Objects = [{C, R} || {object, _, C, R} <- Terms],
+    [require(gap(C, A, B) > R, {Seed, object_on_wall, C, {A, B}})
+     || {C, R} <- Objects, {A, B} <- Walls],
+    [require(dist(C1, C2) > R1 + R2, {Seed, objects_overlap, C1, C2})
+     || {I, {C1, R1}} <- lists:enumerate(Objects), {J, {C2, R2}} <- lists:enumerate(Objects),
+        I < J],
+    [require(gap({X, Y}, A, B) > 0.12, {Seed, robot_on_wall, {A, B}}) || {A, B} <- Walls],
+    [require(dist({X, Y}, C) > 0.12 + R, {Seed, robot_on_object, C}) || {C, R} <- Objects].
+
+require(true, _What) -> ok;
+require(false, What) -> ct:fail(What).
+
+gap(P, {Ax, Ay}, {Bx, By}) ->
+    {Ex, Ey} = {Bx - Ax, By - Ay},
+    {Px, Py} = P,
+    T = max(0.0, min(1.0, ((Px - Ax) * Ex + (Py - Ay) * Ey) / (Ex * Ex + Ey * Ey))),
+    dist(P, {Ax + T * Ex, Ay + T * Ey}).
+
+dist({X1, Y1}, {X2, Y2}) ->
+    math:sqrt((X1 - X2) * (X1 - X2) + (Y1 - Y2) * (Y1 - Y2)).
+
+write_file(Config, Name, Terms) ->
+    File = filename:join(?config(priv_dir, Config), Name),
+    ok = file:write_file(File, [io_lib:format("~tp.~n", [T]) || T <- Terms]),
+    File.
+
+%% The project's root: this file is apps/torobot/test/ in it.
+root() ->
+    Source = proplists:get_value(source, ?MODULE:module_info(compile)),
+    filename:dirname(filename:dirname(filename:dirname(filename:dirname(Source)))).

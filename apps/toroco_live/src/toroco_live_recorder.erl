@@ -1,0 +1,182 @@
+%% @doc Recording (SPEC §12): an MCAP file with the bridge's channels and
+%% schemas, so a recording opens in Foxglove like a live robot.
+%%
+%% A recording is data, not a process: the flight recorder's process
+%% (`toroco_live_flight'), already a subscriber of the observer tap for
+%% everything, feeds the open recording each event that passes its `kinds'
+%% and `names'. One subscription serves both, so recording adds no second
+%% relay to the robot's event path, and the process runs at low priority:
+%% when the disk or the CPU is slower than the robot, the tap drops events
+%% for it and counts them (`dropped'); the robot never waits for the file.
+%% A path that cannot be opened is refused; a failed write (a full disk)
+%% ends the recording with a logged error naming the file, and
+%% `stop_recording/0' returns that error.
+%%
+%% Files: {@link open/2}, {@link event/2}, {@link message/4},
+%% {@link dropped/2}, {@link close/1}. Bytes: {@link log_new/0},
+%% {@link log_event/3}, {@link log_end/1} turn messages into MCAP (channels
+%% and schemas added as they first appear); flight dumps use them too.
+-module(toroco_live_recorder).
+
+-export([open/2, event/2, message/4, dropped/2, close/1, path/1]).
+-export([log_new/0, log_event/3, log_end/1, log_messages/1]).
+
+-export_type([log/0, recording/0]).
+
+-define(KINDS, [emit, deliver, router, lifecycle]).
+
+-record(log, {writer :: toroco_live_mcap:writer(),
+              channels = #{} :: #{toroco_live_channels:key() => non_neg_integer()},
+              schemas = #{} :: #{binary() => pos_integer()},
+              seq = 0 :: non_neg_integer()}).
+-opaque log() :: #log{}.
+
+-record(rec, {path :: file:filename_all(),
+              fd :: file:io_device(),
+              kinds :: [atom()],
+              names :: all | [atom()],
+              log :: log(),
+              since :: integer(),
+              dropped = 0 :: non_neg_integer()}).
+-opaque recording() :: #rec{} | {failed, file:filename_all(), term()}.
+
+%%====================================================================
+%% Recordings
+%%====================================================================
+
+%% @doc A recording of the events of `kinds' (default all) about `names'
+%% (default all) into `Path'.
+-spec open(file:filename_all(), map()) -> {ok, recording()} | {error, term()}.
+open(Path, Opts) when is_map(Opts) ->
+    Kinds = maps:get(kinds, Opts, ?KINDS),
+    Names = maps:get(names, Opts, all),
+    case maps:keys(maps:without([kinds, names], Opts)) of
+        [Bad | _] -> {error, {bad_option, Bad}};
+        [] when not is_list(Kinds) -> {error, {bad_option, {kinds, Kinds}}};
+        [] when Names =/= all, not is_list(Names) -> {error, {bad_option, {names, Names}}};
+        [] ->
+            case Kinds -- ?KINDS of
+                [] -> open(Path, Kinds, Names);
+                Unknown -> {error, {bad_option, {kinds, Unknown}}}
+            end
+    end;
+open(_Path, Opts) ->
+    {error, {bad_option, Opts}}.
+
+open(Path, Kinds, Names) ->
+    case file:open(Path, [write, raw, binary]) of
+        {ok, Fd} ->
+            {Head, Log} = log_new(),
+            case file:write(Fd, Head) of
+                ok -> {ok, #rec{path = Path, fd = Fd, kinds = Kinds, names = Names, log = Log,
+                                since = erlang:system_time(nanosecond)}};
+                {error, Why} ->
+                    _ = file:close(Fd),
+                    {error, {cannot_write, Path, Why}}
+            end;
+        {error, Why} ->
+            {error, {cannot_write, Path, Why}}
+    end.
+
+%% @doc One tap event, written if it passes the recording's filters and
+%% happened after the recording started.
+-spec event(tuple(), recording()) -> recording().
+event(Event, R = #rec{kinds = Kinds, names = Names, since = Since}) ->
+    Wanted = toroco_live_channels:event_time(Event) >= Since andalso
+        lists:member(element(1, Event), Kinds) andalso
+        (Names =:= all orelse
+         lists:any(fun(N) -> lists:member(N, Names) end, toroco_live_channels:event_names(Event))),
+    case Wanted andalso toroco_live_channels:of_event(Event) of
+        {Key, T, Json} -> message(Key, T, Json, R);
+        _ -> R
+    end;
+event(_, Failed) ->
+    Failed.
+
+%% @doc A message made elsewhere (the world's channels).
+-spec message(toroco_live_channels:key(), integer(), binary(), recording()) -> recording().
+message(Key, T, Json, R = #rec{fd = Fd, log = L}) ->
+    {Bytes, L1} = log_event(Key, {T, Json}, L),
+    case iolist_size(Bytes) of
+        0 -> R#rec{log = L1};
+        _ ->
+            case file:write(Fd, Bytes) of
+                ok -> R#rec{log = L1};
+                {error, Why} -> fail(R, Why)
+            end
+    end;
+message(_, _, _, Failed) ->
+    Failed.
+
+%% @doc Events the tap dropped while this recording ran.
+-spec dropped(non_neg_integer(), recording()) -> recording().
+dropped(N, R = #rec{dropped = D}) -> R#rec{dropped = D + N};
+dropped(_, Failed) -> Failed.
+
+%% @doc The recording's file.
+-spec path(recording()) -> file:filename_all().
+path(#rec{path = P}) -> P;
+path({failed, P, _}) -> P.
+
+%% @doc Ends the recording: the file is complete (summary, footer) and
+%% readable by any MCAP reader.
+-spec close(recording()) -> {ok, #{path := file:filename_all(), messages := non_neg_integer(),
+                                   dropped := non_neg_integer()}} | {error, term()}.
+close(#rec{path = Path, fd = Fd, log = L, dropped = D}) ->
+    Result = file:write(Fd, log_end(L)),
+    _ = file:close(Fd),
+    case Result of
+        ok -> {ok, #{path => Path, messages => log_messages(L), dropped => D}};
+        {error, Why} -> {error, {write_failed, Path, Why}}
+    end;
+close({failed, Path, Why}) ->
+    {error, {write_failed, Path, Why}}.
+
+fail(#rec{path = Path, fd = Fd}, Why) ->
+    _ = file:close(Fd),
+    logger:error("recording to ~ts stopped: ~0p", [Path, Why], #{domain => [toroco, live]}),
+    {failed, Path, Why}.
+
+%%====================================================================
+%% Messages to MCAP bytes
+%%====================================================================
+
+%% @doc A new file's log and its first bytes.
+-spec log_new() -> {iodata(), log()}.
+log_new() ->
+    {Head, W} = toroco_live_mcap:new(#{}),
+    {Head, #log{writer = W}}.
+
+%% @doc The bytes of one message on channel `Key' at `T' (ns), with the
+%% channel's and its schema's records the first time they appear.
+-spec log_event(toroco_live_channels:key(), {integer(), binary()}, log()) -> {iodata(), log()}.
+log_event(Key, {T, Json}, L0) ->
+    {Decl, L = #log{writer = W, channels = Chs, seq = Seq}} = declare(Key, L0),
+    {Bytes, W1} = toroco_live_mcap:add_message(W, maps:get(Key, Chs), Seq, max(T, 0), Json),
+    {[Decl, Bytes], L#log{writer = W1, seq = Seq + 1}}.
+
+%% @doc The last bytes of the file.
+-spec log_end(log()) -> iodata().
+log_end(#log{writer = W}) ->
+    toroco_live_mcap:finish(W).
+
+%% @doc Messages logged so far.
+-spec log_messages(log()) -> non_neg_integer().
+log_messages(#log{writer = W}) ->
+    toroco_live_mcap:message_count(W).
+
+declare(Key, L = #log{channels = Chs}) when is_map_key(Key, Chs) ->
+    {[], L};
+declare(Key, L = #log{writer = W, channels = Chs, schemas = Ss}) ->
+    {Name, Schema} = toroco_live_channels:schema(Key),
+    {SBytes, W1, Ss1, SId} =
+        case Ss of
+            #{Name := Id} -> {[], W, Ss, Id};
+            #{} ->
+                Id = map_size(Ss) + 1,
+                {B, W0} = toroco_live_mcap:add_schema(W, Id, Name, Schema),
+                {B, W0, Ss#{Name => Id}, Id}
+        end,
+    CId = map_size(Chs) + 1,
+    {CBytes, W2} = toroco_live_mcap:add_channel(W1, CId, SId, toroco_live_channels:topic(Key), #{}),
+    {[SBytes, CBytes], L#log{writer = W2, channels = Chs#{Key => CId}, schemas = Ss1}}.

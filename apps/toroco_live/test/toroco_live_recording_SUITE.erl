@@ -1,0 +1,268 @@
+%% Recording, the flight recorder and replay (SPEC §12), read back with the
+%% format's reference reader (@mcap/core's indexed reader, in Node).
+-module(toroco_live_recording_SUITE).
+-include_lib("common_test/include/ct.hrl").
+-compile([export_all, nowarn_export_all]).
+
+all() ->
+    [recording_reads_back, recording_filters, unwritable_path_refused, full_disk_refused,
+     flight_recorder_dump, flight_recorder_bounded, flight_recorder_on_layer_removed,
+     flight_recorder_after_restart,
+     foreign_files_refused,
+     simulated_run_replays].
+
+suite() -> [{timetrap, {seconds, 90}}].
+
+init_per_suite(Config) ->
+    LogDir = filename:join(?config(priv_dir, Config), "log"),
+    [{log_dir, LogDir}, {env, tl_live:start(#{log_dir => LogDir})} | Config].
+
+end_per_suite(Config) ->
+    tl_live:stop(?config(env, Config)).
+
+init_per_testcase(simulated_run_replays, Config) ->
+    Config;
+init_per_testcase(_Case, Config) ->
+    tl_live:fake_robot(),
+    Config.
+
+end_per_testcase(_Case, _Config) ->
+    _ = toroco_live:stop_recording(),
+    #{behaviors := Bs, devices := Ds} = toroco:inspect(),
+    [toroco:remove_behavior(B) || B <- Bs],
+    [toroco:remove_device(D) || D <- Ds],
+    ok.
+
+%%====================================================================
+%% Cases
+%%====================================================================
+
+recording_reads_back() ->
+    [{doc, "A recording validates with @mcap/core's indexed reader: the channels and schemas "
+      "are there and the message count equals what stop_recording/0 reports"}].
+recording_reads_back(Config) ->
+    Path = path(Config, "values.mcap"),
+    ok = toroco_live:record(Path, #{}),
+    {error, {already_recording, _, _}} = toroco_live:record(path(Config, "other.mcap"), #{}),
+    N = 3000,
+    [ok = toroco:inject({s, dist}, {I, near}) || I <- lists:seq(1, N)],
+    ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= N end, 10000),
+    {ok, #{path := Path, messages := Messages, dropped := 0}} = toroco_live:stop_recording(),
+    {error, not_recording} = toroco_live:stop_recording(),
+    R = read(Path),
+    ct:log("~p", [maps:without([<<"first">>], R)]),
+    #{<<"ok">> := true, <<"messages">> := Messages, <<"statistics">> := Messages,
+      <<"ordered">> := true, <<"perTopic">> := PerTopic, <<"first">> := First} = R,
+    true = maps:get(<<"chunks">>, R) > 1,
+    N = maps:get(<<"/toroco/out/s/dist">>, PerTopic),
+    N = maps:get(<<"/toroco/in/a/d">>, PerTopic),
+    true = maps:get(<<"/toroco/router/a/d">>, PerTopic, 0) >= 0,
+    Topics = [T || #{<<"topic">> := T} <- maps:get(<<"channels">>, R)],
+    [] = [<<"/toroco/out/s/dist">>, <<"/toroco/in/a/d">>] -- Topics,
+    [true] = lists:usort([V || #{<<"valid">> := V} <- maps:get(<<"schemas">>, R)]),
+    [#{<<"kind">> := <<"send">>, <<"term">> := <<"{1,near}">>, <<"value">> := [1, <<"near">>]} | _] =
+        maps:get(<<"/toroco/out/s/dist">>, First),
+    {ok, #{size := Size}} = {ok, #{size => filelib:file_size(Path)}},
+    ct:log("~b messages in ~b bytes: ~.1f bytes per message", [Messages, Size, Size / Messages]),
+    ok.
+
+recording_filters() ->
+    [{doc, "kinds and names narrow a recording to those events"}].
+recording_filters(Config) ->
+    Path = path(Config, "filtered.mcap"),
+    ok = toroco_live:record(Path, #{kinds => [emit], names => [s]}),
+    [ok = toroco:inject({s, dist}, I) || I <- lists:seq(1, 10)],
+    ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= 10 end, 5000),
+    {ok, #{messages := 10}} = toroco_live:stop_recording(),
+    #{<<"ok">> := true, <<"perTopic">> := #{<<"/toroco/out/s/dist">> := 10} = P} = read(Path),
+    1 = map_size(P),
+    {error, {bad_option, {kinds, [sideways]}}} = toroco_live:record(Path, #{kinds => [sideways]}),
+    ok.
+
+unwritable_path_refused() ->
+    [{doc, "A path that cannot be written is refused with a reason and the robot runs on"}].
+unwritable_path_refused(Config) ->
+    Path = filename:join([?config(priv_dir, Config), "no", "such", "dir", "x.mcap"]),
+    {error, {cannot_write, Path, enoent}} = toroco_live:record(Path, #{}),
+    ok = toroco:inject({s, dist}, 1),
+    ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= 1 end, 5000),
+    {error, not_recording} = toroco_live:stop_recording(),
+    ok.
+
+full_disk_refused() ->
+    [{doc, "A full disk (/dev/full) is an error, not a crash, and the robot runs on"}].
+full_disk_refused(_Config) ->
+    {error, {cannot_write, "/dev/full", enospc}} = toroco_live:record("/dev/full", #{}),
+    ok = toroco:inject({s, dist}, 1),
+    ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= 1 end, 5000),
+    ok.
+
+flight_recorder_dump() ->
+    [{doc, "The flight recorder, always on, dumps the last seconds as MCAP on demand"}].
+flight_recorder_dump(Config) ->
+    [ok = toroco:inject({s, dist}, {flight, I}) || I <- lists:seq(1, 20)],
+    ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= 20 end, 5000),
+    Path = path(Config, "flight.mcap"),
+    {ok, #{messages := N}} = toroco_live:dump(Path),
+    #{<<"ok">> := true, <<"messages">> := N, <<"last">> := Last} = read(Path),
+    Terms = [T || #{<<"term">> := T} <- maps:get(<<"/toroco/out/s/dist">>, Last)],
+    true = lists:member(<<"{flight,20}">>, Terms),
+    ok.
+
+flight_recorder_bounded() ->
+    [{doc, "The flight recorder keeps at most flight_max_bytes of events, the newest"}].
+flight_recorder_bounded(Config) ->
+    ok = application:set_env(toroco_live, flight_max_bytes, 200000),
+    try
+        restart_flight(),
+        Kb = binary:copy(<<"x">>, 1000),
+        N = 2000,
+        [ok = toroco:inject({s, dist}, {I, Kb}) || I <- lists:seq(1, N)],
+        ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= N end, 10000),
+        Path = path(Config, "bounded.mcap"),
+        {ok, #{messages := M}} = toroco_live:dump(Path),
+        ct:log("~b events of 1 kB (each emitted and delivered), ~b kept", [N, M]),
+        %% Each event holds about 1 kB: some 200 fit in 200 kB.
+        true = M > 50 andalso M < 250,
+        #{<<"last">> := Last} = read(Path),
+        Newest = toroco_live_json:term_text({N, Kb}),
+        %% The newest kept: the last delivery (the emitter's events may all
+        %% have come before the actuator's).
+        [#{<<"term">> := Newest} | _] = lists:reverse(maps:get(<<"/toroco/in/a/d">>, Last))
+    after
+        application:unset_env(toroco_live, flight_max_bytes),
+        restart_flight()
+    end.
+
+restart_flight() ->
+    ok = supervisor:terminate_child(toroco_live_sup, toroco_live_flight),
+    {ok, _} = supervisor:restart_child(toroco_live_sup, toroco_live_flight).
+
+flight_recorder_on_layer_removed() ->
+    [{doc, "When a layer is taken out the flight recorder dumps into the log directory "
+      "by itself, and the log line names the file"}].
+flight_recorder_on_layer_removed(Config) ->
+    ok = logger:add_handler(flight_capture, ?MODULE, #{config => self()}),
+    try
+        ok = toroco:add_behavior(crasher, tl_crasher, #{layer => 3, params => #{after_ms => 20}}),
+        Line = receive {flight_log, L} -> L after 20000 -> ct:fail(no_log_line) end,
+        ct:log("~ts", [Line]),
+        [File] = filelib:wildcard(filename:join(?config(log_dir, Config), "flight-*-layer3.mcap")),
+        true = nomatch =/= string:find(Line, File),
+        #{<<"ok">> := true, <<"perTopic">> := P} = read(File),
+        true = maps:get(<<"/toroco/lifecycle">>, P) > 0
+    after
+        logger:remove_handler(flight_capture)
+    end.
+
+flight_recorder_after_restart() ->
+    [{doc, "The flight recorder stays on when the runtime restarts under it"}].
+flight_recorder_after_restart(Config) ->
+    ok = application:stop(toroco_hw),
+    ok = application:stop(toroco),
+    {ok, _} = application:ensure_all_started(toroco_hw),
+    tl_live:fake_robot(),
+    Path = path(Config, "after_restart.mcap"),
+    Dumped = fun() ->
+                     ok = toroco:inject({s, dist}, after_restart),
+                     {ok, _} = toroco_live:dump(Path),
+                     #{<<"last">> := Last} = read(Path),
+                     lists:member(#{<<"kind">> => <<"send">>, <<"value">> => <<"after_restart">>,
+                                    <<"term">> => <<"after_restart">>},
+                                  maps:get(<<"/toroco/out/s/dist">>, Last, []))
+             end,
+    true = until(Dumped, 10000),
+    ok.
+
+until(Pred, Ms) when Ms =< 0 -> Pred();
+until(Pred, Ms) ->
+    case Pred() of
+        true -> true;
+        false -> timer:sleep(200), until(Pred, Ms - 200)
+    end.
+
+%% logger handler: sends the flight recorder's line to the test.
+log(#{msg := {Fmt, Args}, meta := #{domain := [toroco, live]}}, #{config := Pid}) ->
+    Line = lists:flatten(io_lib:format(Fmt, Args)),
+    case string:find(Line, "flight recorder wrote") of
+        nomatch -> ok;
+        _ -> Pid ! {flight_log, Line}
+    end;
+log(_, _) -> ok.
+
+foreign_files_refused() ->
+    [{doc, "replay/2 refuses, with a reason and no crash, a truncated recording, random "
+      "bytes, and a valid MCAP file another program wrote"}].
+foreign_files_refused(Config) ->
+    Path = path(Config, "whole.mcap"),
+    ok = toroco_live:record(Path, #{}),
+    [ok = toroco:inject({s, dist}, I) || I <- lists:seq(1, 200)],
+    ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= 200 end, 5000),
+    {ok, _} = toroco_live:stop_recording(),
+    {ok, Bin} = file:read_file(Path),
+    Truncated = path(Config, "truncated.mcap"),
+    ok = file:write_file(Truncated, binary:part(Bin, 0, byte_size(Bin) * 2 div 3)),
+    {error, {not_mcap, truncated}} = toroco_live:replay(Truncated, #{sources => [s]}),
+    Random = path(Config, "random.mcap"),
+    ok = file:write_file(Random, crypto:strong_rand_bytes(4096)),
+    {error, {not_mcap, no_magic}} = toroco_live:replay(Random, #{sources => [s]}),
+    Flipped = path(Config, "flipped.mcap"),
+    <<Head:100/binary, B, Rest/binary>> = Bin,
+    ok = file:write_file(Flipped, <<Head/binary, (B bxor 1), Rest/binary>>),
+    {error, {not_mcap, _}} = toroco_live:replay(Flipped, #{sources => [s]}),
+    Foreign = path(Config, "foreign.mcap"),
+    #{<<"ok">> := true} = toroco_live_js:run("mcap_write_foreign.js", [Foreign]),
+    {error, {not_a_toroco_recording, <<"someone else">>}} =
+        toroco_live:replay(Foreign, #{sources => [s]}),
+    {error, {cannot_read, _, enoent}} = toroco_live:replay(path(Config, "none.mcap"), #{sources => [s]}),
+    ok.
+
+simulated_run_replays() ->
+    [{doc, "A recording of a short simulated run has the robot's pose and arena, and "
+      "replays onto the same wiring with fake sensors and motors, the motors' deliveries "
+      "matching the recording"}].
+simulated_run_replays(Config) ->
+    World = filename:join(?config(data_dir, Config), "short.world"),
+    Wiring = filename:join(code:lib_dir(torobot), "../../../../config/torobot.wiring"),
+    WiringFile = case filelib:is_file(Wiring) of
+                     true -> Wiring;
+                     false -> filename:join(root(), "config/torobot.wiring")
+                 end,
+    Path = path(Config, "sim.mcap"),
+    ok = toroco_live:record(Path, #{}),
+    {ok, Summary} = torobot_sim:run(World, #{wiring => WiringFile}),
+    {ok, #{messages := M, dropped := 0}} = toroco_live:stop_recording(),
+    ct:log("run ~p, ~b messages, ~b bytes", [Summary, M, filelib:file_size(Path)]),
+    #{<<"ok">> := true, <<"messages">> := M, <<"perTopic">> := P} = read(Path),
+    true = maps:get(<<"/toroco/in/motors/setvel">>, P) > 0,
+    %% The world's snapshots, for the 3D panel.
+    true = maps:get(<<"/toroco/sim/pose">>, P, 0) > 0,
+    true = maps:get(<<"/toroco/sim/scene">>, P, 0) > 0,
+    %% The same wiring, with fake sensors and motors standing for the devices.
+    #{behaviors := Bs, devices := Ds} = toroco:inspect(),
+    _ = [toroco:remove_behavior(B) || B <- Bs],
+    _ = [toroco:remove_device(D) || D <- Ds],
+    ok = toroco:add_device(ir, toroco_fake_sensor, #{outputs => [left, right]}),
+    ok = toroco:add_device(camera, toroco_fake_sensor, #{outputs => [update_red, update_trq]}),
+    ok = toroco:add_device(push, toroco_fake_sensor, #{outputs => [button]}),
+    ok = toroco:add_device(motors, toroco_fake_actuator, #{inputs => [setvel, enable]}),
+    ok = toroco:load_wiring(WiringFile),
+    {ok, #{replayed := Replayed, matched := Matched, differed := Differed}} =
+        toroco_live:replay(Path, #{sources => [ir, camera, push]}),
+    ct:log("replayed ~b, matched ~b, differed ~p", [Replayed, Matched, Differed]),
+    true = Replayed > 0,
+    true = Matched > 0,
+    [] = Differed,
+    ok.
+
+%%====================================================================
+%% Helpers
+%%====================================================================
+
+path(Config, Name) -> filename:join(?config(priv_dir, Config), Name).
+
+read(Path) -> toroco_live_js:run("mcap_read.js", [Path]).
+
+root() ->
+    Src = proplists:get_value(source, ?MODULE:module_info(compile)),
+    filename:dirname(filename:dirname(filename:dirname(filename:dirname(Src)))).
