@@ -40,7 +40,7 @@ test:
 	scripts/test
 
 run: compile
-	SPEED=$(SPEED) scripts/run $(if $(ROBOT),config/worlds/$(ROBOT).world _build/$(ROBOT).svg config/robots/$(ROBOT).wiring,$(WORLD))
+	SPEED=$(SPEED) SPLIT=$(SPLIT) scripts/run $(if $(ROBOT),config/worlds/$(ROBOT).world _build/$(ROBOT).svg config/robots/$(ROBOT).wiring,$(WORLD))
 
 # The simulated lab: the wiring on N generated worlds, scored (SPEC §14).
 eval: compile

@@ -8,7 +8,7 @@
 %% for a bad world or wiring file; the reason goes to stderr.
 -module(torobot_cli).
 
--export([main/1, format_error/1]).
+-export([main/1, format_error/1, await_node/2]).
 
 %% @doc `[WorldFile, SvgFile, Status, WiringFile]' or the same and
 %% `Speed', as `erl -run' passes them; `Status' is `tty' (rewrite one line)
@@ -43,6 +43,21 @@ speed(Text) ->
         {{I, ""}, _} -> I;
         {_, {F, ""}} -> F;
         _ -> Text
+    end.
+
+%% @doc Waits until `Node' answers and runs toroco's wiring server (the
+%% laptop node of `make run SPLIT=1'), at most `TimeoutMs'; halts with 2
+%% if it never does.
+-spec await_node(node(), non_neg_integer()) -> ok.
+await_node(Node, TimeoutMs) ->
+    Up = net_adm:ping(Node) =:= pong andalso
+        is_pid(erpc:call(Node, erlang, whereis, [toroco_wiring], 1000)),
+    case Up of
+        true -> ok;
+        false when TimeoutMs =< 0 ->
+            io:format(standard_error, "torobot: node ~p did not come up~n", [Node]),
+            halt(2);
+        false -> timer:sleep(100), await_node(Node, TimeoutMs - 100)
     end.
 
 %% @doc A one-line human reading of a `torobot_sim:run/2' error.

@@ -16,6 +16,13 @@
 %% <b>Observing the event path</b> (SPEC §10): {@link subscribe_events/1},
 %% {@link unsubscribe_events/1}.
 %%
+%% <b>Several nodes</b> (SPEC §13): `#{node => Node}' in the options of
+%% {@link add_behavior/3} and {@link add_device/3} (and of a wiring file's
+%% `behavior' and `device' terms) places it on `Node'. Every call works from
+%% any node of the robot and acts where the thing lives: the wiring server of
+%% the receiver's node wires its inputs, that of the emitter's node its
+%% inhibitors; `inspect/0' covers every connected node.
+%%
 %% Every call returns `ok' or `{error, Reason}' with a reason naming the
 %% offending behavior, device, input or output; a refused wiring change
 %% changes nothing. The semantics are those of SPEC §4.
@@ -51,34 +58,65 @@
 %% @doc Starts behavior `Name' running callback module `Module' in its layer.
 -spec add_behavior(name(), module(), behavior_opts()) -> ok | {error, error_reason()}.
 add_behavior(Name, Module, Opts) ->
-    toroco_wiring:call({add, behavior, Name, Module, Opts}).
+    add(behavior, Name, Module, Opts).
 
 %% @doc Starts device `Name' (a `toroco_device' module) with `Opts'.
 -spec add_device(name(), module(), map()) -> ok | {error, error_reason()}.
 add_device(Name, Module, Opts) ->
-    toroco_wiring:call({add, device, Name, Module, Opts}).
+    add(device, Name, Module, Opts).
+
+add(Kind, Name, Module, Opts = #{node := Node}) when is_atom(Node) ->
+    toroco_wiring:call(Node, {add, Kind, Name, Module, maps:remove(node, Opts)});
+add(_Kind, Name, _Module, #{node := Node}) ->
+    {error, {bad_option, {Name, {node, Node}}}};
+add(Kind, Name, Module, Opts) ->
+    toroco_wiring:call({add, Kind, Name, Module, Opts}).
+
+%% The node where `Name' lives, if it is known.
+where(Name) ->
+    toroco_wiring:call({where, Name}).
+
+%% A wiring request to the server of the node where `Name' lives (the local
+%% one answers for a name it does not know).
+at(Name, Request) ->
+    case where(Name) of
+        {ok, Node} -> toroco_wiring:call(Node, Request);
+        {error, _} -> toroco_wiring:call(Request)
+    end.
+
+%% `Fun' run on the node where `Name' lives, if it is another one.
+on(Name, Local, Remote) ->
+    case where(Name) of
+        {ok, Node} when Node =/= node() ->
+            try erpc:call(Node, Remote, 10000)
+            catch error:{erpc, _} -> {error, {nodedown, Node}}
+            end;
+        _ -> Local()
+    end.
 
 %% @doc Stops a behavior and strips it from every input and inhibitor list.
 -spec remove_behavior(name()) -> ok | {error, error_reason()}.
 remove_behavior(Name) ->
-    toroco_wiring:call({remove, behavior, Name}).
+    at(Name, {remove, behavior, Name}).
 
 %% @doc Stops a device and strips it from every input and inhibitor list.
 -spec remove_device(name()) -> ok | {error, error_reason()}.
 remove_device(Name) ->
-    toroco_wiring:call({remove, device, Name}).
+    at(Name, {remove, device, Name}).
 
 %% @doc Stops input delivery and callbacks of a behavior; its latches and
 %% holds stay. Inputs arriving while suspended are dropped.
 -spec suspend_behavior(name()) -> ok | {error, error_reason()}.
 suspend_behavior(Name) ->
-    with_behavior(Name, fun toroco_behavior:suspend/1).
+    on(Name, fun() -> with_behavior(Name, fun toroco_behavior:suspend/1) end,
+       fun() -> suspend_behavior(Name) end).
 
 %% @doc Resumes a suspended behavior; each input's latched winner is
 %% re-delivered to it.
 -spec resume_behavior(name()) -> ok | {error, error_reason()}.
 resume_behavior(Name) ->
-    with_behavior(Name, fun toroco_behavior:resume/1).
+    on(Name, fun() -> with_behavior(Name, fun toroco_behavior:resume/1) end,
+       fun() -> resume_behavior(Name) end).
 
 with_behavior(Name, Fun) ->
     case toroco_wiring:call({node, Name}) of
@@ -96,17 +134,17 @@ with_behavior(Name, Fun) ->
 %% Returns once every router involved has taken in its sources' state.
 -spec set_inputs(name(), #{atom() => input_spec()}) -> ok | {error, error_reason()}.
 set_inputs(Receiver, Inputs) ->
-    toroco_wiring:call({set_inputs, Receiver, Inputs}).
+    at(Receiver, {set_inputs, Receiver, Inputs}).
 
 %% @doc Sets the inhibitors of outputs of `Emitter'; `[]' removes them.
 -spec set_inhibitors(name(), #{atom() => [source_spec()]}) -> ok | {error, error_reason()}.
 set_inhibitors(Emitter, Outputs) ->
-    toroco_wiring:call({set_inhibitors, Emitter, Outputs}).
+    at(Emitter, {set_inhibitors, Emitter, Outputs}).
 
 %% @doc Each event on one of `Sources' restarts `Behavior' from `init/1'.
 -spec set_reset(name(), [source_spec()]) -> ok | {error, error_reason()}.
 set_reset(Behavior, Sources) ->
-    toroco_wiring:call({set_reset, Behavior, Sources}).
+    at(Behavior, {set_reset, Behavior, Sources}).
 
 %% @doc Applies a wiring file: `file:consult/1' terms among
 %% `{behavior, Name, Module, Opts}', `{device, Name, Module, Opts}',
@@ -115,7 +153,7 @@ set_reset(Behavior, Sources) ->
 -spec load_wiring(file:name_all()) -> ok | {error, error_reason()}.
 load_wiring(File) ->
     case file:consult(File) of
-        {ok, Terms} -> toroco_wiring:call({load, Terms});
+        {ok, Terms} -> load(Terms);
         {error, Reason} -> {error, {wiring_file, File, Reason}}
     end.
 
@@ -124,6 +162,36 @@ load_wiring(File) ->
 %%====================================================================
 
 %% @doc As if `Src' had sent `Value' (a momentary event, no hold).
+%% A file whose every behavior and device is on this node is checked whole
+%% and applied atomically; one that places some on other nodes is applied
+%% term by term, in order, each where it acts, stopping at the first error.
+load(Terms) ->
+    Here = fun({K, _, _, #{node := N}}) when K =:= behavior; K =:= device -> N =:= node();
+              (_) -> true
+           end,
+    Local = fun({K, Name, M, Opts = #{node := _}}) when K =:= behavior; K =:= device ->
+                    {K, Name, M, maps:remove(node, Opts)};
+               (T) -> T
+            end,
+    case lists:all(Here, Terms) of
+        true -> toroco_wiring:call({load, [Local(T) || T <- Terms]});
+        false -> load_each(Terms)
+    end.
+
+load_each([]) -> ok;
+load_each([T | Ts]) ->
+    case load_term(T) of
+        ok -> load_each(Ts);
+        Err -> Err
+    end.
+
+load_term({behavior, Name, M, Opts}) -> add_behavior(Name, M, Opts);
+load_term({device, Name, M, Opts}) -> add_device(Name, M, Opts);
+load_term({inputs, R, Map}) -> set_inputs(R, Map);
+load_term({inhibitors, E, Map}) -> set_inhibitors(E, Map);
+load_term({reset, B, Srcs}) -> set_reset(B, Srcs);
+load_term(Other) -> {error, {bad_wiring_term, Other}}.
+
 -spec inject(source(), term()) -> ok | {error, error_reason()}.
 inject(Src, Value) ->
     inject(Src, Value, #{}).
@@ -132,7 +200,19 @@ inject(Src, Value) ->
 %% `#{hold => H}' a `send' with that hold.
 -spec inject(source(), term(), #{latch => boolean(), hold => hold()}) ->
           ok | {error, error_reason()}.
-inject({E, Out} = Src, Value, Opts) when is_atom(E), is_atom(Out), is_map(Opts) ->
+inject({E, _} = Src, Value, Opts) when is_atom(E), is_map(Opts) ->
+    case whereis(toroco_names:process(E)) =:= undefined andalso where(E) of
+        {ok, Node} when Node =/= node() ->
+            on(E, fun() -> {error, {unknown_name, E}} end,
+               fun() -> inject(Src, Value, Opts) end);
+        _ -> inject_here(Src, Value, Opts)
+    end;
+inject(Src, _Value, Opts) when is_map(Opts) ->
+    {error, {bad_source, Src}};
+inject(Src, _Value, Opts) ->
+    {error, {bad_option, {Src, Opts}}}.
+
+inject_here({E, Out} = Src, Value, Opts) when is_atom(E), is_atom(Out), is_map(Opts) ->
     %% Straight to the emitter; the wiring table tells an unknown name from
     %% one that is not running.
     case {inject_op(Src, Value, Opts), ?IS_SELF(E)} of
@@ -148,10 +228,8 @@ inject({E, Out} = Src, Value, Opts) when is_atom(E), is_atom(Out), is_map(Opts) 
             end;
         {Err, _} -> Err
     end;
-inject(Src, _Value, Opts) when is_map(Opts) ->
-    {error, {bad_source, Src}};
-inject(Src, _Value, Opts) ->
-    {error, {bad_option, {Src, Opts}}}.
+inject_here(Src, _Value, _Opts) ->
+    {error, {bad_source, Src}}.
 
 inject_op(Src, Value, Opts) ->
     case {maps:keys(maps:without([latch, hold], Opts)), Opts} of
@@ -179,7 +257,8 @@ inspect() ->
 %% latches and last value, outputs with their inhibition and latch (SPEC §6).
 -spec inspect(name()) -> map() | {error, error_reason()}.
 inspect(Name) ->
-    toroco_inspect:describe(Name).
+    on(Name, fun() -> toroco_inspect:describe(Name) end,
+       fun() -> toroco_inspect:describe(Name) end).
 
 %% @doc Prints a table of the running network (for the remote shell).
 -spec top() -> ok.
@@ -191,11 +270,24 @@ top() ->
 %% 60) or a rate above `rate' per second (default 50) stop it.
 -spec watch(name() | {name(), atom()}, map()) -> ok | {error, error_reason()}.
 watch(What, Opts) ->
-    toroco_watch:start(What, Opts).
+    %% A thing on another node is watched there, printing here.
+    Name = case What of
+               {N, _} -> N;
+               N -> N
+           end,
+    case is_atom(Name) andalso is_map(Opts) andalso where(Name) of
+        {ok, Node} when Node =/= node() ->
+            Io = maps:get(io, Opts, group_leader()),
+            try erpc:call(Node, toroco_watch, start, [What, Opts#{io => Io}], 10000)
+            catch error:{erpc, _} -> {error, {nodedown, Node}}
+            end;
+        _ -> toroco_watch:start(What, Opts)
+    end.
 
 %% @doc Stops a running watch.
 -spec unwatch() -> ok.
 unwatch() ->
+    _ = erpc:multicall([N || N <- toroco_wiring:peers(), N =/= node()], toroco_watch, stop, [], 5000),
     toroco_watch:stop().
 
 %% @doc The wiring as a Graphviz `dot' graph.
@@ -220,9 +312,20 @@ reload(Module) ->
 %% dies is unsubscribed.
 -spec subscribe_events(toroco_tap:opts()) -> {ok, reference()} | {error, error_reason()}.
 subscribe_events(Opts) ->
-    toroco_tap:subscribe(Opts).
+    %% A robot on several nodes: the other nodes' events come through a
+    %% relay on each (toroco_tap_relay).
+    case toroco_tap:subscribe(Opts) of
+        {ok, Ref} ->
+            _ = case [N || N <- toroco_wiring:peers(), N =/= node()] of
+                    [] -> ok;
+                    Others -> erpc:multicall(Others, toroco_tap_relay, start, [self(), Ref, Opts], 6000)
+                end,
+            {ok, Ref};
+        Err -> Err
+    end.
 
 %% @doc Ends a subscription.
 -spec unsubscribe_events(reference()) -> ok.
 unsubscribe_events(Ref) ->
-    toroco_tap:unsubscribe(Ref).
+    ok = toroco_tap:unsubscribe(Ref),
+    toroco_tap_relay:stop(Ref).

@@ -241,7 +241,11 @@ handle_event(info, ?WIRE_SUB({_, Out} = Src, Consumer), _S, E = #e{outputs = Out
     case Outs of
         #{Out := Consumers} ->
             toroco_wire:send(Consumer, ?WIRE_STATE(emitter, Src, self(), latch(Out, E))),
-            {keep_state, E#e{outputs = Outs#{Out := lists:usort([Consumer | Consumers])}}};
+            E1 = E#e{outputs = Outs#{Out := lists:usort([Consumer | Consumers])}},
+            case toroco_wire:remote(Consumer) andalso not has_remote(E) of
+                true -> {keep_state, E1, [alive_timer()]};
+                false -> {keep_state, E1}
+            end;
         #{} ->
             toroco_wire:send(Consumer, ?WIRE_STATE(emitter, Src, self(), none)),
             keep_state_and_data
@@ -251,6 +255,17 @@ handle_event(info, ?WIRE_UNSUB({_, Out}, Consumer), _S, E = #e{outputs = Outs}) 
         #{Out := Consumers} ->
             {keep_state, E#e{outputs = Outs#{Out := lists:delete(Consumer, Consumers)}}};
         #{} -> keep_state_and_data
+    end;
+%% Consumers on other nodes hear from each output now and then, with its
+%% latch, so they can tell a silent node from a quiet output (SPEC §13).
+handle_event({timeout, '$toroco_alive'}, beat, _S, E = #e{outputs = Outs, name = Name}) ->
+    maps:foreach(fun(Out, Consumers) ->
+                         Msg = ?WIRE_ALIVE(emitter, {Name, Out}, latch(Out, E)),
+                         [toroco_wire:send(C, Msg) || C <- Consumers, toroco_wire:remote(C)]
+                 end, Outs),
+    case has_remote(E) of
+        true -> {keep_state_and_data, [alive_timer()]};
+        false -> keep_state_and_data
     end;
 handle_event({call, From}, {'$toroco_inject', Out, Op}, _S, E = #e{outputs = Outs, name = N}) ->
     case Outs of
@@ -474,6 +489,12 @@ send_all([], _Msg) -> ok;
 send_all([C | Cs], Msg) ->
     toroco_wire:send(C, Msg),
     send_all(Cs, Msg).
+
+has_remote(#e{outputs = Outs}) ->
+    lists:any(fun toroco_wire:remote/1, lists:append(maps:values(Outs))).
+
+alive_timer() ->
+    {{timeout, '$toroco_alive'}, toroco_wire:keepalive_ms(), beat}.
 
 relatch(Out, {set, V}, E = #e{latches = L}) ->
     E#e{latches = L#{Out => V}};

@@ -19,6 +19,16 @@
 %% answered, and the held-back events follow. Calls (the wiring server's
 %% `rewire', `ready', `unwire', and inspection's `info') wait in the
 %% mailbox meanwhile, so what they see has the change in.
+%%
+%% Remote sources (SPEC §13). A source whose upstream is on another node is
+%% subscribed to again when no incarnation of it answers (it died, its node
+%% is away, or it restarted and cannot know this consumer): at once when
+%% the wiring server says its node is back, else with a backoff of 100 ms
+%% doubling to 2 s, bounded to `resubscribe_tries' (30). Such a source is
+%% also let go after `max_age' ms of silence (per wire, else app env
+%% `remote_max_age_ms'): its holds end and its latch clears as if it had
+%% died; the next word from it (an event, or the keep-alive with its latch)
+%% takes it back.
 -module(toroco_consumer).
 -behaviour(gen_statem).
 
@@ -61,6 +71,13 @@
             data :: kind_data(),
             links = toroco_wire:new_links() :: toroco_wire:links(),
             timer = infinity :: infinity | integer(),
+            %% remote sources: when each was last heard (monotonic ms), its
+            %% max age, those let go as silent, and resubscription tries
+            heard = #{} :: #{key() => integer()},
+            ages = #{} :: #{key() => pos_integer()},
+            stale = [] :: [key()],
+            stale_at = infinity :: infinity | integer(),
+            tries = 0 :: non_neg_integer(),
             sync = none :: none | {toroco_wire:sync(), gen_statem:from() | none, map()}}).
 
 %%====================================================================
@@ -128,10 +145,26 @@ init({Mod, Key, Caller}) ->
 -spec handle_event(gen_statem:event_type(), term(), ready | syncing, #c{}) ->
           gen_statem:event_handler_result(ready | syncing).
 %% The event path.
-handle_event(info, ?WIRE_EVENT(Src, Op), St, C) ->
+handle_event(info, ?WIRE_EVENT(Src, Op), St, C = #c{heard = H}) when map_size(H) =:= 0 ->
     op(emitter, Src, Op, St, C);
-handle_event(info, ?WIRE_GATED(Src, Op), St, C) ->
+handle_event(info, ?WIRE_GATED(Src, Op), St, C = #c{heard = H}) when map_size(H) =:= 0 ->
     op(gate, Src, Op, St, C);
+handle_event(info, ?WIRE_EVENT(Src, Op), St, C) ->
+    with_heard(Src, fun(C1) -> op(emitter, Src, Op, St, C1) end, C);
+handle_event(info, ?WIRE_GATED(Src, Op), St, C) ->
+    with_heard(Src, fun(C1) -> op(gate, Src, Op, St, C1) end, C);
+handle_event(info, ?WIRE_ALIVE(Tag, Src, Latch), _, C = #c{links = L, stale = Stale, mod = Mod}) ->
+    case toroco_wire:carries(Tag, Src, L) andalso lists:member(Src, Stale) of
+        %% Heard again after its silence: its latch comes back.
+        true -> with_heard(Src, fun(C1) -> steps(Mod:late(Src, Latch), C1) end, C);
+        false -> {keep_state, heard(Src, C)}
+    end;
+handle_event({timeout, stale}, check, _, C) ->
+    silent(C#c{stale_at = infinity});
+handle_event({timeout, resub}, again, _, C) ->
+    resubscribe(C);
+handle_event(info, '$toroco_resubscribe', _, C) ->
+    resubscribe(C#c{tries = 0});
 handle_event({timeout, hold}, expire, _, C) ->
     steps([tick], C#c{timer = infinity});
 %% Upstreams: answers, new incarnations, deaths.
@@ -167,7 +200,8 @@ handle_event(info, {'DOWN', Ref, process, Pid, _} = Down, _, C = #c{links = L, s
             case toroco_wire:down(Ref, Pid, L) of
                 %% An emitter's (or gate's) death ends its holds and clears
                 %% its latches.
-                {Srcs, L1} -> steps([{op, S, unset} || S <- Srcs], C#c{links = L1});
+                {Srcs, L1} ->
+                    remote(steps([{op, S, unset} || S <- Srcs], C#c{links = L1}));
                 ignore -> kind(info, Down, C)
             end
     end;
@@ -214,7 +248,9 @@ op(Tag, Src, Op, St, C = #c{links = L, sync = Sync}) ->
 
 late(Tag, Src, Pid, Latch, _St, C = #c{links = L, mod = Mod}) ->
     case toroco_wire:late_state(Tag, Src, Pid, L) of
-        {ok, L1} -> steps(Mod:late(Src, Latch), C#c{links = L1});
+        {ok, L1} ->
+            C1 = C#c{links = L1, stale = lists:delete(Src, C#c.stale)},
+            remote(steps(Mod:late(Src, Latch), C1));
         ignore -> keep_state_and_data
     end.
 
@@ -271,12 +307,14 @@ maybe_finish(C = #c{sync = {Sync, _, _}}) ->
 finish(C = #c{sync = {Sync, From, Cfg}, links = L, mod = Mod, data = D}) ->
     {L1, Synced, Reset} = toroco_wire:finish_sync(Sync, L),
     D1 = Mod:settled(Mod:rewired(Cfg, Synced, Reset, toroco_clock:now_ms(), D)),
-    {C1, Actions} = timer(C#c{links = L1, data = D1, sync = none}),
+    {C1, Actions} = timer(C#c{links = L1, data = D1, sync = none,
+                              ages = ages(Cfg), stale = C#c.stale -- Reset}),
     Reply = case From of
                 none -> [];
                 _ -> [{reply, From, ok}]
             end,
-    {ready, C1, [{{timeout, sync}, cancel} | Reply ++ Actions]}.
+    {C2, More} = track(C1),
+    {ready, C2, [{{timeout, sync}, cancel} | Reply ++ Actions ++ More]}.
 
 %% A consumer answers once its own wait is over, so the wiring server waits
 %% a little longer than that, and never forever.
@@ -286,6 +324,98 @@ answer_timeout() ->
 %% The consumer's own address, as its upstreams know it.
 me(#c{mod = Mod, key = Key}) ->
     toroco_wire:address(Mod:reg(Key)).
+
+%%====================================================================
+%% Remote sources
+%%====================================================================
+
+ages(Cfg) -> maps:get(max_age, Cfg, #{}).
+
+%% A word from a remote source: one that was let go as silent comes back.
+with_heard(Src, Fun, C = #c{stale = Stale}) ->
+    case lists:member(Src, Stale) of
+        false -> Fun(heard(Src, C));
+        true ->
+            case Fun(heard(Src, C#c{stale = lists:delete(Src, Stale)})) of
+                {keep_state, _} = R -> remote(R);
+                {keep_state, _, _} = R -> remote(R);
+                R -> R
+            end
+    end.
+
+heard(Src, C = #c{heard = H}) ->
+    case H of
+        #{Src := _} -> C#c{heard = H#{Src := heard_now()}};
+        #{} -> C
+    end.
+
+heard_now() -> erlang:monotonic_time(millisecond).
+
+%% Adds the timers of remote sources to a handler's result.
+remote({keep_state, C}) -> remote({keep_state, C, []});
+remote({keep_state, C, Actions}) ->
+    {C1, More} = track(C),
+    {keep_state, C1, Actions ++ More}.
+
+%% Which remote sources are listened to (their silence is timed) and which
+%% are orphans (subscribed to again); the timers that follow.
+track(C = #c{links = L, heard = H, tries = Tries}) ->
+    Listened = [S || S <- remote_sources(L), not lists:member(S, toroco_wire:orphans(L))],
+    Now = heard_now(),
+    H1 = maps:from_list([{S, maps:get(S, H, Now)} || S <- Listened]),
+    C1 = C#c{heard = H1},
+    {C2, Resub} = case toroco_wire:orphans(L) of
+                      [] -> {C1#c{tries = 0}, [{{timeout, resub}, cancel}]};
+                      _ when Tries =:= 0 -> {C1, [{{timeout, resub}, 100, again}]};
+                      _ -> {C1, []}
+                  end,
+    {C3, Stale} = stale_timer(C2),
+    {C3, Resub ++ Stale}.
+
+remote_sources(#{ups := Ups}) ->
+    [S || {S, {_, {_, _}}} <- maps:to_list(Ups)].
+
+stale_timer(C = #c{heard = H, ages = Ages, stale = Stale, stale_at = Old}) ->
+    Due = [T + maps:get(S, Ages, toroco_wire:max_age_ms()) || {S, T} <- maps:to_list(H),
+                                                              not lists:member(S, Stale)],
+    case Due of
+        [] when Old =:= infinity -> {C, []};
+        [] -> {C#c{stale_at = infinity}, [{{timeout, stale}, cancel}]};
+        _ ->
+            At = lists:min(Due),
+            case At of
+                Old -> {C, []};
+                _ -> {C#c{stale_at = At}, [{{timeout, stale}, At, check, [{abs, true}]}]}
+            end
+    end.
+
+%% The silence timer fired: sources silent for their max age are let go.
+silent(C = #c{heard = H, ages = Ages, stale = Stale}) ->
+    Now = heard_now(),
+    Gone = [S || {S, T} <- maps:to_list(H), not lists:member(S, Stale),
+                 Now >= T + maps:get(S, Ages, toroco_wire:max_age_ms())],
+    _ = Gone =/= [] andalso
+        logger:notice("toroco: ~p ~p let go of silent remote sources ~p",
+                      [(C#c.mod):kind(), C#c.key, Gone], #{domain => [toroco, wire]}),
+    remote(steps([{op, S, unset} || S <- Gone], C#c{stale = Stale ++ Gone})).
+
+resubscribe(C = #c{links = L, tries = Tries}) ->
+    case toroco_wire:orphans(L) of
+        [] ->
+            {keep_state, C#c{tries = 0}};
+        Orphans ->
+            toroco_wire:resubscribe(Orphans, L, me(C)),
+            case Tries < resubscribe_tries() of
+                true ->
+                    Backoff = min(2000, 100 bsl min(Tries, 5)),
+                    {keep_state, C#c{tries = Tries + 1}, [{{timeout, resub}, Backoff, again}]};
+                false ->
+                    {keep_state, C}
+            end
+    end.
+
+resubscribe_tries() ->
+    application:get_env(toroco, resubscribe_tries, 30).
 
 sync_timeout() ->
     application:get_env(toroco, sync_timeout_ms, 5000).

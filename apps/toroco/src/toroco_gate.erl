@@ -22,7 +22,9 @@
 
 -record(g, {core = toroco_gate_core:new() :: toroco_gate_core:core(),
             %% member -> the addresses of its subscribers downstream
-            subs = #{} :: #{{atom(), atom()} => [toroco_wire:address()]}}).
+            subs = #{} :: #{{atom(), atom()} => [toroco_wire:address()]},
+            %% whether a keep-alive for remote subscribers is on its way
+            beating = false :: boolean()}).
 
 %%====================================================================
 %% API
@@ -86,20 +88,43 @@ late(_Src, _NoLatch) -> [].
 handle(info, ?WIRE_SUB(Src, Consumer), D = #g{core = C, subs = Subs}) ->
     case lists:member(Src, toroco_gate_core:members(C)) of
         true ->
-            State = case toroco_gate_core:is_inhibited(Src, C) of
-                        true -> inhibited;
-                        false -> toroco_gate_core:state_for(Src, C)
-                    end,
+            State = member_state(Src, C),
             toroco_wire:send(Consumer, ?WIRE_STATE(gate, Src, self(), State)),
-            {events, [], D#g{subs = Subs#{Src => lists:usort([Consumer | maps:get(Src, Subs, [])])}}};
+            D1 = D#g{subs = Subs#{Src => lists:usort([Consumer | maps:get(Src, Subs, [])])}},
+            {events, [], beat(D1)};
         false ->
             toroco_wire:send(Consumer, ?WIRE_STATE(gate, Src, self(), none)),
             {events, [], D}
     end;
 handle(info, ?WIRE_UNSUB(Src, Consumer), D = #g{subs = Subs}) ->
     {events, [], D#g{subs = Subs#{Src => lists:delete(Consumer, maps:get(Src, Subs, []))}}};
+handle(info, '$toroco_alive', D = #g{core = C, subs = Subs}) ->
+    %% Remote subscribers hear from each member now and then, with what
+    %% they would get on subscribing (SPEC §13).
+    maps:foreach(fun(M, Consumers) ->
+                         Msg = ?WIRE_ALIVE(gate, M, member_state(M, C)),
+                         [toroco_wire:send(R, Msg) || R <- Consumers, toroco_wire:remote(R)]
+                 end, Subs),
+    {events, [], beat(D#g{beating = false})};
 handle(_Type, _Content, _D) ->
     unknown.
+
+member_state(M, C) ->
+    case toroco_gate_core:is_inhibited(M, C) of
+        true -> inhibited;
+        false -> toroco_gate_core:state_for(M, C)
+    end.
+
+%% The keep-alive is a plain timer message: a gate's timeouts belong to
+%% its shell.
+beat(D = #g{beating = true}) -> D;
+beat(D = #g{subs = Subs}) ->
+    case lists:any(fun toroco_wire:remote/1, lists:append(maps:values(Subs))) of
+        true ->
+            erlang:send_after(toroco_wire:keepalive_ms(), self(), '$toroco_alive'),
+            D#g{beating = true};
+        false -> D
+    end.
 
 -spec info(integer(), #g{}) -> #{{atom(), atom()} => map()}.
 info(Now, #g{core = C}) ->

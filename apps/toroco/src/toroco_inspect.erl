@@ -11,7 +11,7 @@
 %% </ul>
 -module(toroco_inspect).
 
--export([overview/0, describe/1]).
+-export([overview/0, describe/1, local_overview/0]).
 
 %% @doc The network: behaviors and devices by name, the layers and the
 %% layers taken out (`toroco:inspect/0').
@@ -19,19 +19,53 @@
                       layers := #{non_neg_integer() => [atom()]},
                       removed_layers := [non_neg_integer()]}.
 overview() ->
+    Local = local_overview(),
+    case [N || N <- toroco_wiring:peers(), N =/= node()] of
+        [] ->
+            Local;
+        Others ->
+            %% The whole robot: every connected node's own part, merged;
+            %% `nodes' says where each name is.
+            Answers = lists:zip(Others, erpc:multicall(Others, ?MODULE, local_overview, [], 5000)),
+            Parts = [Local#{node => node()} | [P#{node => N} || {N, {ok, P}} <- Answers]],
+            Merge = fun(K) -> lists:usort(lists:append([maps:get(K, P) || P <- Parts])) end,
+            #{behaviors => Merge(behaviors), devices => Merge(devices),
+              layers => lists:foldl(
+                          fun(#{layers := Ls}, Acc) ->
+                                  maps:fold(fun(L, Ns, A) ->
+                                                    maps:update_with(L, fun(Old) -> lists:usort(Old ++ Ns) end,
+                                                                     Ns, A)
+                                            end, Acc, Ls)
+                          end, #{}, Parts),
+              removed_layers => Merge(removed_layers),
+              nodes => maps:from_list([{Name, N} || #{node := N, behaviors := Bs, devices := Ds} <- Parts,
+                                                     Name <- Bs ++ Ds]),
+              name_clashes => lists:usort(lists:append([maps:get(name_clashes, P, []) || P <- Parts]))}
+    end.
+
+%% @doc This node's part of the robot.
+-spec local_overview() -> #{behaviors := [atom()], devices := [atom()],
+                            layers := #{non_neg_integer() => [atom()]},
+                            removed_layers := [non_neg_integer()]}.
+local_overview() ->
     {W, Removed} = toroco_wiring:call(wiring),
     Nodes = lists:sort(maps:to_list(toroco_wiring_core:nodes(W))),
     Behaviors = [{N, L} || {N, #{kind := behavior, layer := L}} <- Nodes],
-    #{behaviors => [N || {N, _} <- Behaviors],
-      devices => [N || {N, #{kind := device}} <- Nodes],
-      layers => lists:foldl(fun({N, L}, Acc) ->
-                                    maps:update_with(L, fun(Ns) -> Ns ++ [N] end, [N], Acc)
-                            end, #{}, Behaviors),
-      removed_layers => Removed}.
+    Base = #{behaviors => [N || {N, _} <- Behaviors],
+             devices => [N || {N, #{kind := device}} <- Nodes],
+             layers => lists:foldl(fun({N, L}, Acc) ->
+                                           maps:update_with(L, fun(Ns) -> Ns ++ [N] end, [N], Acc)
+                                   end, #{}, Behaviors),
+             removed_layers => Removed},
+    %% A robot of one node keeps the map of SPEC §6 as it is.
+    Clashes = toroco_wiring:call(clashes),
+    case map_size(toroco_wiring_core:remote(W)) =:= 0 andalso Clashes =:= []
+        andalso toroco_wiring:peers() =:= [node()] of
+        true -> Base;
+        false -> Base#{nodes => maps:from_list([{N, node()} || {N, _} <- Nodes]),
+                       name_clashes => Clashes}
+    end.
 
-%% @doc One behavior or device (`toroco:inspect/1', SPEC §6): its status,
-%% each input with sources, winner, holds, latches and last value, each
-%% output with its inhibition and latch; a device's own counters.
 -spec describe(atom()) -> map() | {error, term()}.
 describe(Name) ->
     case toroco_wiring:call({node, Name}) of
@@ -48,7 +82,7 @@ node_map(Name, #{kind := Kind, module := M, layer := L, inputs := Ins, outputs :
                  {error, _} -> #{status => down, latches => #{}}
              end,
     Latches = maps:get(latches, Engine),
-    Base = #{name => Name, kind => Kind, module => M, layer => L,
+    Base = #{name => Name, kind => Kind, module => M, layer => L, node => node(),
              status => maps:get(status, Engine),
              inputs => maps:from_list([{I, input(Name, I, Wired)} || I <- Ins]),
              outputs => maps:from_list(

@@ -9,6 +9,7 @@
 %% ├── toroco_layers_sup     one supervisor per layer
 %% │   ├── toroco_layer_sup 0    behaviors of layer 0
 %% │   ├── toroco_layer_sup 1    behaviors of layer 1 ...
+%% ├── pg (scope toroco)     where the wiring servers of connected nodes meet (SPEC §13)
 %% └── toroco_wiring_sup
 %%     └── toroco_wiring     the wiring server: validates and applies changes
 %% '''
@@ -40,4 +41,6 @@ init([]) ->
                   Sup(toroco_routers_sup),
                   Sup(toroco_devices_sup),
                   Sup(toroco_layers_sup),
+                  #{id => pg, start => {pg, start_link, [toroco]}, type => worker,
+                    shutdown => 5000, modules => [pg]},
                   Sup(toroco_wiring_sup)]}}.

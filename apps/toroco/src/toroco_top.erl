@@ -12,7 +12,7 @@
 %% </ul>
 -module(toroco_top).
 
--export([print/0, iodata/0]).
+-export([print/0, iodata/0, row/1]).
 
 %% Cells longer than this are cut (the last column of a table is not).
 -define(CELL, 40).
@@ -36,9 +36,12 @@ print() ->
 %% and the devices' own counters.
 -spec iodata() -> iodata().
 iodata() ->
-    #{behaviors := Bs, devices := Ds, layers := Layers, removed_layers := Removed} =
+    #{behaviors := Bs, devices := Ds, layers := Layers, removed_layers := Removed} = Overview =
         toroco_inspect:overview(),
-    Nodes = [row(N) || N <- Bs ++ Ds],
+    %% A robot on several nodes: each row is read where its thing lives,
+    %% and a column says which node that is.
+    Where = maps:get(nodes, Overview, #{}),
+    Nodes = [row_at(maps:get(N, Where, node()), N) || N <- Bs ++ Ds],
     Sorted = lists:sort(fun(A, B) -> order(A) =< order(B) end, Nodes),
     {UpMs, _} = erlang:statistics(wall_clock),
     [io_lib:format("toroco top  ~w  ~ts  up ~ts~n",
@@ -53,11 +56,20 @@ iodata() ->
                         [] -> "none";
                         _ -> lists:join(" ", [integer_to_list(L) || L <- Removed])
                     end, "\n\n",
-     table(["NODE", "KIND", "LAYER", "STATUS", "STATE", "QUEUE", "RESTARTS", "MODULE"],
-           [[atom_to_list(N), atom_to_list(K), text(L), atom_to_list(St), value(S),
-             text(Q), text(R), atom_to_list(M)]
-            || #{name := N, kind := K, layer := L, status := St, state := S, queue := Q,
-                 restarts := R, module := M} <- Sorted]),
+     case map_size(Where) of
+         0 ->
+             table(["NODE", "KIND", "LAYER", "STATUS", "STATE", "QUEUE", "RESTARTS", "MODULE"],
+                   [[atom_to_list(N), atom_to_list(K), text(L), atom_to_list(St), value(S),
+                     text(Q), text(R), atom_to_list(M)]
+                    || #{name := N, kind := K, layer := L, status := St, state := S, queue := Q,
+                         restarts := R, module := M} <- Sorted]);
+         _ ->
+             table(["NODE", "ON", "KIND", "LAYER", "STATUS", "STATE", "QUEUE", "RESTARTS", "MODULE"],
+                   [[atom_to_list(N), atom_to_list(maps:get(N, Where)), atom_to_list(K), text(L),
+                     atom_to_list(St), value(S), text(Q), text(R), atom_to_list(M)]
+                    || #{name := N, kind := K, layer := L, status := St, state := S, queue := Q,
+                         restarts := R, module := M} <- Sorted])
+     end,
      section("INPUT", ["WINNER", "HOLDS (ms left)", "LATCHED", "LAST"],
              [[port(N, I), source(W), holds(Hs), latches(Lt), last(Last)]
               || #{name := N, info := Info} <- Sorted,
@@ -72,6 +84,15 @@ iodata() ->
              [[atom_to_list(N), counters(C)]
               || #{name := N, info := #{device := C}} <- Sorted, is_map(C)])].
 
+row_at(Node, N) when Node =:= node() -> row(N);
+row_at(Node, N) ->
+    try erpc:call(Node, ?MODULE, row, [N], 5000)
+    catch error:{erpc, _} -> #{name => N, info => #{}, kind => '?', layer => '?', module => '?',
+                               status => down, state => '-', queue => '-', restarts => '-'}
+    end.
+
+%% @doc One row of the table, read on the node where `N' lives.
+-spec row(atom()) -> map().
 row(N) ->
     Info = case toroco_inspect:describe(N) of
                #{} = I -> I;

@@ -29,6 +29,12 @@
 %%         its latch as a `set' when freed</td><td>none</td></tr>
 %% <tr><td>`WIRE_HELLO(Kind, Src, Pid)'</td><td>upstream → consumers</td>
 %%     <td>a new incarnation starts: nothing of the last one holds</td><td>none</td></tr>
+%% <tr><td>`WIRE_ALIVE(Kind, Src, Latch)'</td><td>upstream → consumers on other nodes</td>
+%%     <td>every `remote_keepalive_ms' (app env, default 100) while it has
+%%         remote consumers; `Latch' as in `WIRE_STATE'</td>
+%%     <td>none; a consumer that hears nothing of a remote source for its
+%%         `max_age' lets it go (as if it had died), and takes its latch back
+%%         from the next one</td></tr>
 %% <tr><td>`WIRE_RX(Input, Pid)'</td><td>receiver → router</td>
 %%     <td>the receiver (re)starts, resumes, or asks for a redelivery</td>
 %%     <td>the router forgets the last value and delivers the winner's latch</td></tr>
@@ -50,16 +56,16 @@
 
 -include("toroco_wire.hrl").
 
--export([address/1, send/2, call/4, start_opts/0]).
+-export([address/1, send/2, call/4, start_opts/0, keepalive_ms/0, max_age_ms/0, remote/1]).
 -export([new_links/0, start_sync/4, sync_answer/5, sync_down/2, sync_expire/1, sync_done/1,
          sync_fresh/3, finish_sync/2, detach_all/2, hello/4, late_state/4, down/3, carries/3,
-         hold_timer/2]).
+         hold_timer/2, orphans/1, resubscribe/3]).
 -export_type([address/0, links/0, sync/0, upstream/0]).
 
 -type source() :: {atom(), atom()}.
 %% Where a process is reached: its registered name on its node, or its pid.
 -type address() :: {atom(), node()} | pid().
--type upstream() :: {emitter | gate, atom()}.
+-type upstream() :: {emitter | gate, atom() | {atom(), node()}}.
 -type latch() :: toroco_router_core:latch().
 %% What a consumer knows of its upstreams: where each source comes from, the
 %% pid of the incarnation it currently listens to, and one monitor per pid.
@@ -79,15 +85,19 @@
 %% Addresses and sends
 %%====================================================================
 
-%% @doc The address of a registered process of this node.
--spec address(atom()) -> address().
+%% @doc The address of a registered process: of this node, or already
+%% addressed on another one (a remote upstream of the plan).
+-spec address(atom() | {atom(), node()}) -> address().
+address({Reg, Node}) -> {Reg, Node};
 address(Reg) -> {Reg, node()}.
 
 %% @doc Sends to an address; one that names no process (it is restarting or
-%% gone) swallows the message, as a cut wire would.
+%% gone), or a node that is not connected or whose connection is congested
+%% (a frozen peer), swallows the message, as a cut wire would: the event
+%% path never waits for another node.
 -spec send(address() | atom(), term()) -> ok.
 send(To, Msg) ->
-    try erlang:send(To, Msg, [noconnect]) of
+    try erlang:send(To, Msg, [noconnect, nosuspend]) of
         _ -> ok
     catch
         error:badarg -> ok
@@ -125,7 +135,7 @@ start_sync(NewUps, Links = #{ups := OldUps}, Me, Caller) ->
     Pending = maps:fold(
                 fun(S, {_, Reg} = Up, Acc) ->
                         subscribe(S, Up, Me),
-                        case whereis(Reg) of
+                        case is_atom(Reg) andalso whereis(Reg) of
                             Caller -> Acc;
                             _ -> Acc#{S => erlang:monitor(process, address(Reg))}
                         end
@@ -272,8 +282,28 @@ forget(Src, Links = #{pids := Pids, mons := Mons}) ->
         #{} -> Links
     end.
 
+%% A subscription may be the first message to another node: it connects.
 subscribe(Src, {_Tag, Up}, Me) ->
-    send(address(Up), ?WIRE_SUB(Src, Me)).
+    try erlang:send(address(Up), ?WIRE_SUB(Src, Me), [nosuspend]) of
+        _ -> ok
+    catch
+        error:badarg -> ok
+    end.
+
+%% @doc The sources of remote upstreams that this consumer hears from no
+%% incarnation (it died, its node is away, or it never answered): they are
+%% subscribed to again, since a remote upstream that restarts cannot know
+%% this consumer from its own node's wiring.
+-spec orphans(links()) -> [source()].
+orphans(#{ups := Ups, pids := Pids}) ->
+    [S || {S, {_, {_, _}}} <- maps:to_list(Ups), not maps:is_key(S, Pids)].
+
+%% @doc Subscribes again to the upstreams of `Srcs' (answers come as late
+%% states).
+-spec resubscribe([source()], links(), address()) -> ok.
+resubscribe(Srcs, #{ups := Ups}, Me) ->
+    _ = [subscribe(S, maps:get(S, Ups), Me) || S <- Srcs],
+    ok.
 
 unsubscribe(Src, {_Tag, Up}, Me) ->
     send(address(Up), ?WIRE_UNSUB(Src, Me)).
@@ -289,3 +319,18 @@ unsubscribe(Src, {_Tag, Up}, Me) ->
 -spec start_opts() -> [gen_statem:start_opt()].
 start_opts() ->
     [{hibernate_after, application:get_env(toroco, hibernate_after_ms, 5000)}].
+
+%% @doc How often an upstream tells its remote consumers it is alive.
+-spec keepalive_ms() -> pos_integer().
+keepalive_ms() ->
+    application:get_env(toroco, remote_keepalive_ms, 100).
+
+%% @doc How long a consumer waits on a silent remote source by default.
+-spec max_age_ms() -> pos_integer().
+max_age_ms() ->
+    application:get_env(toroco, remote_max_age_ms, 300).
+
+%% @doc Whether an address is on another node.
+-spec remote(address()) -> boolean().
+remote({_, Node}) -> Node =/= node();
+remote(Pid) when is_pid(Pid) -> node(Pid) =/= node().

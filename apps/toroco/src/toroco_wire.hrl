@@ -22,3 +22,6 @@
 -define(WIRE_IN(Input, Value), {'$toroco_in', Input, Value}).
 -define(WIRE_IN(Input, Value, Router), {'$toroco_in', Input, Value, Router}).
 -define(WIRE_ACK(Input), {'$toroco_ack', Input}).
+%% upstream -> its consumers on other nodes: Src is alive, with its latch
+%% (`{value, V}' or `none'), every `remote_keepalive_ms' (SPEC §13).
+-define(WIRE_ALIVE(Kind, Src, Latch), {'$toroco_alive', Kind, Src, Latch}).

@@ -10,18 +10,40 @@
 %% It also watches the layer supervisors: a layer that exceeds its restart
 %% intensity is taken out as a whole, reported with a logger error and listed
 %% in `toroco:inspect()' under `removed_layers'.
+%%
+%% Several nodes (SPEC §13): the wiring servers of connected nodes find each
+%% other in the `pg' scope `toroco' (group `wiring') and through
+%% `net_kernel:monitor_nodes/1', and tell each other what they run (their
+%% directory: names, ports, layers, gated outputs) whenever it changes, when
+%% one starts and when a node (re)connects. Each server changes only the
+%% wiring of its own node: the inputs of its receivers, the inhibitors of its
+%% emitters; a remote name takes part through what its node told. A name
+%% removed on its node leaves the wiring of every node. A name that two
+%% nodes claim (added on both sides of a partition) is reported with a
+%% logger error and in `toroco:inspect()' under `name_clashes', never merged.
 -module(toroco_wiring).
 -behaviour(gen_server).
 
--export([start_link/0, call/1, lookup/1, subs_of/1, known/1, stopping/0]).
+-export([start_link/0, call/1, call/2, lookup/1, subs_of/1, known/1, stopping/0, peers/0]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 
 -define(TABLE, toroco_wiring).
+-define(SCOPE, toroco).
+%% wiring server -> wiring server: what a node runs; `Hello' asks for the
+%% same back, `Ack' (`none' or `{Pid, Ref}') for an acknowledgement once
+%% it is applied.
+-define(DIR(Node, Dir, Hello, Ack), {'$toroco_dir', Node, Dir, Hello, Ack}).
+-define(DIR_ACK(Ref, Node), {'$toroco_dir_ack', Ref, Node}).
 
 -record(s, {wiring = toroco_wiring_core:new() :: toroco_wiring_core:wiring(),
             layers = #{} :: #{non_neg_integer() => {pid(), reference()}},
             removed = [] :: [non_neg_integer()],
-            stopping = false :: boolean()}).
+            stopping = false :: boolean(),
+            clashes = [] :: [{atom(), node()}],
+            %% changes whose answer waits for the other nodes to know them
+            telling = #{} :: #{reference() => {gen_server:from(), [node()]}},
+            %% the nodes whose wiring servers told this one what they run
+            known = [] :: [node()]}).
 
 %%====================================================================
 %% API
@@ -42,6 +64,26 @@ start_link() ->
 -spec call(term()) -> term().
 call(Request) ->
     gen_server:call(?MODULE, Request, infinity).
+
+%% @doc The same, to the wiring server of `Node'; `{error, {nodedown,
+%% Node}}' if it cannot be reached.
+-spec call(node(), term()) -> term().
+call(Node, Request) when Node =:= node() ->
+    call(Request);
+call(Node, Request) ->
+    Met = lists:member(Node, peers()) orelse
+        (net_kernel:connect_node(Node) =:= true andalso call({meet, Node}) =:= ok),
+    try Met andalso gen_server:call({?MODULE, Node}, Request, infinity) of
+        false -> {error, {nodedown, Node}};
+        Reply -> Reply
+    catch exit:{{nodedown, _}, _} -> {error, {nodedown, Node}};
+          exit:{noproc, _} -> {error, {nodedown, Node}}
+    end.
+
+%% @doc The nodes whose wiring servers this one knows, itself included.
+-spec peers() -> [node()].
+peers() ->
+    lists:usort([node() | [node(P) || P <- pg:get_members(?SCOPE, wiring)]]).
 
 %% @doc A router's or gate's configuration from the wiring table.
 -spec lookup({router | gate, term()}) -> {ok, map()} | error.
@@ -81,21 +123,26 @@ stopping() ->
 
 -spec init([]) -> {ok, #s{}}.
 init([]) ->
-    {ok, restore()}.
+    S = restore(),
+    ok = pg:join(?SCOPE, wiring, self()),
+    ok = net_kernel:monitor_nodes(true),
+    _ = [tell(N, S, [], true, none) || N <- nodes()],
+    {ok, S}.
 
--spec handle_call(term(), gen_server:from(), #s{}) -> {reply, term(), #s{}}.
-handle_call({add, Kind, Name, Module, Opts}, _From, S) ->
-    reply(add_node(Kind, Name, Module, Opts, S), S);
-handle_call({remove, Kind, Name}, {Caller, _}, S) ->
-    reply(remove_node(Kind, Name, Caller, S), S);
-handle_call({set_inputs, R, Map}, {Caller, _}, S = #s{wiring = W}) ->
-    reply(rewire(toroco_wiring_core:set_inputs(W, R, Map), Caller, S), S);
-handle_call({set_inhibitors, E, Map}, {Caller, _}, S = #s{wiring = W}) ->
-    reply(rewire(toroco_wiring_core:set_inhibitors(W, E, Map), Caller, S), S);
-handle_call({set_reset, B, Srcs}, {Caller, _}, S = #s{wiring = W}) ->
-    reply(rewire(toroco_wiring_core:set_reset(W, B, Srcs), Caller, S), S);
-handle_call({load, Terms}, {Caller, _}, S) ->
-    reply(load(Terms, Caller, S), S);
+-spec handle_call(term(), gen_server:from(), #s{}) ->
+          {reply, term(), #s{}} | {noreply, #s{}}.
+handle_call({add, Kind, Name, Module, Opts}, From, S) ->
+    reply(add_node(Kind, Name, Module, Opts, S), From, S);
+handle_call({remove, _Kind, Name} = Req, From = {Caller, _}, S) ->
+    reply(remove_node(Req, Caller, S), From, S, [Name]);
+handle_call({set_inputs, R, Map}, From = {Caller, _}, S = #s{wiring = W}) ->
+    reply(rewire(toroco_wiring_core:set_inputs(W, R, Map), Caller, S), From, S);
+handle_call({set_inhibitors, E, Map}, From = {Caller, _}, S = #s{wiring = W}) ->
+    reply(rewire(toroco_wiring_core:set_inhibitors(W, E, Map), Caller, S), From, S);
+handle_call({set_reset, B, Srcs}, From = {Caller, _}, S = #s{wiring = W}) ->
+    reply(rewire(toroco_wiring_core:set_reset(W, B, Srcs), Caller, S), From, S);
+handle_call({load, Terms}, From = {Caller, _}, S) ->
+    reply(load(Terms, Caller, S), From, S);
 handle_call({node, Name}, _From, S = #s{wiring = W}) ->
     case toroco_wiring_core:node(W, Name) of
         {ok, Info} ->
@@ -108,6 +155,21 @@ handle_call({node, Name}, _From, S = #s{wiring = W}) ->
     end;
 handle_call(wiring, _From, S = #s{wiring = W, removed = Removed}) ->
     {reply, {W, Removed}, S};
+handle_call({where, Name}, _From, S = #s{wiring = W}) ->
+    {reply, case {toroco_wiring_core:nodes(W), toroco_wiring_core:remote(W)} of
+                {#{Name := _}, _} -> {ok, node()};
+                {_, #{Name := #{node := N}}} -> {ok, N};
+                _ -> {error, {unknown_name, Name}}
+            end, S};
+handle_call({meet, Node}, From, S = #s{telling = T}) ->
+    %% Before a first request to another node: it learns this one's names
+    %% (and answers with its own) before the request reaches it.
+    Ref = make_ref(),
+    tell(Node, S, [], true, {self(), Ref}),
+    erlang:send_after(1000, self(), {told, Ref}),
+    {noreply, S#s{telling = T#{Ref => {From, [Node]}}}};
+handle_call(clashes, _From, S = #s{clashes = Cl}) ->
+    {reply, Cl, S};
 handle_call(stopping, _From, S) ->
     {reply, ok, persist(S, S#s{stopping = true})};
 handle_call(Request, _From, S) ->
@@ -134,12 +196,93 @@ handle_info({'DOWN', Ref, process, _Pid, Reason}, S = #s{layers = Layers, remove
         [] ->
             {noreply, S}
     end;
+handle_info(?DIR(Node, Dir, Hello, Ack), S0 = #s{wiring = W, clashes = Cl, known = Known}) ->
+    S = S0#s{known = lists:usort([Node | Known])},
+    _ = Hello andalso tell(Node, S, [], false, none),
+    {W1, Clashes} = toroco_wiring_core:set_remote(W, Node, Dir),
+    _ = [logger:error("toroco: ~p is on both ~p and ~p: the names of a robot must be unique "
+                      "across its nodes; rename or remove one", [N, node(), Node],
+                      #{domain => [toroco, wiring]}) || N <- Clashes],
+    %% A node's clashes are those of its latest directory: one resolved
+    %% (renamed or removed on either side) is no longer listed.
+    S1 = S#s{clashes = lists:usort([{N, Node} || N <- Clashes] ++ [C || C = {_, At} <- Cl, At =/= Node])},
+    {ok, S2} = rewire({ok, W1}, none, S1),
+    resubscribe(Node, S2),
+    _ = case Ack of
+            {Pid, Ref} -> toroco_wire:send(Pid, ?DIR_ACK(Ref, node()));
+            none -> ok
+        end,
+    {noreply, persist(S, S2)};
+handle_info(?DIR_ACK(Ref, Node), S) ->
+    {noreply, told(Ref, [Node], S)};
+handle_info({told, Ref}, S = #s{telling = T}) ->
+    %% A node that did not answer in time learns it when it does.
+    case T of
+        #{Ref := {_, Waiting}} -> {noreply, told(Ref, Waiting, S)};
+        #{} -> {noreply, S}
+    end;
+handle_info({nodeup, Node}, S) ->
+    tell(Node, S, [], true, none),
+    {noreply, S};
+handle_info({nodedown, Node}, S = #s{telling = T, known = Known}) ->
+    %% Its names stay in the wiring: the routers let its sources go after
+    %% their max age, and the wiring is as it was when the node comes back.
+    {noreply, maps:fold(fun(Ref, _, Acc) -> told(Ref, [Node], Acc) end,
+                        S#s{known = lists:delete(Node, Known)}, T)};
 handle_info(_Msg, S) ->
     {noreply, S}.
 
-reply({ok, S1}, S) -> {reply, ok, persist(S, S1)};
-reply({error, Reason, S1}, S) -> {reply, {error, Reason}, persist(S, S1)};
-reply({error, _} = Err, S) -> {reply, Err, S}.
+%% Tells the wiring server of `Node' what this node runs; `Removed' names
+%% were just removed here.
+tell(Node, #s{wiring = W}, Removed, Hello, Ack) ->
+    Dir = #{nodes => toroco_wiring_core:directory(W), removed => Removed},
+    toroco_wire:send({?MODULE, Node}, ?DIR(node(), Dir, Hello, Ack)).
+
+told(Ref, Nodes, S = #s{telling = T}) ->
+    case T of
+        #{Ref := {From, Waiting}} ->
+            case Waiting -- Nodes of
+                [] -> gen_server:reply(From, ok), S#s{telling = maps:remove(Ref, T)};
+                Left -> S#s{telling = T#{Ref := {From, Left}}}
+            end;
+        #{} -> S
+    end.
+
+others(#s{known = Known}) ->
+    lists:usort(Known ++ peers()) -- [node()].
+
+%% The consumers fed from `Node' subscribe again to what they do not hear.
+resubscribe(Node, #s{wiring = W}) ->
+    #{routers := Rs, gates := Gs} = toroco_wiring_core:plan(W),
+    _ = [toroco_wire:send(toroco_wire:address(Reg), '$toroco_resubscribe')
+         || #{reg := Reg, upstreams := Ups} <- maps:values(Rs) ++ maps:values(Gs),
+            lists:any(fun({_, {_, N}}) -> N =:= Node; (_) -> false end, maps:values(Ups))],
+    ok.
+
+%% A change that the other nodes must know (a name added or removed, an
+%% output gated) is answered once each connected node has taken it in, or
+%% after a second; the others hear of it at once.
+reply(Result, From, S) ->
+    reply(Result, From, S, []).
+
+reply({ok, S0}, From, S, Removed) ->
+    %% A clash ends when this node's name goes.
+    Local = toroco_wiring_core:nodes(S0#s.wiring),
+    S1 = S0#s{clashes = [C || C = {N, _} <- S0#s.clashes, maps:is_key(N, Local)]},
+    Others = others(S),
+    Changed = Others =/= [] andalso (Removed =/= [] orelse
+        toroco_wiring_core:directory(S#s.wiring) =/= toroco_wiring_core:directory(S1#s.wiring)),
+    case Changed of
+        false ->
+            {reply, ok, persist(S, S1)};
+        true ->
+            Ref = make_ref(),
+            _ = [tell(N, S1, Removed, false, {self(), Ref}) || N <- Others],
+            erlang:send_after(1000, self(), {told, Ref}),
+            {noreply, persist(S, S1#s{telling = (S1#s.telling)#{Ref => {From, Others}}})}
+    end;
+reply({error, Reason, S1}, _From, S, _Removed) -> {reply, {error, Reason}, persist(S, S1)};
+reply({error, _} = Err, _From, S, _Removed) -> {reply, Err, S}.
 
 %%====================================================================
 %% Surviving a crash
@@ -172,9 +315,10 @@ diff(Old, New) ->
                          end
                  end, Old).
 
-meta(#s{layers = Layers, removed = Removed, stopping = Stopping}) ->
+meta(#s{layers = Layers, removed = Removed, stopping = Stopping, wiring = W, clashes = Cl}) ->
     #{network => network(), layers => maps:map(fun(_, {Pid, _}) -> Pid end, Layers),
-      removed => Removed, stopping => Stopping}.
+      removed => Removed, stopping => Stopping, remote => toroco_wiring_core:remote(W),
+      clashes => Cl}.
 
 network() ->
     [whereis(Sup) || Sup <- [toroco_routers_sup, toroco_devices_sup, toroco_layers_sup]].
@@ -182,20 +326,22 @@ network() ->
 restore() ->
     Net = network(),
     case ets:lookup(?TABLE, '$meta') of
-        [{_, #{network := Net, layers := Layers, removed := Removed, stopping := Stopping}}] ->
+        [{_, #{network := Net, layers := Layers, removed := Removed, stopping := Stopping,
+               remote := Remote, clashes := Clashes}}] ->
             Part = fun(P) -> ets:select(?TABLE, [{{{P, '$1'}, '$2'}, [], [{{'$1', '$2'}}]}]) end,
             W = #{nodes => maps:from_list([{N, #{kind => Kind, module => M, layer => L,
                                                   inputs => Ins, outputs => Outs}}
                                              || {N, {Kind, M, L, Ins, Outs}} <- Part(nodes)]),
-                  inputs => maps:from_list([{K, maps:with([sources, buffer, idle], Cfg)}
+                  inputs => maps:from_list([{K, maps:with([sources, buffer, idle, max_age], Cfg)}
                                             || {K, Cfg} <- Part(router)]),
                   inhibitors => lists:foldl(fun({_, #{entries := Es}}, Acc) -> maps:merge(Acc, Es) end,
-                                            #{}, Part(gate))},
+                                            #{}, Part(gate)),
+                  remote => Remote},
             %% A layer taken out while the server was down is seen here.
             {Alive, Gone} = lists:partition(fun({_, Pid}) -> is_process_alive(Pid) end,
                                             maps:to_list(Layers)),
             S = #s{wiring = W, removed = lists:usort([L || {L, _} <- Gone] ++ Removed),
-                   stopping = Stopping,
+                   stopping = Stopping, clashes = Clashes,
                    layers = maps:from_list([{L, {Pid, erlang:monitor(process, Pid)}}
                                             || {L, Pid} <- Alive])},
             logger:notice("toroco: the wiring server restarted with the wiring it had "
@@ -290,7 +436,7 @@ layer_sup(L, S = #s{layers = Layers, removed = Removed}) ->
                       removed = lists:delete(L, Removed)}}
     end.
 
-remove_node(Kind, Name, Caller, S = #s{wiring = W, layers = Layers}) ->
+remove_node({remove, Kind, Name}, Caller, S = #s{wiring = W, layers = Layers}) ->
     case toroco_wiring_core:node(W, Name) of
         {ok, #{kind := Kind, layer := L}} ->
             Sup = case Kind of
@@ -372,7 +518,7 @@ stop(Kind, Key) ->
 
 %% What a consumer reads of its configuration: the rest is the plan's own
 %% (its key says the rest), and every byte counts ten thousand times.
-stored(router, Cfg) -> maps:with([sources, upstreams, buffer, idle], Cfg);
+stored(router, Cfg) -> maps:with([sources, upstreams, buffer, idle, max_age], Cfg);
 stored(gate, Cfg) -> maps:with([members, entries, upstreams, subs], Cfg).
 
 consumer_module(router) -> toroco_router;

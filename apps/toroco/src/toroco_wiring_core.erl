@@ -13,12 +13,22 @@
 %% per wired input, one gate per group of inhibited outputs (a group is two
 %% outputs of one layer that inhibit each other, or a single output), and for
 %% every emitter the consumers each of its outputs must be sent to.
+%%
+%% Several nodes (SPEC §13): a wiring holds the behaviors and devices of its
+%% own node (`nodes') and what it was told of the other nodes' (`remote',
+%% each with its `node' and the gates of its outputs, `gated'). Remote names
+%% count for validation (a name is unique across nodes, hierarchy uses
+%% remote layers) and for the plan (a remote source's upstream is addressed
+%% `{Reg, Node}'); only local ones are started here. A remote name stays
+%% known while its node is away, so the wiring survives a partition; it is
+%% forgotten when its node removes it.
 -module(toroco_wiring_core).
 
 -compile({no_auto_import, [node/2]}).
 -export([new/0, add_node/3, remove_node/2, node/2, nodes/1,
          set_inputs/3, set_inhibitors/3, set_reset/3,
-         inputs_of/2, inhibitors_of/2, gates/1, plan/1]).
+         inputs_of/2, inhibitors_of/2, gates/1, plan/1,
+         remote/1, set_remote/3, directory/1]).
 -export_type([wiring/0, node_info/0, plan/0, router_config/0, gate_config/0]).
 
 -type name() :: atom().
@@ -28,14 +38,19 @@
                        inputs := [atom()], outputs := [atom()]}.
 -type input_spec() :: #{sources := [{source(), default()}], buffer := all | latest,
                         idle := toroco_router_core:latch()}.
+-type remote_info() :: #{kind := behavior | device, module := module(), layer := non_neg_integer(),
+                         inputs := [atom()], outputs := [atom()], node := node(),
+                         gated := #{atom() => source()}}.
 -type wiring() :: #{nodes := #{name() => node_info()},
+                    remote => #{name() => remote_info()},
                     inputs := #{{name(), atom()} => input_spec()},
                     inhibitors := #{source() => [{source(), default()}]}}.
--type upstream() :: {emitter | gate, atom()}.
+-type upstream() :: {emitter | gate, atom() | {atom(), node()}}.
 -type router_config() :: #{reg := atom(), receiver := name(), input := atom(),
                            receiver_reg := atom(), sources := [{source(), default()}],
                            upstreams := #{source() => upstream()},
-                           buffer := all | latest, idle := toroco_router_core:latch()}.
+                           buffer := all | latest, idle := toroco_router_core:latch(),
+                           max_age => #{source() => pos_integer()}}.
 -type gate_config() :: #{reg := atom(), members := [source()],
                          entries := #{source() => [{source(), default()}]},
                          upstreams := #{source() => upstream()},
@@ -51,21 +66,64 @@
 %%====================================================================
 
 -spec new() -> wiring().
-new() -> #{nodes => #{}, inputs => #{}, inhibitors => #{}}.
+new() -> #{nodes => #{}, inputs => #{}, inhibitors => #{}, remote => #{}}.
 
 -spec add_node(wiring(), name(), node_info()) -> {ok, wiring()} | {error, term()}.
 add_node(W = #{nodes := Nodes}, Name, Info) ->
-    case Nodes of
-        #{Name := _} -> {error, {duplicate_name, Name}};
-        #{} -> {ok, W#{nodes := Nodes#{Name => Info}}}
+    case {Nodes, remote(W)} of
+        {#{Name := _}, _} -> {error, {duplicate_name, Name}};
+        {_, #{Name := #{node := N}}} -> {error, {name_taken, Name, N}};
+        _ -> {ok, W#{nodes := Nodes#{Name => Info}}}
     end.
+
+%%====================================================================
+%% Other nodes
+%%====================================================================
+
+%% @doc The behaviors and devices known on other nodes.
+-spec remote(wiring()) -> #{name() => remote_info()}.
+remote(W) -> maps:get(remote, W, #{}).
+
+%% @doc What node `Node' says it runs: its names with their ports, layers and
+%% gates; `removed' lists the names it removed, which leave every input and
+%% inhibitor list here. A name of this node that it also claims is not taken
+%% in: it is returned as a clash.
+-spec set_remote(wiring(), node(), #{nodes := #{name() => map()}, removed := [name()]}) ->
+          {wiring(), [name()]}.
+set_remote(W = #{nodes := Local}, Node, #{nodes := Infos, removed := Removed}) ->
+    Clashes = [N || N <- maps:keys(Infos), maps:is_key(N, Local)],
+    R0 = maps:filter(fun(N, #{node := At}) -> not (At =:= Node andalso lists:member(N, Removed)) end,
+                     remote(W)),
+    R1 = maps:merge(R0, maps:map(fun(_, I) -> I#{node => Node} end, maps:without(Clashes, Infos))),
+    W1 = lists:foldl(fun(N, Acc) ->
+                             case remote(W) of
+                                 #{N := #{node := Node}} -> strip(Acc, N);
+                                 #{} -> Acc
+                             end
+                     end, W#{remote => R1}, Removed),
+    {W1, Clashes}.
+
+%% @doc What this node tells the others of itself: its names with ports,
+%% layers and the gates of their outputs.
+-spec directory(wiring()) -> #{name() => map()}.
+directory(W = #{nodes := Nodes}) ->
+    Gates = gates(W),
+    maps:map(fun(N, Info) ->
+                     Info#{gated => maps:from_list([{O, K} || {{E, O}, K} <- maps:to_list(Gates),
+                                                              E =:= N])}
+             end, Nodes).
 
 %% @doc Forgets a node and strips it from every input and inhibitor list;
 %% inputs and inhibited outputs left without sources are unwired.
 -spec remove_node(wiring(), name()) -> {ok, wiring()} | {error, term()}.
-remove_node(W = #{nodes := Nodes, inputs := Inputs, inhibitors := Inhs}, Name) ->
+remove_node(W = #{nodes := Nodes}, Name) ->
     case Nodes of
-        #{Name := _} ->
+        #{Name := _} -> {ok, (strip(W, Name))#{nodes := maps:remove(Name, Nodes)}};
+        #{} -> {error, {unknown_name, Name}}
+    end.
+
+%% Strips a name from every input and inhibitor list.
+strip(W = #{inputs := Inputs, inhibitors := Inhs}, Name) ->
             Strip = fun(Srcs) -> [E || E = {{N, _}, _} <- Srcs, N =/= Name] end,
             Inputs1 = maps:filtermap(
                         fun({R, _}, _) when R =:= Name -> false;
@@ -83,16 +141,15 @@ remove_node(W = #{nodes := Nodes, inputs := Inputs, inhibitors := Inhs}, Name) -
                                   Srcs1 -> {true, Srcs1}
                               end
                       end, Inhs),
-            {ok, W#{nodes := maps:remove(Name, Nodes), inputs := Inputs1, inhibitors := Inhs1}};
-        #{} ->
-            {error, {unknown_name, Name}}
-    end.
+            W#{inputs := Inputs1, inhibitors := Inhs1,
+               remote => maps:remove(Name, remote(W))}.
 
 -spec node(wiring(), name()) -> {ok, node_info()} | {error, term()}.
-node(#{nodes := Nodes}, Name) ->
-    case Nodes of
-        #{Name := Info} -> {ok, Info};
-        #{} -> {error, {unknown_name, Name}}
+node(W = #{nodes := Nodes}, Name) ->
+    case {Nodes, remote(W)} of
+        {#{Name := Info}, _} -> {ok, Info};
+        {_, #{Name := Info}} -> {ok, Info};
+        _ -> {error, {unknown_name, Name}}
     end.
 
 -spec nodes(wiring()) -> #{name() => node_info()}.
@@ -200,7 +257,10 @@ input_spec(Where, Spec, W) when is_map(Spec) ->
                                        #{idle := V} -> {value, V};
                                        #{} -> none
                                    end,
-                            {ok, #{sources => Srcs, buffer => Buffer, idle => Idle}};
+                            Ages = maps:from_list([{{E, O}, A} || {E, O, #{max_age := A}}
+                                                                      <- maps:get(sources, Spec, [])]),
+                            {ok, with_ages(#{sources => Srcs, buffer => Buffer, idle => Idle},
+                                           Ages)};
                         Err -> Err
                     end
             end
@@ -232,10 +292,13 @@ source({E, Out, Opts}, W) when is_atom(E), is_atom(Out), is_map(Opts) ->
     case node(W, E) of
         {error, _} = Err -> Err;
         {ok, #{outputs := Outs}} ->
-            case {lists:member(Out, Outs), maps:keys(maps:without([hold], Opts))} of
-                {false, _} -> {error, {unknown_output, {E, Out}}};
-                {true, [Bad | _]} -> {error, {bad_option, {{E, Out}, Bad}}};
-                {true, []} ->
+            case {lists:member(Out, Outs), maps:keys(maps:without([hold, max_age], Opts)),
+                  maps:get(max_age, Opts, 1)} of
+                {false, _, _} -> {error, {unknown_output, {E, Out}}};
+                {true, [Bad | _], _} -> {error, {bad_option, {{E, Out}, Bad}}};
+                {true, [], A} when not is_integer(A); A =< 0 ->
+                    {error, {bad_max_age, {{E, Out}, A}}};
+                {true, [], _} ->
                     case maps:get(hold, Opts, 0) of
                         H when (is_integer(H) andalso H >= 0) orelse H =:= infinity ->
                             {ok, {{E, Out}, H}};
@@ -245,6 +308,10 @@ source({E, Out, Opts}, W) when is_atom(E), is_atom(Out), is_map(Opts) ->
     end;
 source(Other, _W) ->
     {error, {bad_source, Other}}.
+
+%% Max ages are kept only where a wire has one (most have none).
+with_ages(Spec, Ages) when map_size(Ages) =:= 0 -> Spec;
+with_ages(Spec, Ages) -> Spec#{max_age => Ages}.
 
 fold_ok(_Fun, Acc, []) -> {ok, Acc};
 fold_ok(Fun, Acc, [X | Xs]) ->
@@ -310,21 +377,27 @@ allowed_component(W, Members, Edges) ->
 
 %% @doc The processes a wiring needs and what each emitter sends where.
 -spec plan(wiring()) -> plan().
-plan(#{inputs := Inputs, inhibitors := Inhs}) ->
+plan(W = #{inputs := Inputs, inhibitors := Inhs}) ->
     Groups = groups(Inhs),
     GateOf = maps:from_list([{M, Key} || {Key, Ms} <- maps:to_list(Groups), M <- Ms]),
-    Upstream = fun(Src = {E, _}, Self) ->
-                       case GateOf of
-                           #{Src := Key} when Key =/= Self -> {gate, toroco_names:gate(Key)};
-                           #{} -> {emitter, toroco_names:process(E)}
+    Remote = remote(W),
+    Upstream = fun(Src = {E, Out}, Self) ->
+                       case {GateOf, Remote} of
+                           {#{Src := Key}, _} when Key =/= Self -> {gate, toroco_names:gate(Key)};
+                           {_, #{E := #{node := N, gated := #{Out := Key}}}} ->
+                               {gate, {toroco_names:gate(Key), N}};
+                           {_, #{E := #{node := N}}} -> {emitter, {toroco_names:process(E), N}};
+                           _ -> {emitter, toroco_names:process(E)}
                        end
                end,
     Routers = maps:map(
-                fun({R, I}, #{sources := Srcs, buffer := B, idle := Idle}) ->
-                        #{reg => toroco_names:router(R, I), receiver => R, input => I,
-                          receiver_reg => toroco_names:process(R), sources => Srcs,
-                          upstreams => maps:from_list([{S, Upstream(S, none)} || {S, _} <- Srcs]),
-                          buffer => B, idle => Idle}
+                fun({R, I}, Spec = #{sources := Srcs, buffer := B, idle := Idle}) ->
+                        with_ages(#{reg => toroco_names:router(R, I), receiver => R, input => I,
+                                    receiver_reg => toroco_names:process(R), sources => Srcs,
+                                    upstreams => maps:from_list([{S, Upstream(S, none)}
+                                                                 || {S, _} <- Srcs]),
+                                    buffer => B, idle => Idle},
+                                  maps:get(max_age, Spec, #{}))
                 end, Inputs),
     Gates0 = maps:map(
                fun(Key, Members) ->
@@ -340,7 +413,9 @@ plan(#{inputs := Inputs, inhibitors := Inhs}) ->
     {Subs, Gates} =
         lists:foldl(
           fun({Reg, Ups}, Acc) ->
-                  maps:fold(fun({E, Out}, {emitter, _}, {SAcc, GAcc}) ->
+                  %% A remote upstream learns of its consumers by their subscription.
+                  maps:fold(fun(_Src, {_, {_, _}}, Acc1) -> Acc1;
+                               ({E, Out}, {emitter, _}, {SAcc, GAcc}) ->
                                     {add_sub([E, Out], Reg, SAcc), GAcc};
                                (Src, {gate, _}, {SAcc, GAcc}) ->
                                     Key = maps:get(Src, GateOf),
