@@ -2,7 +2,7 @@
 #   make run   - the Torobot in the simulated world (default config);
 #                make run ROBOT=wall_follower runs a library robot of config/robots/
 #   make test  - every test suite: C port, detector, Common Test, PropEr, Dialyzer
-.PHONY: run test deps compile port port-test detector detector-test ct dialyzer bench release clean eval
+.PHONY: run test deps compile port port-test detector detector-test ct dialyzer bench release board-check clean eval
 
 WORLD ?= config/worlds/default.world
 SPEED ?= 1
@@ -51,6 +51,11 @@ bench: compile
 
 release: compile
 	rebar3 as prod release
+
+# The board release booted on Debian 12 armhf's Erlang under qemu (root; slow,
+# not part of `make test'): README, "The board".
+board-check: compile
+	scripts/board-emulate
 
 clean:
 	rm -rf _build

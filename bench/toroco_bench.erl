@@ -22,6 +22,9 @@ main([Dir]) ->
                erlang:system_info(schedulers_online)]),
     warm_up(),
     case os:getenv("TOROCO_BENCH_ONLY") of
+        "memory" ->
+            memory_table([10, 1000, 10000]),
+            halt(0);
         "internal" ->
             table("Internal test", [internal(I, N, Dir) || I <- [closed, 10]], Dir, "internal"),
             halt(0);
@@ -237,6 +240,71 @@ alive(B, N, Dir) ->
     R = run(closed, N, N * 20 + 60000),
     Row = row(B, R, Dir, "alive_" ++ integer_to_list(B)),
     Row#{mem_per => (M1 - M0) div B}.
+
+%% Memory per idle behavior with its router, and where it goes: the new
+%% behavior and router processes, what the processes that were there before
+%% grew by (supervisors, the wiring server, the source's subscribers), ETS,
+%% atoms, and the rest of the system. No latency is measured here.
+memory_table(Counts) ->
+    io:format("~n| behaviors alive | bytes per idle behavior with its router | behavior process | "
+              "router and other new processes | older processes' growth | ETS | atoms | rest | processes |~n"
+              "|---:|---:|---:|---:|---:|---:|---:|---:|---:|~n"),
+    %% A first round, not shown: what starting the runtime leaves behind is
+    %% freed during it, which would swamp the 10-behavior row.
+    _ = memory_row(10, false),
+    [memory_row(B, true) || B <- Counts],
+    ok.
+
+memory_row(B, Show) ->
+    chain(closed, 10),
+    ok = toroco:add_device(idle_src, toroco_fake_sensor, #{outputs => [v]}),
+    settle_steady(erlang:memory(total), 10),
+    Before = maps:from_list([{P, proc_mem(P)} || P <- processes()]),
+    M0 = maps:from_list(erlang:memory()),
+    Mine0 = proc_mem(self()),
+    Names = [list_to_atom("idle" ++ integer_to_list(I)) || I <- lists:seq(1, B)],
+    Terms = [{behavior, Nm, toroco_bench_relay, #{layer => 0}} || Nm <- Names]
+        ++ [{inputs, Nm, #{in => [{idle_src, v}]}} || Nm <- Names],
+    ok = toroco_wiring:call({load, Terms}),
+    settle_steady(erlang:memory(total), 10),
+    M1 = maps:from_list(erlang:memory()),
+    %% This process holds the names: not the runtime's memory.
+    Mine = proc_mem(self()) - Mine0,
+    Behaviors = [whereis(toroco_names:process(Nm)) || Nm <- Names],
+    BehaviorSet = maps:from_keys(Behaviors, true),
+    {New, Grown} = lists:foldl(
+                     fun(P, {NewAcc, GrownAcc}) ->
+                             case {maps:find(P, Before), maps:is_key(P, BehaviorSet)} of
+                                 {error, false} -> {NewAcc + proc_mem(P), GrownAcc};
+                                 {error, true} -> {NewAcc, GrownAcc};
+                                 {{ok, Was}, _} -> {NewAcc, GrownAcc + proc_mem(P) - Was}
+                             end
+                     end, {0, 0}, processes() -- [self()]),
+    Beh = lists:sum([proc_mem(P) || P <- Behaviors]),
+    D = fun(K) -> maps:get(K, M1) - maps:get(K, M0) end,
+    Total = D(total) - Mine,
+    Rest = Total - Beh - New - Grown - D(ets) - D(atom_used),
+    Per = fun(X) -> round(X / B) end,
+    Show andalso io:format("| ~w | ~w | ~w | ~w | ~w | ~w | ~w | ~w | ~w |~n",
+              [B, Per(Total), Per(Beh), Per(New), Per(Grown), Per(D(ets)), Per(D(atom_used)),
+               Per(Rest), erlang:system_info(process_count)]).
+
+%% Settles until the VM's total stays within 1 KB from one settling to the
+%% next (what the previous round left is freed by then), at most N times.
+settle_steady(_, 0) ->
+    ok;
+settle_steady(Was, N) ->
+    settle_memory(),
+    case erlang:memory(total) of
+        Now when abs(Now - Was) < 1024 -> ok;
+        Now -> settle_steady(Now, N - 1)
+    end.
+
+proc_mem(P) ->
+    case erlang:process_info(P, memory) of
+        {memory, M} -> M;
+        undefined -> 0
+    end.
 
 %% Idle processes hibernate after hibernate_after_ms (5 s): measure after that.
 settle_memory() ->
