@@ -61,6 +61,8 @@ main([Dir]) ->
     RawExt =/= [] andalso table("Raw reference: UDP sender → plain gen_udp echo → UDP receiver "
                                 "(mean of a run before and a run after)", RawExt, Dir, "raw_external"),
     External =/= [] andalso table("External test: UDP sender → udp_link → behavior → udp_link → UDP receiver", External, Dir, "external", RawExt),
+    %% TOROCO_BENCH_ONLY=raw: the runtime against its raw references only.
+    os:getenv("TOROCO_BENCH_ONLY") =:= "raw" andalso halt(0),
     Sources = [sources_per_input(K, N, Dir) || K <- [1, 4, 16, 64]],
     table("Sources per input (the others holding latches below the measured source)", Sources, Dir, "sources"),
     Fanout = [fan_out(F, N div 2, Dir) || F <- [1, 8, 64]],
