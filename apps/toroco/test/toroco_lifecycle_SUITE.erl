@@ -142,7 +142,9 @@ gate_restart_recovers_inhibition(_) ->
     ok = toroco:set_inhibitors(e, #{out => [{i, out}]}),
     Gate = whereis(toroco_names:gate({e, out})),
     exit(Gate, kill),
-    wait_until(fun() -> is_pid(whereis(toroco_names:gate({e, out}))) end, 2000),
+    %% the new incarnation, not the old one still registered while it dies
+    wait_until(fun() -> not lists:member(whereis(toroco_names:gate({e, out})), [undefined, Gate]) end,
+               2000),
     #{outputs := #{out := #{inhibited := true}}} = toroco:inspect(e),
     ok = toroco:inject({e, out}, blocked),
     settle(a),
