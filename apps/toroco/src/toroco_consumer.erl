@@ -266,9 +266,15 @@ kind(Type, Content, C = #c{mod = Mod, data = D}) ->
             keep_state_and_data
     end.
 
+steps([Event], C = #c{mod = Mod, data = D0}) ->
+    %% the event path: one event at a time
+    settle(Mod:run(Event, toroco_clock:now_ms(), D0), C);
 steps(Events, C = #c{mod = Mod, data = D0}) ->
     Now = toroco_clock:now_ms(),
-    D = Mod:settled(lists:foldl(fun(E, Acc) -> Mod:run(E, Now, Acc) end, D0, Events)),
+    settle(lists:foldl(fun(E, Acc) -> Mod:run(E, Now, Acc) end, D0, Events), C).
+
+settle(D0, C = #c{mod = Mod}) ->
+    D = Mod:settled(D0),
     case timer(C#c{data = D}) of
         {C1, []} -> {keep_state, C1};
         {C1, Actions} -> {keep_state, C1, Actions}

@@ -96,6 +96,13 @@ address(Reg) -> {Reg, node()}.
 %% (a frozen peer), swallows the message, as a cut wire would: the event
 %% path never waits for another node.
 -spec send(address() | atom(), term()) -> ok.
+send({Reg, Node}, Msg) when Node =:= node() ->
+    %% the event path's common case: a plain send to a local name
+    try Reg ! Msg of
+        _ -> ok
+    catch
+        error:badarg -> ok
+    end;
 send(To, Msg) ->
     try erlang:send(To, Msg, [noconnect, nosuspend]) of
         _ -> ok
