@@ -78,9 +78,13 @@
                  recording = none :: none | toroco_live_recorder:recording(),
                  scene = none :: toroco_live_channels:scene_sent()}).
 
+%% Every garbage collection a full sweep: the heap holds the state and the
+%% open batch, and what an event leaves behind is not kept in an old heap
+%% until the next seal (with the Torobot, about 150 kB on average instead
+%% of 400).
 -spec start_link() -> {ok, pid()} | {error, term()}.
 start_link() ->
-    gen_server:start_link({local, ?MODULE}, ?MODULE, [], []).
+    gen_server:start_link({local, ?MODULE}, ?MODULE, [], [{spawn_opt, [{fullsweep_after, 0}]}]).
 
 %% @doc Writes the last seconds to `Path' as MCAP.
 -spec dump(file:filename_all()) -> {ok, #{messages := non_neg_integer(), path := file:filename_all()}}
