@@ -282,8 +282,6 @@ seal_if_full(T, F = #flight{batch_first = First, batch_n = BN, batch_bytes = BB,
 %% The open batch becomes one compressed binary, off the process's heap;
 %% the heap that held the batch is given back by hibernating
 %% (`hibernate' in the state, handled by noreply/1).
-seal(F = #flight{batch = []}) ->
-    F;
 seal(F = #flight{batch = B, batch_n = BN, batch_bytes = BB, segments = Q, bytes = Bytes,
                  max_bytes = MaxB}) ->
     Batch = lists:reverse([{T, Item} || {T, _, Item} <- B]),
