@@ -7,7 +7,8 @@
 all() ->
     [recording_reads_back, recording_filters, unwritable_path_refused, full_disk_refused,
      flight_recorder_dump, flight_recorder_bounded, flight_recorder_across_segments,
-     flight_recorder_bounded_by_count, flight_recorder_on_layer_removed,
+     flight_recorder_bounded_by_count, flight_recorder_window_by_time,
+     flight_recorder_on_layer_removed,
      flight_recorder_after_restart,
      foreign_files_refused,
      simulated_run_replays].
@@ -177,6 +178,24 @@ flight_recorder_bounded_by_count(Config) ->
         ct:log("~b values, ~b messages and the last ~b values kept", [N, M, length(Kept)]),
         true = M =< Max andalso M > Max - 10,
         Kept = lists:seq(N - length(Kept) + 1, N)
+    end).
+
+flight_recorder_window_by_time() ->
+    [{doc, "A dump holds the last flight_seconds only, also when older events share "
+      "a segment with newer ones"}].
+flight_recorder_window_by_time(Config) ->
+    with_flight_env(flight_seconds, 1, fun() ->
+        [ok = toroco:inject({s, dist}, {old, I}) || I <- lists:seq(1, 10)],
+        ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= 10 end, 5000),
+        %% The window's length must pass: nothing to wait on but the clock.
+        timer:sleep(1200),
+        [ok = toroco:inject({s, dist}, {new, I}) || I <- lists:seq(1, 10)],
+        ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= 20 end, 5000),
+        Path = path(Config, "time.mcap"),
+        {ok, #{messages := M}} = toroco_live:dump(Path),
+        New = [{new, I} || I <- lists:seq(1, 10)],
+        New = terms(Path, <<"/toroco/out/s/dist">>),
+        #{<<"ok">> := true, <<"messages">> := M} = read(Path)
     end).
 
 %% Runs Fun with a fresh flight recorder under app env Key = Value.
