@@ -406,7 +406,7 @@ actions([{send, Map, Opts} = A | T], E, Acc) when is_map(Map), is_map(Opts) ->
             actions(T, E, Acc)
     end;
 actions([{set, Map} | T], E, Acc) when is_map(Map) ->
-    actions(T, maps:fold(fun(Out, V, EAcc) -> emit(Out, {set, V}, EAcc) end, E, Map), Acc);
+    actions(T, emit_each(maps:to_list(Map), set, E), Acc);
 actions([{unset, Outs} | T], E, Acc) when is_list(Outs) ->
     actions(T, lists:foldl(fun(Out, EAcc) -> emit(Out, unset, EAcc) end, E, Outs), Acc);
 actions([unset | T], E = #e{outputs = Outs}, Acc) ->
@@ -446,7 +446,11 @@ clock(T) when is_integer(T) -> toroco_clock:real_ms(T);
 clock(A) -> A.
 
 emit_all(Map, Hold, E) ->
-    maps:fold(fun(Out, V, EAcc) -> emit(Out, {send, V, Hold}, EAcc) end, E, Map).
+    emit_each(maps:to_list(Map), Hold, E).
+
+emit_each([], _How, E) -> E;
+emit_each([{Out, V} | T], set, E) -> emit_each(T, set, emit(Out, {set, V}, E));
+emit_each([{Out, V} | T], Hold, E) -> emit_each(T, Hold, emit(Out, {send, V, Hold}, E)).
 
 %% One emission on one output: to every consumer, in order; the latch follows.
 emit(Out, Op, E = #e{outputs = Outs, name = Name}) ->
