@@ -23,8 +23,91 @@ main([_Dir]) ->
     io:format("~nMessages received per event: ~s (total ~.1f)~n",
               [lists:join(", ", [io_lib:format("~s ~.1f", [K, float(C)]) || {K, C} <- Msgs]),
                float(lists:sum([C || {_, C} <- Msgs]))]),
-    eprof(N),
+    isolation(),
+    [eprof(N) || os:getenv("TOROCO_BENCH_EPROF") =:= "1"],
     halt(0).
+
+%% Each step of the closed loop alone, in a tight loop in one process (no
+%% message received, no scheduling; what a step sends piles up in suspended
+%% processes): the source emitting, a router taking one event (shell, core,
+%% its delivery), the relay taking one input and emitting, the sink taking
+%% one input; then the gen_statem loop around each (a gen_statem draining a
+%% full mailbox against a plain receive loop doing the same). What is left
+%% of the closed loop is messaging and scheduling (the raw chain's figure).
+isolation() ->
+    M = 200000,
+    toroco_bench:chain(closed, M + 1),
+    Src = pid(src), Relay = pid(relay), Sink = pid(sink),
+    Router = whereis(toroco_names:router(relay, in)),
+    RouterSink = whereis(toroco_names:router(sink, in)),
+    All = [Src, Router, Relay, RouterSink, Sink],
+    Got = [sys:get_state(P) || P <- All],
+    [sys:suspend(P) || P <- All],
+    %% what the steps send goes to processes that drop it, under the
+    %% routers' names, as the receiver, as the source
+    Drop = fun() -> spawn(fun Loop() -> receive _ -> Loop() end end) end,
+    [begin unregister(Reg), register(Reg, Drop()) end
+     || Reg <- [toroco_names:router(relay, in), toroco_names:router(sink, in)]],
+    [{_, ESrc}, {ready, CRouter0}, {SRelay, ERelay}, _, {SSink, ESink0}] = Got,
+    CRouter = setelement(4, CRouter0, setelement(5, element(4, CRouter0), Drop())),
+    ESink = setelement(7, ESink0, (element(7, ESink0))#{source := Drop()}),
+    io:format("~n### Each step alone (ns per call, ~b calls, one process)~n~n| step | ns |~n|---|---:|~n",
+              [M]),
+    Steps =
+        [step("source: `{arrived, N}' in, the next emission out (engine + callback)",
+              fun(K, E) -> data(toroco_behavior:handle_event(info, {arrived, K}, {closed, M + 1, 1, 0}, E), E) end,
+              ESrc, M),
+         step("router: one event in, one delivery out (shell + core)",
+              fun(K, C) -> data(toroco_consumer:handle_event(info, {'$toroco', {src, out}, {send, {0, K}, default}},
+                                                            ready, C), C) end,
+              CRouter, M),
+         step("relay: one input in, one emission out (engine + callback)",
+              fun(K, E) -> data(toroco_behavior:handle_event(info, {'$toroco_in', in, {0, K}}, SRelay, E), E) end,
+              ERelay, M),
+         step("sink: one input in, `{arrived, N}' out (engine + callback)",
+              fun(K, E) -> data(toroco_behavior:handle_event(info, {'$toroco_in', in, {0, K}}, SSink, E), E) end,
+              ESink, M)],
+    Loop = gen_statem_loop(M) - plain_loop(M),
+    io:format("| gen_statem's loop around one event, per process (× 5 processes on the path) | ~.1f |~n",
+              [float(Loop)]),
+    io:format("| sum: the steps with the router twice, plus 5 gen_statem loops | ~.1f |~n",
+              [float(lists:sum(Steps) + lists:nth(2, Steps) + 5 * Loop)]),
+    [exit(P, kill) || P <- All],
+    ok.
+
+data({keep_state, D}, _) -> D;
+data({keep_state, D, _}, _) -> D;
+data({next_state, _, D}, _) -> D;
+data({next_state, _, D, _}, _) -> D;
+data(keep_state_and_data, D) -> D;
+data({keep_state_and_data, _}, D) -> D.
+
+step(Label, F, Acc0, M) ->
+    garbage_collect(),
+    T0 = erlang:monotonic_time(nanosecond),
+    _ = lists:foldl(F, Acc0, lists:seq(1, M)),
+    Ns = (erlang:monotonic_time(nanosecond) - T0) / M,
+    io:format("| ~ts | ~.1f |~n", [Label, float(Ns)]),
+    Ns.
+
+%% ns per message for a process draining M messages already in its mailbox
+gen_statem_loop(M) ->
+    drain(fun(Parent) -> {ok, P} = gen_statem:start(toroco_bench_drain, {Parent, M}, []), P end, M).
+
+plain_loop(M) ->
+    drain(fun(Parent) -> spawn(fun() -> plain_drain(Parent, M) end) end, M).
+
+plain_drain(Parent, 0) -> Parent ! {drained, self()};
+plain_drain(Parent, K) -> receive _ -> plain_drain(Parent, K - 1) end.
+
+drain(Start, M) ->
+    P = Start(self()),
+    true = erlang:suspend_process(P),
+    [P ! {'$toroco_in', in, K} || K <- lists:seq(1, M)],
+    T0 = erlang:monotonic_time(nanosecond),
+    true = erlang:resume_process(P),
+    receive {drained, P} -> ok end,
+    (erlang:monotonic_time(nanosecond) - T0) / M.
 
 pid(Name) -> whereis(toroco_names:process(Name)).
 
