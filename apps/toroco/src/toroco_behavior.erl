@@ -225,10 +225,8 @@ start_user(E = #e{kind = Kind, module = M, args = Args, name = Name}) ->
 %% The idle tick (toroco_wire:idle_arm/0), whatever the callback module's
 %% state; the first event after hibernating arms it again.
 handle_event(info, ?WIRE_IDLE, _S, E = #e{idle = Idle}) ->
-    case toroco_wire:idle_tick(Idle) of
-        hibernate -> {keep_state, E#e{idle = off}, [hibernate]};
-        Idle1 -> {keep_state, E#e{idle = Idle1}}
-    end;
+    {Idle1, Actions} = toroco_wire:idle_tick(Idle),
+    {keep_state, E#e{idle = Idle1}, Actions};
 handle_event(Type, Content, S, E = #e{idle = off}) ->
     handle_event(Type, Content, S, E#e{idle = toroco_wire:idle_arm()});
 %% The observer tap changed: keep the sinks that concern this process.

@@ -148,10 +148,8 @@ init({Mod, Key, Caller}) ->
 %% The idle tick (toroco_wire:idle_arm/0); the first event after
 %% hibernating arms it again.
 handle_event(info, ?WIRE_IDLE, _, C = #c{idle = Idle}) ->
-    case toroco_wire:idle_tick(Idle) of
-        hibernate -> {keep_state, C#c{idle = off}, [hibernate]};
-        Idle1 -> {keep_state, C#c{idle = Idle1}}
-    end;
+    {Idle1, Actions} = toroco_wire:idle_tick(Idle),
+    {keep_state, C#c{idle = Idle1}, Actions};
 handle_event(Type, Content, St, C = #c{idle = off}) ->
     handle_event(Type, Content, St, C#c{idle = toroco_wire:idle_arm()});
 %% The event path.

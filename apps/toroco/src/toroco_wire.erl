@@ -350,17 +350,17 @@ idle_arm() ->
             {armed, reductions()}
     end.
 
-%% @doc At `WIRE_IDLE': `hibernate' if the process did nothing since the
-%% tick was armed (its reductions grew by no more than the tick's own), else
-%% the tick armed again.
--spec idle_tick(idle()) -> hibernate | idle().
+%% @doc At `WIRE_IDLE': the process did nothing since the tick was armed
+%% (its reductions grew by no more than the tick's own): `[hibernate]' to
+%% do, and the tick off; else the tick armed again.
+-spec idle_tick(idle()) -> {idle(), [hibernate]}.
 idle_tick({armed, R0}) ->
     case reductions() - R0 =< ?IDLE_REDUCTIONS of
-        true -> hibernate;
-        false -> idle_arm()
+        true -> {off, [hibernate]};
+        false -> {idle_arm(), []}
     end;
 idle_tick(Idle) ->
-    Idle.
+    {Idle, []}.
 
 reductions() ->
     {reductions, R} = erlang:process_info(self(), reductions),
