@@ -34,10 +34,11 @@
 
 -include("toroco_wire.hrl").
 
--export([start_link/3, child_spec/3, rewire/3, ready/2, info/2, call/4]).
+-export([start_link/3, rewire/3, ready/2, info/2, call/4]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3]).
 
 -type key() :: {atom(), atom()}.
+-export_type([key/0]).
 -type core_event() :: term().
 -type kind_data() :: term().
 
@@ -92,11 +93,6 @@ start_link(Mod, Key, Caller) ->
     gen_statem:start_link({local, Mod:reg(Key)}, ?MODULE, {Mod, Key, Caller},
                           toroco_wire:start_opts()).
 
--spec child_spec(module(), key(), pid() | none) -> supervisor:child_spec().
-child_spec(Mod, Key, Caller) ->
-    #{id => {Mod:kind(), Key}, start => {?MODULE, start_link, [Mod, Key, Caller]},
-      restart => permanent, shutdown => 1000, type => worker, modules => [?MODULE, Mod]}.
-
 %% @doc Takes the configuration now in the wiring table; returns once the
 %% change is in the core (every new upstream answered, died, or was waited
 %% for `sync_timeout_ms').
@@ -131,7 +127,7 @@ call(Mod, Key, Req, Timeout) ->
 callback_mode() -> handle_event_function.
 
 -spec init({module(), key(), pid() | none}) ->
-          gen_statem:init_result(ready | syncing) | ignore.
+          gen_statem:init_result(ready | syncing | gone).
 init({Mod, Key, Caller}) ->
     process_flag(trap_exit, true),
     case toroco_wiring:lookup({Mod:kind(), Key}) of
@@ -140,11 +136,15 @@ init({Mod, Key, Caller}) ->
             {St, C1, Actions} = start_sync(Cfg, Caller, none, C),
             {ok, St, C1, Actions};
         error ->
-            ignore
+            %% Unwired while (re)starting: end at once, not to be restarted
+            %% (`toroco_routers_sup').
+            {ok, gone, none, [{next_event, internal, gone}]}
     end.
 
--spec handle_event(gen_statem:event_type(), term(), ready | syncing, #c{}) ->
-          gen_statem:event_handler_result(ready | syncing).
+-spec handle_event(gen_statem:event_type(), term(), ready | syncing | gone, #c{} | none) ->
+          gen_statem:event_handler_result(ready | syncing | gone).
+handle_event(internal, gone, gone, none) ->
+    {stop, normal};
 %% The idle tick (toroco_wire:idle_arm/0); the first event after
 %% hibernating arms it again.
 handle_event(info, ?WIRE_IDLE, _, C = #c{idle = Idle}) ->
@@ -234,7 +234,9 @@ handle_event({call, From}, ready, ready, _C) ->
 handle_event(Type, Content, _, C) ->
     kind(Type, Content, C).
 
--spec terminate(term(), ready | syncing, #c{}) -> ok.
+-spec terminate(term(), ready | syncing | gone, #c{} | none) -> ok.
+terminate(_Reason, gone, none) ->
+    ok;
 terminate(_Reason, _, C = #c{links = L}) ->
     toroco_wire:detach_all(L, me(C)).
 

@@ -21,7 +21,11 @@ start_link() ->
 
 -spec init([]) -> {ok, []}.
 init([]) ->
-    _ = ets:new(toroco_wiring, [named_table, public, set, {read_concurrency, true}]),
+    %% Compressed: read when a consumer starts or is re-wired, never per
+    %% event, and at ten thousand behaviors its rows are the largest part of
+    %% the runtime's memory outside processes (about 560 bytes per behavior
+    %% with its router, 320 compressed).
+    _ = ets:new(toroco_wiring, [named_table, public, set, compressed, {read_concurrency, true}]),
     _ = ets:new(toroco_lives, [named_table, public, set, {write_concurrency, true}]),
     {ok, []}.
 

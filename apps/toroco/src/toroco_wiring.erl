@@ -491,13 +491,10 @@ apply_plan(#{routers := OldR, gates := OldG, subs := OldSubs},
 %% changed.
 ensure(Kind, Key, Changed, Caller) ->
     Mod = consumer_module(Kind),
-    case supervisor:start_child(toroco_routers_sup, toroco_consumer:child_spec(Mod, Key, Caller)) of
+    case toroco_routers_sup:start_consumer(Mod, Key, Caller) of
         {ok, _} -> answered(toroco_consumer:ready(Mod, Key));
         {error, {already_started, _}} when Changed -> answered(toroco_consumer:rewire(Mod, Key, Caller));
         {error, {already_started, _}} -> ok;
-        {error, already_present} ->
-            _ = supervisor:restart_child(toroco_routers_sup, {Kind, Key}),
-            answered(toroco_consumer:ready(Mod, Key));
         {error, Reason} ->
             logger:error("toroco: could not start ~p ~p: ~p", [Kind, Key, Reason],
                          #{domain => [toroco, wiring]})
@@ -512,9 +509,9 @@ answered({error, Reason}) ->
 
 stop(Kind, Key) ->
     _ = Kind =:= router andalso toroco_router:unwire(Key),
-    _ = supervisor:terminate_child(toroco_routers_sup, {Kind, Key}),
-    _ = supervisor:delete_child(toroco_routers_sup, {Kind, Key}),
-    ets:delete(?TABLE, {Kind, Key}).
+    %% The configuration goes first: a restart racing with the stop ends.
+    ets:delete(?TABLE, {Kind, Key}),
+    toroco_routers_sup:stop_consumer(consumer_module(Kind), Key).
 
 %% What a consumer reads of its configuration: the rest is the plan's own
 %% (its key says the rest), and every byte counts ten thousand times.
