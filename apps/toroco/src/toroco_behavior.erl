@@ -94,6 +94,7 @@
             user_events = false :: boolean(),
             %% the observer tap's sinks that concern this process (SPEC §10)
             tap = #{} :: toroco_tap:sinks(),
+            idle = off :: toroco_wire:idle(),
             %% names of the generic timeouts the callback module has set, so
             %% that a reset cancels them
             timers = [] :: [term()],
@@ -176,7 +177,7 @@ init(#{kind := Kind, name := Name, module := M, layer := Layer, args := Args}) -
             E = #e{name = Name, kind = Kind, module = M, layer = Layer, args = Args,
                    outputs = Subs, inputs = Ins,
                    user_events = erlang:function_exported(M, handle_event, 4),
-                   tap = tap(toroco_tap:current(), Name)},
+                   tap = tap(toroco_tap:current(), Name), idle = toroco_wire:idle_arm()},
             toroco_tap:lifecycle(E#e.tap, Name, toroco_restarts:started(Name)),
             announce(E),
             start_user(E);
@@ -221,6 +222,13 @@ start_user(E = #e{kind = Kind, module = M, args = Args, name = Name}) ->
 
 -spec handle_event(gen_statem:event_type(), term(), term(), #e{}) ->
           gen_statem:event_handler_result(term()).
+%% The idle tick (toroco_wire:idle_arm/0), whatever the callback module's
+%% state; the first event after hibernating arms it again.
+handle_event(info, ?WIRE_IDLE, _S, E = #e{idle = Idle}) ->
+    {Idle1, Actions} = toroco_wire:idle_tick(Idle),
+    {keep_state, E#e{idle = Idle1}, Actions};
+handle_event(Type, Content, S, E = #e{idle = off}) ->
+    handle_event(Type, Content, S, E#e{idle = toroco_wire:idle_arm()});
 %% The observer tap changed: keep the sinks that concern this process.
 handle_event(info, {'$toroco_tap', Subs}, _S, E = #e{name = Name}) ->
     {keep_state, E#e{tap = tap(Subs, Name)}};
@@ -406,7 +414,7 @@ actions([{send, Map, Opts} = A | T], E, Acc) when is_map(Map), is_map(Opts) ->
             actions(T, E, Acc)
     end;
 actions([{set, Map} | T], E, Acc) when is_map(Map) ->
-    actions(T, maps:fold(fun(Out, V, EAcc) -> emit(Out, {set, V}, EAcc) end, E, Map), Acc);
+    actions(T, emit_each(maps:to_list(Map), set, E), Acc);
 actions([{unset, Outs} | T], E, Acc) when is_list(Outs) ->
     actions(T, lists:foldl(fun(Out, EAcc) -> emit(Out, unset, EAcc) end, E, Outs), Acc);
 actions([unset | T], E = #e{outputs = Outs}, Acc) ->
@@ -445,8 +453,14 @@ clock({Kind, T, Msg, Opts}) when ?IS_TIMEOUT(Kind), is_integer(T), is_list(Opts)
 clock(T) when is_integer(T) -> toroco_clock:real_ms(T);
 clock(A) -> A.
 
+%% A list of the map's pairs, walked without a fun: an action's map has one
+%% or two outputs, where an iterator costs more than the walk.
 emit_all(Map, Hold, E) ->
-    maps:fold(fun(Out, V, EAcc) -> emit(Out, {send, V, Hold}, EAcc) end, E, Map).
+    emit_each(maps:to_list(Map), Hold, E).
+
+emit_each([], _How, E) -> E;
+emit_each([{Out, V} | T], set, E) -> emit_each(T, set, emit(Out, {set, V}, E));
+emit_each([{Out, V} | T], Hold, E) -> emit_each(T, Hold, emit(Out, {send, V, Hold}, E)).
 
 %% One emission on one output: to every consumer, in order; the latch follows.
 emit(Out, Op, E = #e{outputs = Outs, name = Name}) ->

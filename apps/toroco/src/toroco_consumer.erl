@@ -79,6 +79,7 @@
             stale = [] :: [key()],
             stale_at = infinity :: infinity | integer(),
             tries = 0 :: non_neg_integer(),
+            idle = off :: toroco_wire:idle(),
             sync = none :: none | {toroco_wire:sync(), gen_statem:from() | none, map()}}).
 
 %%====================================================================
@@ -131,7 +132,7 @@ init({Mod, Key, Caller}) ->
     process_flag(trap_exit, true),
     case toroco_wiring:lookup({Mod:kind(), Key}) of
         {ok, Cfg} ->
-            C = #c{mod = Mod, key = Key, data = Mod:init(Key, Cfg)},
+            C = #c{mod = Mod, key = Key, data = Mod:init(Key, Cfg), idle = toroco_wire:idle_arm()},
             {St, C1, Actions} = start_sync(Cfg, Caller, none, C),
             {ok, St, C1, Actions};
         error ->
@@ -144,6 +145,13 @@ init({Mod, Key, Caller}) ->
           gen_statem:event_handler_result(ready | syncing | gone).
 handle_event(internal, gone, gone, none) ->
     {stop, normal};
+%% The idle tick (toroco_wire:idle_arm/0); the first event after
+%% hibernating arms it again.
+handle_event(info, ?WIRE_IDLE, _, C = #c{idle = Idle}) ->
+    {Idle1, Actions} = toroco_wire:idle_tick(Idle),
+    {keep_state, C#c{idle = Idle1}, Actions};
+handle_event(Type, Content, St, C = #c{idle = off}) ->
+    handle_event(Type, Content, St, C#c{idle = toroco_wire:idle_arm()});
 %% The event path.
 handle_event(info, ?WIRE_EVENT(Src, Op), St, C = #c{heard = H}) when map_size(H) =:= 0 ->
     op(emitter, Src, Op, St, C);

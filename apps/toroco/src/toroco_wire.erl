@@ -43,6 +43,8 @@
 %%     <td>`WIRE_ACK(Input)' for the second</td></tr>
 %% <tr><td>`WIRE_ACK(Input)'</td><td>receiver → router</td>
 %%     <td>a `latest' delivery was handled</td><td>the newest pending value, if any</td></tr>
+%% <tr><td>`WIRE_IDLE'</td><td>a process → itself</td>
+%%     <td>the idle tick (see `idle_arm/0')</td><td>none</td></tr>
 %% <tr><td>`{'$toroco_tap', Subs}'</td><td>`toroco_tap' → emitters, routers</td>
 %%     <td>observer subscriptions change</td><td>none</td></tr>
 %% </table>
@@ -57,14 +59,18 @@
 -include("toroco_wire.hrl").
 
 -export([address/1, send/2, call/4, start_opts/0, keepalive_ms/0, max_age_ms/0, remote/1]).
+-export([idle_arm/0, idle_tick/1]).
 -export([new_links/0, start_sync/4, sync_answer/5, sync_down/2, sync_expire/1, sync_done/1,
          sync_fresh/3, finish_sync/2, detach_all/2, hello/4, late_state/4, down/3, carries/3,
          hold_timer/2, orphans/1, resubscribe/3]).
--export_type([address/0, links/0, sync/0, upstream/0]).
+-export_type([address/0, links/0, sync/0, upstream/0, idle/0]).
 
 -type source() :: {atom(), atom()}.
 %% Where a process is reached: its registered name on its node, or its pid.
 -type address() :: {atom(), node()} | pid().
+%% The idle tick: armed (with the process's reductions then), off (the
+%% process hibernated; its next event arms it), or never.
+-type idle() :: {armed, non_neg_integer()} | off | never.
 -type upstream() :: {emitter | gate, atom() | {atom(), node()}}.
 -type latch() :: toroco_router_core:latch().
 %% What a consumer knows of its upstreams: where each source comes from, the
@@ -320,12 +326,45 @@ unsubscribe(Src, {_Tag, Up}, Me) ->
 %%====================================================================
 
 %% @doc Start options of the network's processes (behaviors, devices,
-%% routers, gates): a process idle for `hibernate_after_ms' (app env, default
-%% 5000) hibernates, which shrinks an idle behavior with its router to a few
-%% kilobytes; one that is busy, even at 1 Hz, never does.
+%% routers, gates). No `hibernate_after': it would set a timer on every wait
+%% for a message, that is on every event (about a fifth of the closed loop's
+%% CPU); idleness is checked by the idle tick instead (`idle_arm/0').
 -spec start_opts() -> [gen_statem:start_opt()].
 start_opts() ->
-    [{hibernate_after, application:get_env(toroco, hibernate_after_ms, 5000)}].
+    [].
+
+%% @doc Arms the idle tick of the calling process (behaviors, devices,
+%% routers, gates): `WIRE_IDLE' comes back after half of `hibernate_after_ms'
+%% (app env, default 5000; `infinity' never), and `idle_tick/1' then tells
+%% whether the process did anything since. One that did nothing hibernates
+%% (so within `hibernate_after_ms' of its last event), which shrinks an idle
+%% behavior with its router to a few kilobytes; its next event arms the tick
+%% again. One that is busy, even at 1 Hz, never hibernates.
+-spec idle_arm() -> idle().
+idle_arm() ->
+    case application:get_env(toroco, hibernate_after_ms, 5000) of
+        infinity ->
+            never;
+        Ms ->
+            _ = erlang:send_after(max(1, Ms div 2), self(), ?WIRE_IDLE),
+            {armed, reductions()}
+    end.
+
+%% @doc At `WIRE_IDLE': the process did nothing since the tick was armed
+%% (its reductions grew by no more than the tick's own): `[hibernate]' to
+%% do, and the tick off; else the tick armed again.
+-spec idle_tick(idle()) -> {idle(), [hibernate]}.
+idle_tick({armed, R0}) ->
+    case reductions() - R0 =< ?IDLE_REDUCTIONS of
+        true -> {off, [hibernate]};
+        false -> {idle_arm(), []}
+    end;
+idle_tick(Idle) ->
+    {Idle, []}.
+
+reductions() ->
+    {reductions, R} = erlang:process_info(self(), reductions),
+    R.
 
 %% @doc How often an upstream tells its remote consumers it is alive.
 -spec keepalive_ms() -> pos_integer().

@@ -25,3 +25,8 @@
 %% upstream -> its consumers on other nodes: Src is alive, with its latch
 %% (`{value, V}' or `none'), every `remote_keepalive_ms' (SPEC §13).
 -define(WIRE_ALIVE(Kind, Src, Latch), {'$toroco_alive', Kind, Src, Latch}).
+%% a process -> itself: the idle tick (toroco_wire:idle_arm/0); a process
+%% whose reductions grew by no more than IDLE_REDUCTIONS since (a tick of its
+%% own costs 34 to 42 here, the lightest event about 30 more) did nothing.
+-define(WIRE_IDLE, '$toroco_idle').
+-define(IDLE_REDUCTIONS, 50).

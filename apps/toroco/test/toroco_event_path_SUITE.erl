@@ -337,8 +337,18 @@ reset_cancels_named_timeouts(_Config) ->
     %% Without a reset the timer fires.
     ok = toroco:inject({s, v}, arm),
     ok = toroco_fake_actuator:await(a, fun(H) -> [V || {_, V, _} <- H] =:= [ticked] end, 2000),
-    %% Armed, then reset: it must not fire.
+    %% Armed, then reset: it must not fire. The arm and the reset come
+    %% through two routers, so the reset is sent once b is seen armed (a
+    %% first reset brings it back to idle, where the test can tell).
+    State = fun() ->
+                    try sys:get_state(toroco_names:process(b), 1000) of {St, _} -> St
+                    catch exit:_ -> unknown
+                    end
+            end,
+    ok = toroco:inject({r, go}, first),
+    toroco_test_lib:wait_until(fun() -> State() =:= idle end, 2000),
     ok = toroco:inject({s, v}, arm),
+    toroco_test_lib:wait_until(fun() -> State() =:= armed end, 2000),
     ok = toroco:inject({r, go}, now),
     {error, timeout} = toroco_fake_actuator:await(a, fun(H) -> length(H) > 1 end, 800),
     [ticked] = toroco_test_lib:values(a).
