@@ -9,9 +9,7 @@
 -export([main/1]).
 
 main([Dir, Root]) ->
-    ok = filelib:ensure_path(Dir),
-    logger:set_primary_config(level, error),
-    Quick = os:getenv("TOROCO_BENCH_QUICK") =:= "1",
+    Quick = toroco_bench:setup(Dir),
     Wiring = filename:join([Root, "config", "torobot.wiring"]),
     World = filename:join([Root, "config", "worlds", "default.world"]),
     io:format("~n## Simulated lab~n~n"),

@@ -7,15 +7,22 @@
 -module(toroco_bench).
 -export([main/1]).
 %% The chain and its tables, for the recording section (toroco_bench_live).
--export([chain/2, run/3, row/4, table/4]).
+-export([setup/1, chain/2, run/3, row/4, table/4]).
 
 -define(N, 10000).
 
-main([Dir]) ->
+%% What every section of the benchmark does first: its results directory,
+%% UTF-8 output, only errors logged. `true' for a quick run
+%% (TOROCO_BENCH_QUICK=1).
+-spec setup(file:filename()) -> boolean().
+setup(Dir) ->
     ok = filelib:ensure_path(Dir),
     ok = io:setopts([{encoding, unicode}]),
     logger:set_primary_config(level, error),
-    Quick = os:getenv("TOROCO_BENCH_QUICK") =:= "1",
+    os:getenv("TOROCO_BENCH_QUICK") =:= "1".
+
+main([Dir]) ->
+    Quick = setup(Dir),
     N = case Quick of true -> 2000; false -> ?N end,
     io:format("~ts~n~nMachine: ~ts~nOTP ~s, ~w schedulers~n~n",
               [<<"# Torocó benchmark"/utf8>>, machine(), erlang:system_info(otp_release),

@@ -15,9 +15,7 @@
 -define(IR_FAR, 100).
 
 main([Dir, Flags]) ->
-    ok = io:setopts([{encoding, unicode}]),
-    logger:set_primary_config(level, error),
-    Quick = os:getenv("TOROCO_BENCH_QUICK") =:= "1",
+    Quick = toroco_bench:setup(Dir),
     Secs = case Quick of true -> 5; false -> 10 end,
     io:format("~n### CPU per event, VM flags `~s`~n~n", [Flags]),
     io:format("| load | events | events/s | CPU-s per s (VM + pru_port) | events per CPU-second | "

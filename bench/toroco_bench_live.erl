@@ -9,10 +9,7 @@
 -export([main/1]).
 
 main([Dir]) ->
-    ok = filelib:ensure_path(Dir),
-    ok = io:setopts([{encoding, unicode}]),
-    logger:set_primary_config(level, error),
-    Quick = os:getenv("TOROCO_BENCH_QUICK") =:= "1",
+    Quick = toroco_bench:setup(Dir),
     N = case Quick of true -> 2000; false -> 10000 end,
     Paced = case Quick of true -> 300; false -> 3000 end,
     Window = case Quick of true -> 50000; false -> 300000 end,

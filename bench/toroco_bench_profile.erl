@@ -6,9 +6,8 @@
 -module(toroco_bench_profile).
 -export([main/1]).
 
-main([_Dir]) ->
-    ok = io:setopts([{encoding, unicode}]),
-    logger:set_primary_config(level, error),
+main([Dir]) ->
+    _ = toroco_bench:setup(Dir),
     N = 20000,
     toroco_bench:chain(closed, 2000),
     _ = toroco_bench:run(closed, 2000, 20000),

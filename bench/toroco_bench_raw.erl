@@ -73,18 +73,10 @@ sink(Mode, Expect, Controller) ->
 
 sink(Mode, Expect, Controller, Src, N, Lat) ->
     receive
-        {ev, {T0, Seq}} ->
-            Now = now_ns(),
-            N1 = N + 1,
-            Lat1 = case T0 of 0 -> Lat; _ -> [Now - T0 | Lat] end,
-            case Mode of
-                closed -> Src ! {arrived, Seq};
-                {window, Every} when N1 rem Every =:= 0 -> Src ! {acked, N1};
-                _ -> ok
-            end,
-            case N1 >= Expect of
-                true -> Controller ! {sink_done, self(), Now, lists:reverse(Lat1)};
-                false -> sink(Mode, Expect, Controller, Src, N1, Lat1)
+        {ev, Ev} ->
+            case toroco_bench_sink:arrived(Ev, Mode, Expect, Src, Controller, N, Lat) of
+                done -> ok;
+                {N1, Lat1} -> sink(Mode, Expect, Controller, Src, N1, Lat1)
             end
     end.
 

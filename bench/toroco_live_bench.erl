@@ -12,10 +12,7 @@
 -export([main/1]).
 
 main([Dir]) ->
-    ok = filelib:ensure_path(Dir),
-    ok = io:setopts([{encoding, unicode}]),
-    logger:set_primary_config(level, error),
-    Quick = os:getenv("TOROCO_BENCH_QUICK") =:= "1",
+    Quick = toroco_bench:setup(Dir),
     {ok, _} = application:ensure_all_started(toroco_hw),
     _ = application:load(toroco_live),
     ok = application:set_env(toroco_live, enabled, false),
