@@ -7,7 +7,7 @@
 -module(toroco_bench).
 -export([main/1]).
 %% The chain and its tables, for the recording section (toroco_bench_live).
--export([setup/1, chain/2, run/3, row/4, table/4]).
+-export([setup/1, chain/2, run/3, row/4, table/4, cpu_ticks/0, ticks_per_sec/0]).
 
 -define(N, 10000).
 
