@@ -89,7 +89,7 @@ torobot_row(Secs, _Dir) ->
           (Cpu + PortCpu) / 1000, none),
     io:format("~nTorobot: ~b IR events (each a sim_adc call into pru_port, which the board's PRU "
               "does without the VM), ~b camera datagrams, ~.1f s; pru_port ~b ms CPU, VM ~b ms~n",
-              [IrEvents, CamEvents, WallS, PortCpu, Cpu]),
+              [IrEvents, CamEvents, WallS, round(PortCpu), round(Cpu)]),
     ok = gen_udp:close(Sock),
     torobot_sim_robot:stop().
 
@@ -119,20 +119,18 @@ wait_until(At) ->
     receive {timeout, _, tick} -> ok end.
 
 %% This VM's CPU time (all threads), ms: user time (`statistics(runtime)'),
-%% or with TOROCO_BENCH_CPU_CLOCK=proc user + system time summed over
-%% /proc/self/task/*/stat. The threads' files, not the process's: qemu user
-%% mode answers a program's reads of its own /proc/PID/stat itself (with no
-%% times), not those of its threads. No thread of the VM ends during a row.
+%% or with TOROCO_BENCH_CPU_CLOCK=proc user + system time of its threads.
 cpu_ms() ->
-    case os:getenv("TOROCO_BENCH_CPU_CLOCK") of
-        "proc" ->
-            Task = "/proc/" ++ os:getpid() ++ "/task",
-            {ok, Tids} = file:list_dir(Task),
-            lists:sum([os_cpu_ms(filename:join(Task, T)) || T <- Tids]);
-        _ ->
+    case proc_clock() of
+        true ->
+            tasks_ms(os:getpid());
+        false ->
             {Ms, _} = erlang:statistics(runtime),
             Ms
     end.
+
+proc_clock() ->
+    os:getenv("TOROCO_BENCH_CPU_CLOCK") =:= "proc".
 
 %% The pru_port program of this VM: a child of its erl_child_setup.
 pru_port_pid() ->
@@ -144,11 +142,35 @@ pru_port_pid() ->
         [] -> none
     end.
 
-%% User + system time of a process (a pid) or of a thread (its /proc
-%% directory), ms.
+%% User + system time of a process (a pid), ms.
 os_cpu_ms(none) -> 0;
-os_cpu_ms("/" ++ _ = Dir) -> stat_ms(Dir ++ "/stat");
-os_cpu_ms(Pid) -> stat_ms("/proc/" ++ Pid ++ "/stat").
+os_cpu_ms(Pid) ->
+    case proc_clock() of
+        true -> tasks_ms(Pid);
+        false -> stat_ms("/proc/" ++ Pid ++ "/stat")
+    end.
+
+%% The time on a CPU of all threads of a process, ms, summed over
+%% /proc/PID/task/*/schedstat (ns; /stat's times count 10 ms ticks, too coarse
+%% for a row of 100 ms), or over their /stat where there is no schedstat.
+%% The threads' files, not the process's: qemu user mode answers a
+%% program's reads of its own /proc/PID/stat itself (with no times), not
+%% those of its threads. No thread ends during a row.
+tasks_ms(Pid) ->
+    Task = "/proc/" ++ Pid ++ "/task",
+    case file:list_dir(Task) of
+        {ok, Tids} -> lists:sum([task_ms(filename:join(Task, T)) || T <- Tids]);
+        {error, _} -> 0
+    end.
+
+task_ms(Dir) ->
+    case file:read_file(Dir ++ "/schedstat") of
+        {ok, B} ->
+            [Ns | _] = string:lexemes(binary_to_list(B), " \n"),
+            list_to_integer(Ns) / 1.0e6;
+        {error, _} ->
+            stat_ms(Dir ++ "/stat")
+    end.
 
 stat_ms(File) ->
     case file:read_file(File) of
@@ -168,7 +190,7 @@ vm_line() ->
                    erlang:system_info(emu_flavor), 8 * erlang:system_info(wordsize),
                    erlang:system_info(schedulers_online),
                    case os:getenv("TOROCO_BENCH_CPU_CLOCK") of
-                       "proc" -> "user + system (/proc)";
+                       "proc" -> "user + system (/proc/PID/task/*/schedstat)";
                        _ -> "user (statistics(runtime))"
                    end]).
 
@@ -181,39 +203,41 @@ csv(Label, Events, WallS, CpuS) ->
             ok = file:write_file(File, unicode:characters_to_binary(Line), [append])
     end.
 
-%% compare([File]): the rows of File (written through
+%% compare([File | Prefixes]): the rows of File (written through
 %% TOROCO_BENCH_CPU_CSV) as one table, load by load, runs in the order they
-%% ran; the last column divides each run's CPU per event by the first
-%% run's (the native one to compare with).
-compare([File]) ->
+%% ran. Each run's CPU per event is divided by the first run's (the native
+%% one to compare with) and by that of the first run whose tag starts with
+%% each of Prefixes.
+compare([File | Prefixes]) ->
     ok = io:setopts([{encoding, unicode}]),
     {ok, Bin} = file:read_file(File),
     Rows = [list_to_tuple(string:split(L, ";", all))
             || L <- string:lexemes(unicode:characters_to_list(Bin), "\n")],
     Loads = in_order([Load || {_, Load, _, _, _} <- Rows]),
-    [Base | _] = Runs = in_order([Run || {Run, _, _, _, _} <- Rows]),
-    PerEvent = fun(Run, Load) ->
-                       case [{list_to_integer(E), list_to_float(W), list_to_float(C)}
-                             || {R, L, E, W, C} <- Rows, R =:= Run, L =:= Load] of
-                           [{E, W, C} | _] -> {E, W, C};
-                           [] -> none
-                       end
-               end,
-    io:format("| load | run | events/s | CPU-s per s | events per CPU-second | µs CPU per event | "
-              "÷ ~ts |~n|---|---|---:|---:|---:|---:|---:|~n", [Base]),
-    _ = [case PerEvent(Run, Load) of
+    Runs = in_order([Run || {Run, _, _, _, _} <- Rows]),
+    Bases = in_order([hd(Runs) | [R || P <- Prefixes, R <- [hd([X || X <- Runs, lists:prefix(P, X)] ++ [none])],
+                                       R =/= none]]),
+    Find = fun(Run, Load) ->
+                   case [{list_to_integer(E), list_to_float(W), list_to_float(C)}
+                         || {R, L, E, W, C} <- Rows, R =:= Run, L =:= Load] of
+                       [{E, W, C} | _] -> {E, W, C};
+                       [] -> none
+                   end
+           end,
+    io:format("| load | run | events/s | CPU-s per s | events per CPU-second | µs CPU per event |~ts~n"
+              "|---|---|---:|---:|---:|---:|~ts~n",
+              [[[" ÷ ", B, " |"] || B <- Bases], [[" ---: |"] || _ <- Bases]]),
+    _ = [case Find(Run, Load) of
              none -> ok;
              {E, W, C} ->
-                 Ratio = case {Run, PerEvent(Base, Load)} of
-                             {Base, _} -> "1";
-                             {_, none} -> "-";
-                             {_, {E0, _, C0}} when C0 > 0 ->
-                                 io_lib:format("~.1f", [(C / E) / (C0 / E0)]);
-                             _ -> "-"
-                         end,
-                 io:format("| ~ts | ~ts | ~b | ~.3f | ~b | ~.1f | ~ts |~n",
+                 Ratios = [case Find(B, Load) of
+                               {E0, _, C0} when C0 > 0, E > 0 ->
+                                   io_lib:format(" ~.1f |", [(C / E) / (C0 / E0)]);
+                               _ -> " - |"
+                           end || B <- Bases],
+                 io:format("| ~ts | ~ts | ~b | ~.3f | ~b | ~.1f |~ts~n",
                            [Load, Run, round(E / W), C / W, round(E / max(1.0e-9, C)),
-                            1.0e6 * C / max(1, E), Ratio])
+                            1.0e6 * C / max(1, E), Ratios])
          end || Load <- Loads, Run <- Runs],
     halt(0).
 
