@@ -2,7 +2,7 @@
 #   make run   - the Torobot in the simulated world (default config);
 #                make run ROBOT=wall_follower runs a library robot of config/robots/
 #   make test  - every test suite: C port, detector, Common Test, PropEr, Dialyzer
-.PHONY: run test deps compile port port-test detector detector-test ct dialyzer bench release board-check clean eval
+.PHONY: run test deps compile port port-test detector detector-test ct dialyzer bench release board-check board-bench clean eval
 
 WORLD ?= config/worlds/default.world
 SPEED ?= 1
@@ -56,6 +56,11 @@ release: compile
 # not part of `make test'): README, "The board".
 board-check: compile
 	scripts/board-emulate
+
+# CPU per event there, beside this machine's (README, "The emulated board"):
+# the same step alone; BOARD_BENCH=1 make board-check runs both.
+board-bench: compile
+	BOARD_BENCH=only scripts/board-emulate
 
 clean:
 	rm -rf _build

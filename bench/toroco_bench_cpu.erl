@@ -8,8 +8,16 @@
 %% as datagrams. The VM's flags are the caller's (`scripts/bench' runs this
 %% with the bench's flags and again without the schedulers' busy wait);
 %% `main/1' takes the results directory and a label for the flags.
+%%
+%% The VM's CPU is `statistics(runtime)', user time only, unless
+%% TOROCO_BENCH_CPU_CLOCK=proc: then user + system time of all its threads
+%% from /proc, as for `pru_port' (the emulated board's comparison,
+%% `make board-bench', uses that: under qemu user mode it is the qemu
+%% process's CPU, translation included). With TOROCO_BENCH_CPU_CSV=File
+%% each row is also appended to File, tagged with TOROCO_BENCH_CPU_RUN;
+%% `compare/1' prints such files as one table.
 -module(toroco_bench_cpu).
--export([main/1]).
+-export([main/1, compare/1]).
 
 -define(IR_NEAR, 300).
 -define(IR_FAR, 100).
@@ -17,7 +25,7 @@
 main([Dir, Flags]) ->
     Quick = toroco_bench:setup(Dir),
     Secs = case Quick of true -> 5; false -> 10 end,
-    io:format("~n### CPU per event, VM flags `~s`~n~n", [Flags]),
+    io:format("~n### CPU per event, VM flags `~s`~n~n~ts~n~n", [Flags, vm_line()]),
     io:format("| load | events | events/s | CPU-s per s (VM + pru_port) | events per CPU-second | "
               "µs CPU per event | p50 µs |~n|---|---:|---:|---:|---:|---:|---:|~n"),
     toroco_bench:chain(closed, 2000),
@@ -46,6 +54,7 @@ chain_row(Label, Mode, N) ->
     print(Label, N, Ns / 1.0e9, Cpu / 1000, P50).
 
 print(Label, Events, WallS, CpuS, P50) ->
+    csv(Label, Events, WallS, CpuS),
     io:format("| ~ts | ~b | ~b | ~.3f | ~b | ~.2f | ~ts |~n",
               [Label, Events, round(Events / WallS), CpuS / WallS, round(Events / max(1.0e-9, CpuS)),
                1.0e6 * CpuS / max(1, Events),
@@ -67,7 +76,8 @@ torobot_row(Secs, _Dir) ->
     Cpu0 = cpu_ms(), PortCpu0 = os_cpu_ms(Port), W0 = erlang:monotonic_time(millisecond),
     Ir = spawn_link(fun() -> ir(W0, Secs * 1000, 0) end),
     Cam = spawn_link(fun() -> camera(Sock, CamPort, W0, Secs * 30, 0) end),
-    [receive {'EXIT', P, normal} -> ok after Secs * 2000 + 10000 -> error({stuck, P}) end
+    %% Generous: under emulation the feeders fall behind when the VM is saturated.
+    [receive {'EXIT', P, normal} -> ok after Secs * 20000 + 60000 -> error({stuck, P}) end
      || P <- [Ir, Cam]],
     W1 = erlang:monotonic_time(millisecond),
     Cpu = cpu_ms() - Cpu0, PortCpu = os_cpu_ms(Port) - PortCpu0,
@@ -79,7 +89,7 @@ torobot_row(Secs, _Dir) ->
           (Cpu + PortCpu) / 1000, none),
     io:format("~nTorobot: ~b IR events (each a sim_adc call into pru_port, which the board's PRU "
               "does without the VM), ~b camera datagrams, ~.1f s; pru_port ~b ms CPU, VM ~b ms~n",
-              [IrEvents, CamEvents, WallS, PortCpu, Cpu]),
+              [IrEvents, CamEvents, WallS, round(PortCpu), round(Cpu)]),
     ok = gen_udp:close(Sock),
     torobot_sim_robot:stop().
 
@@ -108,10 +118,19 @@ wait_until(At) ->
     erlang:start_timer(At, self(), tick, [{abs, true}]),
     receive {timeout, _, tick} -> ok end.
 
-%% This VM's CPU time (all threads), ms.
+%% This VM's CPU time (all threads), ms: user time (`statistics(runtime)'),
+%% or with TOROCO_BENCH_CPU_CLOCK=proc user + system time of its threads.
 cpu_ms() ->
-    {Ms, _} = erlang:statistics(runtime),
-    Ms.
+    case proc_clock() of
+        true ->
+            tasks_ms(os:getpid());
+        false ->
+            {Ms, _} = erlang:statistics(runtime),
+            Ms
+    end.
+
+proc_clock() ->
+    os:getenv("TOROCO_BENCH_CPU_CLOCK") =:= "proc".
 
 %% The pru_port program of this VM: a child of its erl_child_setup.
 pru_port_pid() ->
@@ -123,9 +142,38 @@ pru_port_pid() ->
         [] -> none
     end.
 
+%% User + system time of a process (a pid), ms.
 os_cpu_ms(none) -> 0;
 os_cpu_ms(Pid) ->
-    case file:read_file("/proc/" ++ Pid ++ "/stat") of
+    case proc_clock() of
+        true -> tasks_ms(Pid);
+        false -> stat_ms("/proc/" ++ Pid ++ "/stat")
+    end.
+
+%% The time on a CPU of all threads of a process, ms, summed over
+%% /proc/PID/task/*/schedstat (ns; /stat's times count 10 ms ticks, too coarse
+%% for a row of 100 ms), or over their /stat where there is no schedstat.
+%% The threads' files, not the process's: qemu user mode answers a
+%% program's reads of its own /proc/PID/stat itself (with no times), not
+%% those of its threads. No thread ends during a row.
+tasks_ms(Pid) ->
+    Task = "/proc/" ++ Pid ++ "/task",
+    case file:list_dir(Task) of
+        {ok, Tids} -> lists:sum([task_ms(filename:join(Task, T)) || T <- Tids]);
+        {error, _} -> 0
+    end.
+
+task_ms(Dir) ->
+    case file:read_file(Dir ++ "/schedstat") of
+        {ok, B} ->
+            [Ns | _] = string:lexemes(binary_to_list(B), " \n"),
+            list_to_integer(Ns) / 1.0e6;
+        {error, _} ->
+            stat_ms(Dir ++ "/stat")
+    end.
+
+stat_ms(File) ->
+    case file:read_file(File) of
         {ok, B} ->
             [_, Rest] = binary:split(B, <<") ">>),
             F = string:lexemes(binary_to_list(Rest), " "),
@@ -133,3 +181,66 @@ os_cpu_ms(Pid) ->
             Ticks * 1000 div 100;
         {error, _} -> 0
     end.
+
+%% Which VM this is: architecture, emulator flavor (jit or emu), word size,
+%% schedulers.
+vm_line() ->
+    io_lib:format("VM: OTP ~s, ~s, flavor ~s, ~b-bit, ~b scheduler(s), CPU clock ~s",
+                  [erlang:system_info(otp_release), erlang:system_info(system_architecture),
+                   erlang:system_info(emu_flavor), 8 * erlang:system_info(wordsize),
+                   erlang:system_info(schedulers_online),
+                   case os:getenv("TOROCO_BENCH_CPU_CLOCK") of
+                       "proc" -> "user + system (/proc/PID/task/*/schedstat)";
+                       _ -> "user (statistics(runtime))"
+                   end]).
+
+csv(Label, Events, WallS, CpuS) ->
+    case os:getenv("TOROCO_BENCH_CPU_CSV") of
+        false -> ok;
+        File ->
+            Run = os:getenv("TOROCO_BENCH_CPU_RUN", "run"),
+            Line = io_lib:format("~ts;~ts;~b;~.6f;~.6f~n", [Run, Label, Events, WallS, CpuS]),
+            ok = file:write_file(File, unicode:characters_to_binary(Line), [append])
+    end.
+
+%% compare([File | Prefixes]): the rows of File (written through
+%% TOROCO_BENCH_CPU_CSV) as one table, load by load, runs in the order they
+%% ran. Each run's CPU per event is divided by the first run's (the native
+%% one to compare with) and by that of the first run whose tag starts with
+%% each of Prefixes.
+compare([File | Prefixes]) ->
+    ok = io:setopts([{encoding, unicode}]),
+    {ok, Bin} = file:read_file(File),
+    Rows = [list_to_tuple(string:split(L, ";", all))
+            || L <- string:lexemes(unicode:characters_to_list(Bin), "\n")],
+    Loads = in_order([Load || {_, Load, _, _, _} <- Rows]),
+    Runs = in_order([Run || {Run, _, _, _, _} <- Rows]),
+    Bases = in_order([hd(Runs) | [R || P <- Prefixes, R <- [hd([X || X <- Runs, lists:prefix(P, X)] ++ [none])],
+                                       R =/= none]]),
+    Find = fun(Run, Load) ->
+                   case [{list_to_integer(E), list_to_float(W), list_to_float(C)}
+                         || {R, L, E, W, C} <- Rows, R =:= Run, L =:= Load] of
+                       [{E, W, C} | _] -> {E, W, C};
+                       [] -> none
+                   end
+           end,
+    io:format("| load | run | events/s | CPU-s per s | events per CPU-second | µs CPU per event |~ts~n"
+              "|---|---|---:|---:|---:|---:|~ts~n",
+              [[[" ÷ ", B, " |"] || B <- Bases], [[" ---: |"] || _ <- Bases]]),
+    _ = [case Find(Run, Load) of
+             none -> ok;
+             {E, W, C} ->
+                 Ratios = [case Find(B, Load) of
+                               {E0, _, C0} when C0 > 0, E > 0 ->
+                                   io_lib:format(" ~.1f |", [(C / E) / (C0 / E0)]);
+                               _ -> " - |"
+                           end || B <- Bases],
+                 io:format("| ~ts | ~ts | ~b | ~.3f | ~b | ~.1f |~ts~n",
+                           [Load, Run, round(E / W), C / W, round(E / max(1.0e-9, C)),
+                            1.0e6 * C / max(1, E), Ratios])
+         end || Load <- Loads, Run <- Runs],
+    halt(0).
+
+in_order(L) ->
+    lists:foldl(fun(X, Acc) -> case lists:member(X, Acc) of true -> Acc; false -> Acc ++ [X] end end,
+                [], L).
