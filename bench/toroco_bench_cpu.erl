@@ -9,11 +9,12 @@
 %% with the bench's flags and again without the schedulers' busy wait);
 %% `main/1' takes the results directory and a label for the flags.
 %%
-%% The VM's CPU is `statistics(runtime)', user time only, unless
-%% TOROCO_BENCH_CPU_CLOCK=proc: then user + system time of all its threads
-%% from /proc, as for `pru_port' (the emulated board's comparison,
-%% `make board-bench', uses that: under qemu user mode it is the qemu
-%% process's CPU, translation included). With TOROCO_BENCH_CPU_CSV=File
+%% The VM's CPU is user + system time of all its threads from /proc, as
+%% for `pru_port' (waking and sleeping schedulers is system time, most of
+%% the cost at robot rates; under qemu user mode, `make board-bench', it is
+%% the qemu process's CPU, translation included);
+%% TOROCO_BENCH_CPU_CLOCK=runtime counts `statistics(runtime)' instead,
+%% user time only. With TOROCO_BENCH_CPU_CSV=File
 %% each row is also appended to File, tagged with TOROCO_BENCH_CPU_RUN;
 %% `compare/1' prints such files as one table.
 -module(toroco_bench_cpu).
@@ -118,8 +119,8 @@ wait_until(At) ->
     erlang:start_timer(At, self(), tick, [{abs, true}]),
     receive {timeout, _, tick} -> ok end.
 
-%% This VM's CPU time (all threads), ms: user time (`statistics(runtime)'),
-%% or with TOROCO_BENCH_CPU_CLOCK=proc user + system time of its threads.
+%% This VM's CPU time (all threads), ms: user + system time of its threads,
+%% or with TOROCO_BENCH_CPU_CLOCK=runtime user time (`statistics(runtime)').
 cpu_ms() ->
     case proc_clock() of
         true ->
@@ -130,7 +131,7 @@ cpu_ms() ->
     end.
 
 proc_clock() ->
-    os:getenv("TOROCO_BENCH_CPU_CLOCK") =:= "proc".
+    os:getenv("TOROCO_BENCH_CPU_CLOCK") =/= "runtime".
 
 %% The pru_port program of this VM: a child of its erl_child_setup.
 pru_port_pid() ->
@@ -189,9 +190,9 @@ vm_line() ->
                   [erlang:system_info(otp_release), erlang:system_info(system_architecture),
                    erlang:system_info(emu_flavor), 8 * erlang:system_info(wordsize),
                    erlang:system_info(schedulers_online),
-                   case os:getenv("TOROCO_BENCH_CPU_CLOCK") of
-                       "proc" -> "user + system (/proc/PID/task/*/schedstat)";
-                       _ -> "user (statistics(runtime))"
+                   case proc_clock() of
+                       true -> "user + system (/proc/PID/task/*/schedstat)";
+                       false -> "user (statistics(runtime))"
                    end]).
 
 csv(Label, Events, WallS, CpuS) ->
