@@ -7,7 +7,9 @@
 -module(toroco_bench).
 -export([main/1]).
 %% The chain and its tables, for the recording section (toroco_bench_live).
--export([setup/1, chain/2, run/3, row/4, table/4, cpu_ticks/0, ticks_per_sec/0]).
+-export([setup/1, warm_up/0, chain/2, run/3, measure/4, row/4, table/4]).
+%% CPU time, for the sections that count it (toroco_bench_cpu, toroco_bench_perf).
+-export([cpu_ticks/0, stat_ticks/1, ticks_per_sec/0]).
 
 -define(N, 10000).
 
@@ -460,11 +462,22 @@ write_cdf(File, Title, Sorted) ->
 %% CPU of this VM
 %%====================================================================
 
+%% This VM's user + system time, in clock ticks.
 cpu_ticks() ->
-    {ok, B} = file:read_file("/proc/self/stat"),
-    [_, Rest] = binary:split(B, <<") ">>),
-    F = string:lexemes(binary_to_list(Rest), " "),
-    list_to_integer(lists:nth(12, F)) + list_to_integer(lists:nth(13, F)).
+    stat_ticks("/proc/self/stat").
+
+%% User + system time in a /proc `stat' file (a process's or a thread's),
+%% in clock ticks; 0 if it cannot be read.
+-spec stat_ticks(file:filename()) -> non_neg_integer().
+stat_ticks(File) ->
+    case file:read_file(File) of
+        {ok, B} ->
+            [_, Rest] = binary:split(B, <<") ">>),
+            F = string:lexemes(binary_to_list(Rest), " "),
+            list_to_integer(lists:nth(12, F)) + list_to_integer(lists:nth(13, F));
+        {error, _} ->
+            0
+    end.
 
 ticks_per_sec() ->
     case string:trim(os:cmd("getconf CLK_TCK")) of

@@ -29,8 +29,7 @@ main([Dir, Flags]) ->
     io:format("~n### CPU per event, VM flags `~s`~n~n~ts~n~n", [Flags, vm_line()]),
     io:format("| load | events | events/s | CPU-s per s (VM + pru_port) | events per CPU-second | "
               "µs CPU per event | p50 µs |~n|---|---:|---:|---:|---:|---:|---:|~n"),
-    toroco_bench:chain(closed, 2000),
-    _ = toroco_bench:run(closed, 2000, 20000),
+    toroco_bench:warm_up(),
     N = case Quick of true -> 20000; false -> 100000 end,
     chain_row("internal chain, closed loop", closed, N),
     chain_row("internal chain, open loop (window 1000)", {window, 1000}, N),
@@ -174,14 +173,7 @@ task_ms(Dir) ->
     end.
 
 stat_ms(File) ->
-    case file:read_file(File) of
-        {ok, B} ->
-            [_, Rest] = binary:split(B, <<") ">>),
-            F = string:lexemes(binary_to_list(Rest), " "),
-            Ticks = list_to_integer(lists:nth(12, F)) + list_to_integer(lists:nth(13, F)),
-            Ticks * 1000 div 100;
-        {error, _} -> 0
-    end.
+    toroco_bench:stat_ticks(File) * 1000 div toroco_bench:ticks_per_sec().
 
 %% Which VM this is: architecture, emulator flavor (jit or emu), word size,
 %% schedulers.

@@ -21,8 +21,7 @@ main([Dir]) ->
             io:format("~n(no `perf' here: install Debian's linux-perf for this section)~n"),
             halt(0);
         Perf ->
-            toroco_bench:chain(closed, 2000),
-            _ = toroco_bench:run(closed, 2000, 20000),
+            toroco_bench:warm_up(),
             Raw = sample(Perf, Dir, "raw", fun raw_batch/0),
             Runtime = sample(Perf, Dir, "runtime", fun runtime_batch/0),
             table(Raw, Runtime),
@@ -37,8 +36,7 @@ runtime_batch() ->
 
 raw_batch() ->
     Chain = {Src, _} = toroco_bench_raw:chain(closed, ?BATCH, self()),
-    Src ! {run, closed, ?BATCH},
-    receive {sink_done, _, _, _} -> ok after 60000 -> ok end,
+    _ = toroco_bench:measure(Src, closed, ?BATCH, 60000),
     toroco_bench_raw:stop(Chain),
     ?BATCH.
 

@@ -9,8 +9,7 @@
 main([Dir]) ->
     _ = toroco_bench:setup(Dir),
     N = 20000,
-    toroco_bench:chain(closed, 2000),
-    _ = toroco_bench:run(closed, 2000, 20000),
+    toroco_bench:warm_up(),
     io:format("~n### Closed loop, per event (~b events)~n~n", [N]),
     io:format("| chain | µs per event (wall) | reductions per event (VM) | "
               "per process: reductions per event |~n|---|---:|---:|---|~n"),
@@ -166,8 +165,7 @@ count_loop(Parent, Acc) ->
 
 eprof(N) ->
     toroco_bench:chain(closed, N),
-    Procs = [pid(src), whereis(toroco_names:router(relay, in)), pid(relay),
-             whereis(toroco_names:router(sink, in)), pid(sink)],
+    Procs = [P || {_, P} <- procs()],
     {ok, _} = eprof:start(),
     profiling = eprof:start_profiling(Procs),
     _ = toroco_bench:run(closed, N, N * 20 + 10000),
