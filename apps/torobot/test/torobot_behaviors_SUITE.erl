@@ -143,27 +143,27 @@ hold_passes_through(_Config) ->
     ir(left, 0),
     await(setvel, ?FORWARD).
 
+%% Waits until the motors' Input has Src as its winner.
 winner_becomes(Input, Src) ->
-    winner_becomes(Input, Src, 50).
-
-winner_becomes(Input, Src, 0) ->
-    ct:fail({winner_not, Src, maps:get(Input, maps:get(inputs, toroco:inspect(motors)))});
-winner_becomes(Input, Src, Tries) ->
-    case toroco:inspect(motors) of
-        #{inputs := #{Input := #{winner := Src}}} -> ok;
-        _ -> receive after 20 -> winner_becomes(Input, Src, Tries - 1) end
-    end.
+    Winner = fun() -> maps:get(Input, maps:get(inputs, toroco:inspect(motors))) end,
+    becomes(fun() -> maps:get(winner, Winner()) =:= Src end, fun() -> {winner_not, Src, Winner()} end).
 
 %% Waits until the behavior Name's callback state is State.
 state_becomes(Name, State) ->
-    state_becomes(Name, State, 50).
+    Now = fun() -> sys:get_state(toroco_names:process(Name)) end,
+    becomes(fun() -> element(1, Now()) =:= State end, fun() -> {state_not, Name, State, Now()} end).
 
-state_becomes(Name, State, 0) ->
-    ct:fail({state_not, Name, State, sys:get_state(toroco_names:process(Name))});
-state_becomes(Name, State, Tries) ->
-    case sys:get_state(toroco_names:process(Name)) of
-        {State, _} -> ok;
-        _ -> receive after 20 -> state_becomes(Name, State, Tries - 1) end
+%% Looks at Holds() every 20 ms, 50 times at most; fails with Why() if it
+%% never held.
+becomes(Holds, Why) ->
+    becomes(Holds, Why, 50).
+
+becomes(_Holds, Why, 0) ->
+    ct:fail(Why());
+becomes(Holds, Why, Tries) ->
+    case Holds() of
+        true -> ok;
+        false -> receive after 20 -> becomes(Holds, Why, Tries - 1) end
     end.
 
 hold_keeps_turn_while_blue() ->
