@@ -98,6 +98,9 @@
             %% names of the generic timeouts the callback module has set, so
             %% that a reset cancels them
             timers = [] :: [term()],
+            %% in lockstep, the timeouts set with toroco_lockstep and their
+            %% simulated deadlines (gen_statem keeps none of them)
+            vtimers = #{} :: #{term() => integer()},
             %% emissions on undeclared outputs: when last logged, how many since
             undeclared = {never, 0} :: {never | integer(), non_neg_integer()}}).
 
@@ -222,6 +225,14 @@ start_user(E = #e{kind = Kind, module = M, args = Args, name = Name}) ->
 
 -spec handle_event(gen_statem:event_type(), term(), term(), #e{}) ->
           gen_statem:event_handler_result(term()).
+%% Lockstep (toroco_lockstep): one message of the event path, or a timer,
+%% handled as it would be in real time; the step is done once the events
+%% it inserts are handled too.
+handle_event(info, ?WIRE_STEP(Token, Msg), S, E) ->
+    toroco_wire:step_done(Token, step(Msg, S, E));
+handle_event(internal, ?WIRE_STEP_DONE(Token), _S, _E) ->
+    toroco_lockstep:done(Token),
+    keep_state_and_data;
 %% The idle tick (toroco_wire:idle_arm/0), whatever the callback module's
 %% state; the first event after hibernating arms it again.
 handle_event(info, ?WIRE_IDLE, _S, E = #e{idle = Idle}) ->
@@ -237,12 +248,12 @@ handle_event(info, ?WIRE_IN(Input, V), S, E = #e{suspended = false}) ->
     input(Input, V, S, E);
 handle_event(info, ?WIRE_IN(Input, V, Router), S, E = #e{suspended = false}) ->
     Result = input(Input, V, S, E),
-    Router ! ?WIRE_ACK(Input),
+    toroco_wire:send(Router, ?WIRE_ACK(Input)),
     Result;
 handle_event(info, ?WIRE_IN(_Input, _V), _S, _E) ->
     keep_state_and_data;                      % suspended: inputs are dropped
 handle_event(info, ?WIRE_IN(Input, _V, Router), _S, _E) ->
-    Router ! ?WIRE_ACK(Input),
+    toroco_wire:send(Router, ?WIRE_ACK(Input)),
     keep_state_and_data;
 %% Wiring: consumers attach and detach (see toroco_wire).
 handle_event(info, ?WIRE_SUB({_, Out} = Src, Consumer), _S, E = #e{outputs = Outs}) ->
@@ -307,7 +318,7 @@ handle_event(Type, Content, S, E = #e{user_events = true, module = M, user = UD}
     %% A callback module's handle_event/4 with no clause for this event
     %% falls through to the engine's default below.
     try M:handle_event(Type, Content, S, UD) of
-        R -> result(R, E)
+        R -> result(R, S, E)
     catch
         error:function_clause:Stack ->
             case Stack of
@@ -355,24 +366,38 @@ code_change(OldVsn, S, E = #e{module = M, user = UD}, Extra) ->
 input(?RESET, _V, _S, E) ->
     reset(E);
 input(Input, V, S, E = #e{module = M, user = UD}) ->
-    result(M:handle_input(Input, V, S, UD), E).
+    result(M:handle_input(Input, V, S, UD), S, E).
+
+%% A step of lockstep: a simulated timer that is still set fires; any other
+%% event ends an event timeout, as gen_statem's own would end.
+step(?WIRE_TIMER(Kind, Msg), S, E = #e{vtimers = VT}) ->
+    case VT of
+        #{Kind := _} -> handle_event(Kind, Msg, S, E#e{vtimers = maps:remove(Kind, VT)});
+        #{} -> keep_state_and_data
+    end;
+step(Msg, S, E = #e{vtimers = #{timeout := _}}) ->
+    {none, E1} = virtual({timeout, cancel}, E),
+    handle_event(info, Msg, S, E1);
+step(Msg, S, E) ->
+    handle_event(info, Msg, S, E).
 
 %% Brooks' reset: the behavior's latches and holds are cleared, then it starts
 %% again from init/1 in the same process.
 reset(E = #e{outputs = Outs, name = Name, tap = Tap}) ->
     toroco_tap:lifecycle(Tap, Name, reset),
     E1 = lists:foldl(fun(Out, Acc) -> emit(Out, unset, Acc) end, E, maps:keys(Outs)),
-    Cancel = [{state_timeout, cancel} | [{{timeout, T}, cancel} || T <- E1#e.timers]],
-    case start_user(E1#e{timers = []}) of
+    {Cancel, E1a} = actions([{state_timeout, cancel} | [{{timeout, T}, cancel} || T <- E1#e.timers]],
+                            E1),
+    case start_user(E1a#e{timers = []}) of
         {ok, S, E2} -> {next_state, S, E2, Cancel};
         {ok, S, E2, Actions} -> {next_state, S, E2, Cancel ++ Actions};
         {stop, Reason} -> {stop, Reason, E1}
     end.
 
-result(R, E) ->
+result(R, S0, E) ->
     case R of
-        {next_state, S, UD} -> {next_state, S, E#e{user = UD}};
-        {next_state, S, UD, A} -> with_actions(next_state, S, A, E#e{user = UD});
+        {next_state, S, UD} -> {next_state, S, left(S0, S, E#e{user = UD})};
+        {next_state, S, UD, A} -> with_actions(next_state, S, A, left(S0, S, E#e{user = UD}));
         {keep_state, UD} -> {keep_state, E#e{user = UD}};
         {keep_state, UD, A} -> with_actions(keep_state, A, E#e{user = UD});
         keep_state_and_data -> {keep_state, E};
@@ -387,6 +412,14 @@ result(R, E) ->
         {stop_and_reply, Reason, Replies, UD} -> {stop_and_reply, Reason, Replies, E#e{user = UD}};
         Other -> {stop, {bad_return_from_callback, Other}, E}
     end.
+
+%% Leaving a state ends its state timeout; gen_statem does it for its own,
+%% the engine for a simulated one.
+left(S, S, E) -> E;
+left(_S0, _S, E = #e{vtimers = #{state_timeout := _}}) ->
+    {none, E1} = virtual({state_timeout, cancel}, E),
+    E1;
+left(_S0, _S, E) -> E.
 
 with_actions(next_state, S, A, E) ->
     {A1, E1} = actions(A, E),
@@ -429,11 +462,21 @@ actions([A | T], E, Acc) when element(1, A) =:= send; element(1, A) =:= set;
                  ?LOG#{name => E#e.name}),
     actions(T, E, Acc);
 actions([{{timeout, Name}, _, _} = A | T], E, Acc) ->
-    actions(T, timer_named(Name, E), [clock(A) | Acc]);
+    timer_action(A, T, timer_named(Name, E), Acc);
 actions([{{timeout, Name}, _, _, _} = A | T], E, Acc) ->
-    actions(T, timer_named(Name, E), [clock(A) | Acc]);
+    timer_action(A, T, timer_named(Name, E), Acc);
 actions([A | T], E, Acc) ->
-    actions(T, E, [clock(A) | Acc]).
+    timer_action(A, T, E, Acc).
+
+timer_action(A, T, E, Acc) ->
+    case toroco_clock:lockstep_server() of
+        none -> actions(T, E, [clock(A) | Acc]);
+        _ ->
+            case virtual(A, E) of
+                {none, E1} -> actions(T, E1, Acc);
+                {A1, E1} -> actions(T, E1, [A1 | Acc])
+            end
+    end.
 
 timer_named(Name, E = #e{timers = Ts}) ->
     case lists:member(Name, Ts) of
@@ -452,6 +495,42 @@ clock({Kind, T, Msg, Opts}) when ?IS_TIMEOUT(Kind), is_integer(T), is_list(Opts)
     end;
 clock(T) when is_integer(T) -> toroco_clock:real_ms(T);
 clock(A) -> A.
+
+%% In lockstep a callback module's timeouts are set with toroco_lockstep,
+%% in simulated time, and gen_statem sees none of them (`none'); absolute
+%% ones stay gen_statem's, in real time (the servos' keepalive).
+virtual({Kind, T, Msg}, E) when ?IS_TIMEOUT(Kind), is_integer(T) ->
+    vset(Kind, T, Msg, E);
+virtual({Kind, infinity, _Msg}, E) when ?IS_TIMEOUT(Kind) ->
+    virtual({Kind, cancel}, E);
+virtual({Kind, T, Msg, Opts} = A, E) when ?IS_TIMEOUT(Kind), is_integer(T), is_list(Opts) ->
+    case proplists:get_value(abs, Opts, false) of
+        false -> vset(Kind, T, Msg, E);
+        true -> {A, E}
+    end;
+virtual({Kind, cancel}, E = #e{vtimers = VT}) when ?IS_TIMEOUT(Kind) ->
+    case VT of
+        #{Kind := _} ->
+            toroco_clock:cancel_timer(Kind),
+            {none, E#e{vtimers = maps:remove(Kind, VT)}};
+        #{} ->
+            {none, E}
+    end;
+virtual({Kind, update, Msg}, E = #e{vtimers = VT}) when ?IS_TIMEOUT(Kind) ->
+    case VT of
+        #{Kind := Deadline} -> toroco_clock:set_timer(Kind, Deadline, Msg);
+        #{} -> ok
+    end,
+    {none, E};
+virtual(T, E) when is_integer(T) ->
+    vset(timeout, T, T, E);
+virtual(A, E) ->
+    {A, E}.
+
+vset(Kind, T, Msg, E = #e{vtimers = VT}) ->
+    Deadline = toroco_clock:now_ms() + T,
+    toroco_clock:set_timer(Kind, Deadline, Msg),
+    {none, E#e{vtimers = VT#{Kind => Deadline}}}.
 
 %% A list of the map's pairs, walked without a fun: an action's map has one
 %% or two outputs, where an iterator costs more than the walk.

@@ -166,10 +166,11 @@ notify([{Ref, Sub, A, Max} | Rest], Event) ->
         end,
     notify(Rest, Event).
 
-%% @doc The time stamp of events: when the runtime saw it.
+%% @doc The time stamp of events: when the runtime saw it (in lockstep, the
+%% simulated time since the run began, `toroco_clock:timestamp_ns/0').
 -spec timestamp() -> integer().
 timestamp() ->
-    erlang:system_time(nanosecond).
+    toroco_clock:timestamp_ns().
 
 %% @doc A lifecycle event about `Name', for a producer that holds no sinks
 %% of its own (the wiring server).

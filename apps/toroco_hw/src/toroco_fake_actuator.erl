@@ -51,7 +51,7 @@ init(_Name, Opts) ->
 
 -spec handle_input(atom(), term(), recording, map()) -> toroco_behavior:result().
 handle_input(In, V, _State, D = #{rev := Rev, n := N, max := Max, waiters := Ws}) ->
-    Rev1 = [{In, V, erlang:monotonic_time(millisecond)} | Rev],
+    Rev1 = [{In, V, toroco_clock:now_ms()} | Rev],
     {Rev2, N2} = case N + 1 > Max of
                      true -> {lists:sublist(Rev1, Max), Max};
                      false -> {Rev1, N + 1}
