@@ -19,6 +19,15 @@
 %% nothing of the previous incarnation survives) and to its input routers
 %% (which re-deliver each input's latched winner).
 %%
+%% Time: a callback module reads time only with `toroco_clock:now_ms/0' and
+%% sets timers only with gen_statem's timeout actions (`state_timeout',
+%% `{timeout, Name}', event timeouts, relative times): the engine turns them
+%% into the runtime's clock, scaled by the simulated lab's speed, or kept by
+%% `toroco_lockstep' in simulated time when a world is the clock (SPEC §14).
+%% A module that reads the OS clock, calls `erlang:send_after' or sends
+%% itself messages to time things cannot run in lockstep. Absolute timeouts
+%% (`{abs, true}') stay in real time: they are for real hardware.
+%%
 %% Devices (`toroco_device') run on this same engine with `kind => device'.
 -module(toroco_behavior).
 -behaviour(gen_statem).
