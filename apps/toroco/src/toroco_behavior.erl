@@ -101,15 +101,15 @@
             suspended = false :: boolean(),
             queued = [] :: [{gen_statem:event_type(), term()}],
             user_events = false :: boolean(),
+            %% in lockstep, the timeouts set with toroco_lockstep and their
+            %% simulated deadlines (gen_statem keeps none of them)
+            vtimers = #{} :: #{term() => integer()},
             %% the observer tap's sinks that concern this process (SPEC §10)
             tap = #{} :: toroco_tap:sinks(),
             idle = off :: toroco_wire:idle(),
             %% names of the generic timeouts the callback module has set, so
             %% that a reset cancels them
             timers = [] :: [term()],
-            %% in lockstep, the timeouts set with toroco_lockstep and their
-            %% simulated deadlines (gen_statem keeps none of them)
-            vtimers = #{} :: #{term() => integer()},
             %% emissions on undeclared outputs: when last logged, how many since
             undeclared = {never, 0} :: {never | integer(), non_neg_integer()}}).
 

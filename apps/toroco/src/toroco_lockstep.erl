@@ -160,6 +160,8 @@ handle_call({start, Trace}, _From, _S) ->
     persistent_term:put(?MODULE, self()),
     ok = toroco_clock:lockstep_cell(Cell),
     {reply, ok, #s{cell = Cell, trace = case Trace of true -> []; false -> off end}};
+handle_call(stop, _From, S = #s{cell = undefined}) ->
+    {reply, ok, S};
 handle_call(stop, _From, #s{queue = Q}) ->
     _ = persistent_term:erase(?MODULE),
     ok = toroco_clock:lockstep_cell(undefined),
