@@ -256,8 +256,18 @@ slots(Node, auto) ->
     catch Class:Reason -> {error, {Class, Reason}}
     end.
 
-%% Workers: idle (not yet started or free) or busy with run I. When no
-%% worker is left the runs not done fail with the last worker's reason.
+%% The share's process and its workers (worker/2), plain messages under
+%% monitors (the worker's of its share, the share's of each worker):
+%%
+%%   from     to       message            when
+%%   worker   share    {Worker, ready}    its peer is up
+%%   share    worker   {run, I, Spec}     it is free and a run is left
+%%   worker   share    {Worker, I, Res}   run I ended: {ok, Final(s)} | {error, R}
+%%   share    worker   stop               it is free and no run is left
+%%
+%% Workers: idle (not yet started or free) or busy with run I. A worker
+%% gone while busy fails its run naming the node; when no worker is left
+%% the runs not done fail with the last one's reason.
 deal(Node, Jobs, Workers, Done, Why) when map_size(Workers) =:= 0 ->
     maps:to_list(Done) ++ [{I, {error, {node, Node, Why}}} || {I, _} <- Jobs];
 deal(Node, Jobs, Workers, Done, Why) ->

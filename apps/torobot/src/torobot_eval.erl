@@ -52,8 +52,8 @@ main([N, Seed, Wiring, OutDir, Speed, Runs, Time, NodeList]) ->
             io:put_chars(markdown(Report)),
             case Nodes of
                 [Here] when Here =:= node() -> ok;
-                _ -> io:format("~nSpread over ~b nodes: ~ts.~n",
-                               [length(Nodes), lists:join(", ", [atom_to_list(Nd) || Nd <- Nodes])])
+                _ -> io:format("~nRuns dealt to ~ts.~n",
+                               [lists:join(", ", [atom_to_list(Nd) || Nd <- Nodes])])
             end,
             io:format("~nwritten to ~ts: report.md worlds.csv runs.csv time_to_red.svg "
                       "success.svg trajectories.svg~n", [OutDir]),
