@@ -44,8 +44,11 @@ run: compile
 	SPEED=$(SPEED) SPLIT=$(SPLIT) LOCKSTEP=$(LOCKSTEP) TRACE=$(TRACE) scripts/run $(if $(ROBOT),config/worlds/$(ROBOT).world _build/$(ROBOT).svg config/robots/$(ROBOT).wiring,$(WORLD))
 
 # The simulated lab: the wiring on N generated worlds, scored (SPEC §14).
+# Lockstep by default; TIME=realtime [SPEED=10] for real time, and
+# NODES=a@host,b@host spreads the runs over those nodes (README).
 eval: compile
-	scripts/eval $(N) $(SEED) $(WIRING)
+	TIME=$(TIME) NODES=$(NODES) scripts/eval $(N) $(SEED) $(WIRING) \
+	  $(if $(filter command line environment,$(origin SPEED)),$(SPEED),10)
 
 bench: compile
 	scripts/bench
