@@ -126,7 +126,7 @@ stop() ->
 %% @doc Moves simulated time to `T' (timers due on the way fire at their
 %% deadlines), hands over the stimuli in order, and answers once the node
 %% is quiescent, with the trace lines since the last tick.
--spec tick(integer(), [stimulus()], timeout()) -> {ok, [iodata()]} | {error, term()}.
+-spec tick(integer() | now, [stimulus()], timeout()) -> {ok, [iodata()]} | {error, term()}.
 tick(T, Stimuli, Timeout) ->
     try gen_server:call(?MODULE, {tick, T, Stimuli}, Timeout)
     catch exit:{timeout, _} -> {error, {not_quiescent, T}}
