@@ -2,7 +2,9 @@
 %% through `torobot_examples' as a user runs them, driven by scripted mouse
 %% and sensor events, with the exact sequence each actuator input must get.
 %%
-%% The verification programs run in lockstep (SPEC §14): the runtime's clock
+%% The verification programs and the line follower (whose scripted lap
+%% plays two sensors' timed scripts side by side) run in lockstep (SPEC
+%% §14): the runtime's clock
 %% is virtual, each injected event is followed by quiescence, and waiting
 %% means moving simulated time, so their timeouts and holds are checked to
 %% the millisecond. The other groups run in real time: events are injected
@@ -30,7 +32,7 @@ groups() ->
                     mouse_follows_and_reopens_its_device]},
      {runner, [], [run_and_stop_every_example, unknown_example_is_refused]}].
 
-init_per_group(verification, Config) ->
+init_per_group(G, Config) when G =:= verification; G =:= line_follower ->
     [{lockstep, true} | Config];
 init_per_group(_, Config) ->
     Config.

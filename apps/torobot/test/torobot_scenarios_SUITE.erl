@@ -190,18 +190,47 @@ lockstep_cascade_in_one_tick(Config) ->
 
 real_time_default_world() ->
     [{doc, "Real time (speed 1) keeps the default world's known summary, the one lockstep "
-      "gives exactly: red touched at 45.5 s (within a tenth), no contact."}].
+      "gives exactly: red touched at 45.5 s (within a tenth), no contact; on a machine "
+      "too loaded to keep real time (a 10 ms timer late by over 25 ms) the real-time "
+      "half says so and is skipped."}].
 real_time_default_world(Config) ->
     World = filename:join([?config(root, Config), "config", "worlds", "default.world"]),
     Opts = #{wiring => ?config(wiring, Config)},
     {ok, Lockstep} = torobot_sim:run(World, Opts#{time => lockstep}),
     ?assertMatch(#{red_touched_ms := 45500, wall_contacts := 0, blue_contacts := 0}, Lockstep),
+    Probe = lateness_probe(),
     {ok, Real} = torobot_sim:run(World, Opts#{speed => 1}),
-    ct:comment("lockstep ~s; real time ~s", [torobot_sim:summary_json(Lockstep),
-                                             torobot_sim:summary_json(Real)]),
-    ?assertMatch(#{wall_contacts := 0, blue_contacts := 0}, Real),
-    Red = maps:get(red_touched_ms, Real),
-    ?assert(is_integer(Red) andalso abs(Red - 45500) =< 4550).
+    Late = lateness(Probe),
+    ct:comment("lockstep ~s; real time ~s; timers up to ~b ms late",
+               [torobot_sim:summary_json(Lockstep), torobot_sim:summary_json(Real), Late]),
+    case Late > 25 of
+        true ->
+            %% a reaction lands in whichever tick its real latency allows: on a
+            %% machine that does not keep time the run is another run
+            {skip, io_lib:format("this machine did not keep real time (timers ~b ms late): "
+                                 "real time ~s", [Late, torobot_sim:summary_json(Real)])};
+        false ->
+            ?assertMatch(#{wall_contacts := 0, blue_contacts := 0}, Real),
+            Red = maps:get(red_touched_ms, Real),
+            ?assert(is_integer(Red) andalso abs(Red - 45500) =< 4550)
+    end.
+
+%% How late a 10 ms timer fires while the run goes: the machine's own
+%% measure of whether it kept real time.
+lateness_probe() ->
+    spawn_link(fun() -> probe(0) end).
+
+probe(Worst) ->
+    T0 = erlang:monotonic_time(millisecond),
+    receive
+        {stop, From} -> From ! {lateness, Worst}
+    after 10 ->
+            probe(max(Worst, erlang:monotonic_time(millisecond) - T0 - 10))
+    end.
+
+lateness(Probe) ->
+    Probe ! {stop, self()},
+    receive {lateness, L} -> L after 5000 -> 1000 end.
 
 refuses_bad_options() ->
     [{doc, "run/2 refuses an option it does not know, a bad time, and a trace in real "
