@@ -254,7 +254,7 @@ handle_event(info, ?WIRE_IDLE, _S, E = #e{idle = Idle}) ->
 handle_event(Type, Content, S, E = #e{idle = off}) ->
     handle_event(Type, Content, S, E#e{idle = toroco_wire:idle_arm()});
 %% The observer tap changed: keep the sinks that concern this process.
-handle_event(info, {'$toroco_tap', Subs}, _S, E = #e{name = Name}) ->
+handle_event(info, ?WIRE_TAP(Subs), _S, E = #e{name = Name}) ->
     {keep_state, E#e{tap = tap(Subs, Name)}};
 %% The event path: one input delivered by a router.
 handle_event(info, ?WIRE_IN(Input, V), S, E = #e{suspended = false}) ->
