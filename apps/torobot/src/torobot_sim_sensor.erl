@@ -15,13 +15,13 @@
 %% @doc Hands readings `#{Out => Value}' to device `Name' (asynchronous).
 -spec feed(atom(), #{atom() => term()}) -> ok.
 feed(Name, Readings) ->
-    gen_statem:cast(toroco_names:process(Name), {?MODULE, Readings}).
+    toroco_device:cast(Name, {?MODULE, Readings}).
 
 %% @doc Lockstep: readings for device `Name', as a stimulus for
 %% `toroco_clock:tick/2'.
 -spec stimulus(atom(), #{atom() => term()}) -> toroco_clock:stimulus().
 stimulus(Name, Readings) ->
-    {toroco_names:process(Name), {?MODULE, Readings}}.
+    {Name, {?MODULE, Readings}}.
 
 -spec interface(map()) -> #{inputs := [], outputs := [atom()]}.
 interface(#{outputs := Outs}) when is_list(Outs) -> #{inputs => [], outputs => Outs};

@@ -35,7 +35,7 @@
 -include("toroco_wire.hrl").
 
 -export([start_link/1, child_spec/1]).
--export([inject/3, info/1, suspend/1, resume/1, interface/3]).
+-export([inject/3, info/1, suspend/1, resume/1, reset_behavior/1, interface/3]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3, code_change/4]).
 -export_type([spec/0, action/0, actions/0, result/0]).
 
@@ -168,6 +168,10 @@ suspend(Name) -> call(Name, '$toroco_suspend').
 -spec resume(atom()) -> ok | {error, term()}.
 resume(Name) -> call(Name, '$toroco_resume').
 
+%% @doc Brooks' reset of a running behavior (see `toroco:reset_behavior/1').
+-spec reset_behavior(atom()) -> ok | {error, term()}.
+reset_behavior(Name) -> call(Name, '$toroco_reset').
+
 call(Name, Req) ->
     toroco_wire:call(toroco_names:process(Name), Req, 5000, Name).
 
@@ -250,7 +254,7 @@ handle_event(info, ?WIRE_IDLE, _S, E = #e{idle = Idle}) ->
 handle_event(Type, Content, S, E = #e{idle = off}) ->
     handle_event(Type, Content, S, E#e{idle = toroco_wire:idle_arm()});
 %% The observer tap changed: keep the sinks that concern this process.
-handle_event(info, {'$toroco_tap', Subs}, _S, E = #e{name = Name}) ->
+handle_event(info, ?WIRE_TAP(Subs), _S, E = #e{name = Name}) ->
     {keep_state, E#e{tap = tap(Subs, Name)}};
 %% The event path: one input delivered by a router.
 handle_event(info, ?WIRE_IN(Input, V), S, E = #e{suspended = false}) ->
@@ -299,6 +303,11 @@ handle_event({call, From}, {'$toroco_inject', Out, Op}, _S, E = #e{outputs = Out
     case Outs of
         #{Out := _} -> {keep_state, emit(Out, Op, E), [{reply, From, ok}]};
         #{} -> {keep_state_and_data, [{reply, From, {error, {unknown_output, {N, Out}}}}]}
+    end;
+handle_event({call, From}, '$toroco_reset', _S, E = #e{kind = behavior}) ->
+    case reset(E) of
+        {next_state, S1, E1, Actions} -> {next_state, S1, E1, [{reply, From, ok} | Actions]};
+        {stop, Reason, E1} -> {stop_and_reply, Reason, [{reply, From, ok}], E1}
     end;
 handle_event({call, From}, '$toroco_info', S, E) ->
     {keep_state_and_data, [{reply, From, describe(S, E)}]};
@@ -614,8 +623,10 @@ latch(Out, #e{latches = L}) ->
 
 describe(S, #e{kind = Kind, module = M, layer = L, latches = Latches, suspended = Susp,
                user = UD}) ->
+    {message_queue_len, Q} = erlang:process_info(self(), message_queue_len),
     Base = #{kind => Kind, module => M, layer => L, latches => Latches,
-             status => case Susp of true -> suspended; false -> running end},
+             status => case Susp of true -> suspended; false -> running end,
+             state => S, mailbox => Q},
     case Kind =:= device andalso erlang:function_exported(M, info, 2) of
         true -> Base#{device => M:info(S, UD)};
         false -> Base

@@ -180,7 +180,7 @@ handle_event({timeout, stale}, check, _, C) ->
     silent(C#c{stale_at = infinity});
 handle_event({timeout, resub}, again, _, C) ->
     resubscribe(C);
-handle_event(info, '$toroco_resubscribe', _, C) ->
+handle_event(info, ?WIRE_RESUBSCRIBE, _, C) ->
     resubscribe(C#c{tries = 0});
 handle_event({timeout, hold}, expire, _, C) ->
     steps([tick], C#c{timer = infinity});

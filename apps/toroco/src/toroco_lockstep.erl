@@ -49,8 +49,8 @@
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 -export_type([stimulus/0]).
 
-%% A stimulus from the world: `Msg' to the process registered as `Name' on
-%% this node (a device), delivered as a step like any other.
+%% A stimulus from the world: `Msg' to behavior or device `Name' of this
+%% node (a device, as a rule), delivered as a step like any other.
 -type stimulus() :: {atom(), term()}.
 
 -define(TAG, '$toroco_lockstep').
@@ -242,7 +242,8 @@ due(S = #s{timers = Ts, target = Target}) ->
 stimuli(S = #s{stimuli = []}) ->
     quiescent(S);
 stimuli(S = #s{stimuli = Stimuli, queue = Q}) ->
-    Q1 = lists:foldl(fun({Name, Msg}, Acc) -> queue:in({{Name, node()}, {stimulus, Msg}}, Acc)
+    Q1 = lists:foldl(fun({Name, Msg}, Acc) ->
+                             queue:in({{toroco_names:process(Name), node()}, {stimulus, Msg}}, Acc)
                      end, Q, Stimuli),
     run(set_now(S#s.target, S#s{stimuli = [], queue = Q1})).
 

@@ -115,7 +115,7 @@ handle(info, ?WIRE_RX(_Input, Pid), D) ->
     {events, [receiver_up], attach_receiver(Pid, D)};
 handle(info, {'DOWN', Ref, process, _, _}, D = #r{rx_mon = Ref}) ->
     {events, [], D#r{rx = undefined, rx_mon = undefined, inflight = false, pending = none}};
-handle(info, {'$toroco_tap', Subs}, D = #r{key = {R, _}}) ->
+handle(info, ?WIRE_TAP(Subs), D = #r{key = {R, _}}) ->
     {events, [], D#r{tap = tap(Subs, R), view = none}};
 handle(info, ?WIRE_UNSUB(_, _), D) ->
     {events, [], D};

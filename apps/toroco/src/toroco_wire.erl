@@ -45,8 +45,16 @@
 %%     <td>a `latest' delivery was handled</td><td>the newest pending value, if any</td></tr>
 %% <tr><td>`WIRE_IDLE'</td><td>a process → itself</td>
 %%     <td>the idle tick (see `idle_arm/0')</td><td>none</td></tr>
-%% <tr><td>`{'$toroco_tap', Subs}'</td><td>`toroco_tap' → emitters, routers</td>
+%% <tr><td>`WIRE_TAP(Subs)'</td><td>`toroco_tap' → emitters, routers</td>
 %%     <td>observer subscriptions change</td><td>none</td></tr>
+%% <tr><td>`WIRE_RESUBSCRIBE'</td><td>wiring server → consumers</td>
+%%     <td>a node of the robot came back</td>
+%%     <td>the consumer subscribes again to its orphaned remote sources</td></tr>
+%% <tr><td>`WIRE_STEP(Token, Msg)'</td><td>`toroco_lockstep' → any of the above</td>
+%%     <td>lockstep (SPEC §14): one message of the path, a stimulus or a
+%%         timer (`WIRE_TIMER(Kind, Msg)'), in its turn</td>
+%%     <td>`toroco_lockstep:done(Token)' once it and the events it inserted
+%%         (the last one `WIRE_STEP_DONE(Token)') are handled</td></tr>
 %% </table>
 %%
 %% The wiring server reaches consumers with calls (`toroco_consumer':

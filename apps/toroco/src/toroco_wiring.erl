@@ -24,6 +24,8 @@
 -module(toroco_wiring).
 -behaviour(gen_server).
 
+-include("toroco_wire.hrl").
+
 -export([start_link/0, call/1, call/2, lookup/1, subs_of/1, known/1, stopping/0, peers/0]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 
@@ -254,7 +256,7 @@ others(#s{known = Known}) ->
 %% The consumers fed from `Node' subscribe again to what they do not hear.
 resubscribe(Node, #s{wiring = W}) ->
     #{routers := Rs, gates := Gs} = toroco_wiring_core:plan(W),
-    _ = [toroco_wire:send(toroco_wire:address(Reg), '$toroco_resubscribe')
+    _ = [toroco_wire:send(toroco_wire:address(Reg), ?WIRE_RESUBSCRIBE)
          || #{reg := Reg, upstreams := Ups} <- maps:values(Rs) ++ maps:values(Gs),
             lists:any(fun({_, {_, N}}) -> N =:= Node; (_) -> false end, maps:values(Ups))],
     ok.

@@ -20,16 +20,16 @@
 
 -spec history(atom()) -> history().
 history(A) ->
-    gen_statem:call(toroco_names:process(A), history).
+    toroco_device:call(A, history, 5000).
 
 -spec clear(atom()) -> ok.
 clear(A) ->
-    gen_statem:call(toroco_names:process(A), clear).
+    toroco_device:call(A, clear, 5000).
 
 %% @doc Waits until `Pred(History)' is true; `{error, timeout}' otherwise.
 -spec await(atom(), fun((history()) -> boolean()), timeout()) -> ok | {error, timeout}.
 await(A, Pred, Timeout) ->
-    try gen_statem:call(toroco_names:process(A), {await, Pred, deadline(Timeout)}, Timeout)
+    try toroco_device:call(A, {await, Pred, deadline(Timeout)}, Timeout)
     catch exit:{timeout, _} -> {error, timeout}
     end.
 

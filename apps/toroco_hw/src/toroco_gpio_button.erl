@@ -44,7 +44,7 @@ sim_button(Device, Level) ->
 %% `toroco_clock:tick/2'.
 -spec stimulus(atom(), pressed | released) -> toroco_clock:stimulus().
 stimulus(Device, Edge) ->
-    {toroco_names:process(Device), {?MODULE, edge, Edge}}.
+    {Device, {?MODULE, edge, Edge}}.
 
 %%====================================================================
 %% toroco_device

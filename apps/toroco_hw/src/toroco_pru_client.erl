@@ -235,7 +235,7 @@ describe(#{mode := Mode, pid := Pid, restarts := R, losses := L, failures := F})
 -spec sim(atom(), term(), fun((pid(), term()) -> ok | {error, term()})) ->
           ok | {error, term()}.
 sim(Device, Request, F) ->
-    try gen_statem:call(toroco_names:process(Device), Request, 5000) of
+    try toroco_device:call(Device, Request, 5000) of
         {ok, Pid, Detail} ->
             try F(Pid, Detail)
             catch exit:{Reason, _} -> {error, {port_call, Reason}}

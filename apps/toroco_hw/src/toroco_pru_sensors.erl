@@ -59,7 +59,7 @@ sim_adc(Device, Sensor, Raw) ->
 %% stimulus for `toroco_clock:tick/2'.
 -spec stimulus(atom(), atom(), 0..4095) -> toroco_clock:stimulus().
 stimulus(Device, Sensor, Raw) ->
-    {toroco_names:process(Device), {?MODULE, sample, Sensor, Raw}}.
+    {Device, {?MODULE, sample, Sensor, Raw}}.
 
 %%====================================================================
 %% toroco_device

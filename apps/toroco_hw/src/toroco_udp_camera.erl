@@ -33,7 +33,7 @@
 %% that came over UDP from the loopback address.
 -spec stimulus(atom(), binary()) -> toroco_clock:stimulus().
 stimulus(Device, Datagram) ->
-    {toroco_names:process(Device), {?MODULE, datagram, Datagram}}.
+    {Device, {?MODULE, datagram, Datagram}}.
 
 -define(COORD_MAX, 1048576).
 -define(INT_MAX, 9223372036854775807).

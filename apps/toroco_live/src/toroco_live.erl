@@ -44,12 +44,14 @@
 %% `off') and returns the ports it listens on and the token controls need.
 %% `{error, already_started}' when it runs already; `{error, {bad_option,
 %% {Key, Value}}}' for an option it cannot use; `{error, {http, Reason}}'
-%% when the port cannot be opened.
+%% when the port cannot be opened; `{error, not_started}' before the
+%% application `toroco_live' runs (`application:ensure_all_started/1').
 -spec start(opts()) -> {ok, info()} | {error, term()}.
 start(Opts) when is_map(Opts) ->
-    case options(maps:merge(?DEFAULTS, Opts)) of
-        {ok, Config} -> start_dashboard(Config);
-        {error, _} = Error -> Error
+    case {whereis(toroco_live_sup), options(maps:merge(?DEFAULTS, Opts))} of
+        {undefined, _} -> {error, not_started};
+        {_, {ok, Config}} -> start_dashboard(Config);
+        {_, {error, _} = Error} -> Error
     end;
 start(Other) ->
     {error, {bad_option, Other}}.

@@ -21,8 +21,6 @@
 -type rates() :: #{emits := #{{atom(), atom()} => number()},
                    delivers := #{{atom(), atom()} => number()}}.
 
-%% How long a busy process may take to tell its state before it shows as busy.
--define(STATE_TIMEOUT, 100).
 %% Longest term text shown for a state.
 -define(STATE_TEXT, 300).
 
@@ -48,24 +46,14 @@ reading(Name) ->
                #{} = I -> I;
                {error, _} -> #{name => Name, status => down}
            end,
-    Pid = whereis(toroco_names:process(Name)),
-    #{name => Name, info => Info, restarts => toroco_restarts:count(Name),
-      mailbox => mailbox(Pid), state => user_state(Pid)}.
-
-mailbox(undefined) -> null;
-mailbox(Pid) ->
-    case erlang:process_info(Pid, message_queue_len) of
-        {message_queue_len, Q} -> Q;
-        undefined -> null
-    end.
-
-user_state(undefined) -> down;
-user_state(Pid) ->
-    try sys:get_state(Pid, ?STATE_TIMEOUT) of
-        {S, _Data} -> {value, S};
-        _ -> unknown
-    catch exit:_ -> busy
-    end.
+    %% what the behavior's own process told inspect/1, on whatever node
+    Process = maps:get(process, Info, #{}),
+    #{name => Name, info => maps:without([process], Info), restarts => maps:get(restarts, Info, 0),
+      mailbox => maps:get(mailbox, Process, null),
+      state => case Process of
+                   #{state := S} -> {value, S};
+                   #{} -> down
+               end}.
 
 %% @doc The page's state frame.
 -spec page(rates()) -> jiffy:json_value().
