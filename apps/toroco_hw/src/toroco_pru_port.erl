@@ -436,6 +436,11 @@ handle_event(info, {'DOWN', MRef, process, Pid, _}, _State, #data{subscribers = 
     end;
 handle_event(info, _Other, _State, _D) ->
     %% frames and exits of programs already given up, the kill helper's exit
+    keep_state_and_data;
+handle_event({timeout, step}, _Section, _State, _D) ->
+    %% a step timeout that fired as its program was given up
+    keep_state_and_data;
+handle_event(cast, _Msg, _State, _D) ->
     keep_state_and_data.
 
 -spec terminate(term(), state(), data()) -> ok.

@@ -14,7 +14,7 @@
          neutral_on_owner_stop/1, bad_frames_raw/1, bad_requests_owner/1,
          round_trip/1,
          servo_command_while_connecting/1, neutral_first_after_kill_in_configuring/1,
-         hello_backoff/1]).
+         hello_backoff/1, first_start_without_hello/1]).
 
 -define(NEUTRAL, "1500000").
 -define(WAIT, 5000).
@@ -33,7 +33,7 @@ groups() ->
      {safety, [], [neutral_on_kill, neutral_on_watchdog, neutral_on_stdin_eof,
                    neutral_on_owner_stop, bad_frames_raw, bad_requests_owner]},
      {connecting, [], [servo_command_while_connecting, neutral_first_after_kill_in_configuring,
-                       hello_backoff]},
+                       hello_backoff, first_start_without_hello]},
      {performance, [], [round_trip]}].
 
 init_per_suite(Config) ->
@@ -430,6 +430,31 @@ hello_backoff(Config) ->
     ?assertMatch(#{state := running, failures := 0}, toroco_pru_port:info(S)),
     ok = toroco_pru_port:set_servos(S, #{left => 10}),
     ok = toroco_pru_port:stop(S).
+
+first_start_without_hello(doc) ->
+    ["A first program that never says hello: start_link's caller waits, the owner answers "
+     "meanwhile, and start_link returns {error, {port_program, start_timeout}} with the program "
+     "killed and the name free"];
+first_start_without_hello(Config) ->
+    ok = file:write_file(flag(Config), ""),
+    Self = self(),
+    Opts = #{name => hello_less, backend => sim, executable => withhold_exe(Config),
+             sysfs_root => ?config(root, Config), servos => servos(), hello_timeout_ms => 1000},
+    Starter = spawn(fun() -> Self ! {started, toroco_pru_port:start_link(Opts)} end),
+    ok = wait_until(fun() -> is_pid(whereis(hello_less)) end, ?WAIT),
+    #{state := connecting, os_pid := Sleeper} = toroco_pru_port:info(hello_less),
+    T0 = erlang:monotonic_time(microsecond),
+    ?assertEqual({error, {connecting, awaiting_hello}},
+                 toroco_pru_port:set_servos(hello_less, #{left => 10})),
+    ?assert(erlang:monotonic_time(microsecond) - T0 < 100000),
+    receive
+        {started, Result} ->
+            ?assertEqual({error, {port_program, start_timeout}}, Result)
+    after ?WAIT -> ct:fail(start_link_did_not_return)
+    end,
+    ?assertNot(is_process_alive(Starter)),
+    ?assertEqual(undefined, whereis(hello_less)),
+    ok = wait_until(fun() -> not filelib:is_dir("/proc/" ++ integer_to_list(Sleeper)) end, ?WAIT).
 
 %%% ---------------------------------------------------------------------
 %%% Performance
