@@ -82,7 +82,7 @@
 -spec owner_keys() -> [atom()].
 owner_keys() ->
     [backend, executable, sysfs_root, gpiochip, sim_script, remoteproc, firmware,
-     rpmsg_dev, max_restarts].
+     rpmsg_dev, max_restarts, hello_timeout_ms, reply_timeout_ms, restart_backoff].
 
 %% @doc A client from a device's options (only the `port' and owner keys are
 %% looked at); nothing is started yet.
