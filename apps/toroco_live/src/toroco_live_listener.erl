@@ -118,7 +118,7 @@ connection(Socket, Opts, Guard, Loop) ->
             Self = self(),
             mochiweb_http:loop(Socket, Opts, fun(Req) -> request(Guard, Self, Loop, Req) end);
         {error, _} ->
-            mochiweb_socket:close(Socket),
+            _ = mochiweb_socket:close(Socket),
             ok
     end.
 
