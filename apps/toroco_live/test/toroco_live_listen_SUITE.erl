@@ -36,12 +36,14 @@ flood_from_one_address() ->
       "the node's memory stays bounded and /metrics counts the refused"}].
 flood_from_one_address(_Config) ->
     {ok, #{http := Http, foxglove := Fox}} = toroco_live:start(#{http => 0, foxglove => 0}),
-    {ok, Fds} = fd_limit(),
-    ct:pal("file descriptors: ~p allowed, ~b sockets of the flood (x2 with the server's side)",
-           [Fds, 2 * ?FLOOD]),
+    %% each flood socket is two descriptors in this VM (both ends), on
+    %% each of the two ports: a lower `ulimit -n' gets a smaller flood
+    Fds = fd_limit(),
+    N = min(?FLOOD, (Fds - 1000) div 4),
+    ct:pal("file descriptors: ~b allowed; ~b connections from 127.0.0.1 on each port", [Fds, N]),
     erlang:garbage_collect(),
     Before = erlang:memory(total),
-    Flood = flood([Http, Fox], ?FLOOD),
+    Flood = flood([Http, Fox], N),
     During = erlang:memory(total),
     {PageMs, {200, Page}} = timed(fun() -> http_get(Http, "/") end),
     {StateMs, {200, State}} = timed(fun() -> http_get(Http, "/api/state") end),
@@ -62,10 +64,15 @@ flood_from_one_address(_Config) ->
     Lines = metric_lines(Metrics),
     ct:pal("~s", [lists:join("\n", [L || L <- Lines, string:find(L, "connections") =/= nomatch])]),
     [#{connections := HttpConns, closed_by := HttpBy}, #{connections := FoxConns, closed_by := FoxBy}]
-        = [toroco_live_listener:stats(N) || N <- [toroco_live_http, toroco_live_foxglove_listener]],
+        = [toroco_live_listener:stats(L) || L <- [toroco_live_http, toroco_live_foxglove_listener]],
     ?assert(HttpConns =< 32 + 2 andalso FoxConns =< 32 + 1),
-    ?assert(maps:get(too_many_from_peer, HttpBy) >= ?FLOOD - 32 - maps:get(shed, HttpBy)),
-    ?assert(maps:get(too_many_from_peer, FoxBy) >= ?FLOOD - 32 - maps:get(shed, FoxBy)),
+    %% every connection of the flood was given a slot or refused, the most refused
+    [begin
+         ?assert(Accepted + maps:get(too_many_from_peer, By) + maps:get(too_many_clients, By) >= N),
+         ?assert(maps:get(too_many_from_peer, By) >= N div 2)
+     end || #{accepted := Accepted, closed_by := By} <- [toroco_live_listener:stats(L)
+                                                        || L <- [toroco_live_http,
+                                                                 toroco_live_foxglove_listener]]],
     ?assertEqual(maps:get(too_many_from_peer, HttpBy),
                  metric_value(Lines, "dashboard", "too_many_from_peer")),
     ?assertEqual(maps:get(too_many_from_peer, FoxBy),
@@ -157,7 +164,9 @@ flood(Ports, N) ->
                              receive stop -> [gen_tcp:close(S) || S <- Socks] end,
                              Self ! {unflooded, self()}
                      end),
-    receive {flooded, Pid, Open} -> ct:pal("flood: ~b connections open", [Open])
+    receive {flooded, Pid, Open} ->
+            ct:pal("flood: ~b connections open", [Open]),
+            ?assertEqual(N * length(Ports), Open)
     after 60000 -> ct:fail(flood_not_open)
     end,
     Pid.
@@ -266,6 +275,9 @@ metric_value(Lines, Listener, Reason) ->
     end.
 
 fd_limit() ->
-    {ok, string:trim(os:cmd("ulimit -n"))}.
+    case string:trim(os:cmd("ulimit -n")) of
+        "unlimited" -> 1 bsl 20;
+        Limit -> list_to_integer(Limit)
+    end.
 
 mb(Bytes) -> Bytes / 1048576.
