@@ -27,11 +27,11 @@
 %% connection did: {@link started/3}, {@link done/3}, {@link busy/2};
 %% time: {@link expired/2}, {@link next_deadline/1}; the end:
 %% {@link remove/2}; reading: {@link size/1}, {@link peers/1},
-%% {@link limits/1}.
+%% {@link is_member/2}.
 -module(toroco_slots).
 
 -export([new/1, admit/4, started/3, done/3, busy/2, expired/2, next_deadline/1,
-         remove/2, size/1, peers/1, limits/1, is_member/2]).
+         remove/2, size/1, peers/1, is_member/2]).
 -export_type([slots/1, limits/0, refusal/0, expiry/0]).
 
 -type limits() :: #{max := pos_integer(),
@@ -169,8 +169,3 @@ size(#{conns := Cs}) ->
 -spec peers(slots(_)) -> #{term() => pos_integer()}.
 peers(#{per_peer := PP}) ->
     PP.
-
-%% @doc The limits these slots were made with.
--spec limits(slots(_)) -> limits().
-limits(#{limits := L}) ->
-    L.
