@@ -518,6 +518,8 @@ bad_options(Config) ->
          {toroco_udp_link, #{inputs => ["cmd"]}, {bad_option, {inputs, ["cmd"]}}},
          {toroco_tcp_link, #{max_line => 0}, {bad_option, {max_line, 0}}},
          {toroco_tcp_link, #{allow => [nowhere]}, {bad_option, {allow, [nowhere]}}},
+         {toroco_tcp_link, #{line_timeout => 0}, {bad_option, {line_timeout, 0}}},
+         {toroco_tcp_link, #{min_age => -1}, {bad_option, {min_age, -1}}},
          {toroco_pru_sensors, #{}, {bad_option, {sensors, missing}}},
          {toroco_pru_sensors, #{sensors => [{a, #{channel => 9}}]},
           {bad_option, {sensors, {a, {channel, 9}}}}},

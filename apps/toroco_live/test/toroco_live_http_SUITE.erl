@@ -31,7 +31,10 @@ init_per_suite(Config) ->
     {ok, _} = application:ensure_all_started(toroco_live),
     {ok, _} = application:ensure_all_started(inets),
     {ok, #{http := Port, token := Token, foxglove := off}} =
-        toroco_live:start(#{http => 0, foxglove => off, max_clients => 60, max_body => 4096}),
+        %% many clients from one address (loopback): a share per address
+        %% above the clients the cases open
+        toroco_live:start(#{http => 0, foxglove => off, max_clients => 60, max_body => 4096,
+                            max_per_peer => 128}),
     [{port, Port}, {token, Token} | Config].
 
 end_per_suite(_Config) ->
