@@ -1,7 +1,8 @@
 %% The applications' boundaries (STYLE, "Between apps"): the device, robot,
 %% library and dashboard applications use the runtime through its API only:
-%% `toroco', `toroco_clock', and the behaviours a callback implements
-%% (`toroco_behavior', `toroco_device'). An xref query over the compiled
+%% `toroco', `toroco_clock', the behaviours a callback implements
+%% (`toroco_behavior', `toroco_device') and `toroco_slots' (the bounds of
+%% every listener, STYLE "Listeners and clients"). An xref query over the compiled
 %% applications finds every call from them into another module of `toroco',
 %% and a scan of their sources every include of the runtime's private
 %% headers; both must be empty.
@@ -12,7 +13,7 @@
 
 -compile([export_all, nowarn_export_all]).
 
--define(API, [toroco, toroco_clock, toroco_behavior, toroco_device]).
+-define(API, [toroco, toroco_clock, toroco_behavior, toroco_device, toroco_slots]).
 -define(OTHERS, [toroco_hw, torobot, toroco_lib, toroco_live]).
 
 all() ->
@@ -20,7 +21,8 @@ all() ->
 
 no_call_into_the_runtimes_insides() ->
     [{doc, "No call from toroco_hw, torobot, toroco_lib or toroco_live reaches a module of "
-      "toroco outside its API (toroco, toroco_clock, toroco_behavior, toroco_device)."}].
+      "toroco outside its API (toroco, toroco_clock, toroco_behavior, toroco_device, "
+      "toroco_slots)."}].
 no_call_into_the_runtimes_insides(_Config) ->
     {ok, X} = xref:start([{xref_mode, functions}]),
     try

@@ -28,7 +28,8 @@
 %% lab's speed and lockstep, SPEC §14) and the behaviours a callback module
 %% implements, `toroco_behavior' and `toroco_device' (with
 %% `toroco_device:call/3' and `cast/2', a device module's way to its own
-%% process wherever it runs). Every other module of the application is
+%% process wherever it runs), and `toroco_slots' (the connection bounds
+%% every listener of the project applies). Every other module of the application is
 %% private: the other applications use none of them (a test checks it).
 %%
 %% Every call returns `ok' or `{error, Reason}' with a reason naming the
