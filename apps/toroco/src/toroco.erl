@@ -57,7 +57,9 @@
 -type source_spec() :: source() | {Emitter :: name(), Output :: atom(), #{hold => hold()}}.
 -type input_spec() :: [source_spec()]
                     | #{sources := [source_spec()], buffer => all | latest, idle => term()}.
--type behavior_opts() :: #{layer => non_neg_integer(), params => map()}.
+%% A module with `interface/1' (toroco_behavior) takes options of its own
+%% too, e.g. `toroco_lua''s `file'.
+-type behavior_opts() :: #{layer => non_neg_integer(), params => map(), atom() => term()}.
 -type error_reason() :: term().
 
 %%====================================================================

@@ -35,11 +35,16 @@
 -include("toroco_wire.hrl").
 
 -export([start_link/1, child_spec/1]).
--export([inject/3, info/1, suspend/1, resume/1, reset_behavior/1, interface/3]).
+-export([inject/3, info/1, suspend/1, resume/1, reset_behavior/1, interface/3, configured/1]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3, code_change/4]).
 -export_type([spec/0, action/0, actions/0, result/0]).
 
 -callback interface() -> #{inputs := [atom()], outputs := [atom()]}.
+%% A behavior whose ports depend on its options (a Lua behavior's on its
+%% file) exports `interface/1' instead: it and `init/1' get the options of
+%% `toroco:add_behavior/3' but `layer' (`params' among them), and any
+%% option is accepted.
+-callback interface(Opts :: map()) -> #{inputs := [atom()], outputs := [atom()]}.
 %% `{error, Reason}' refuses to start: `add_behavior' answers
 %% `{error, {start_failed, {Name, Reason}}}' (the library's bad parameters).
 -callback init(Params :: map()) ->
@@ -55,7 +60,7 @@
     {ok, NewState :: term(), NewData :: term()}.
 -callback terminate(Reason :: term(), State :: term(), Data :: term()) ->
     {emit, actions()} | term().
--optional_callbacks([handle_event/4, code_change/4, terminate/3]).
+-optional_callbacks([interface/0, interface/1, handle_event/4, code_change/4, terminate/3]).
 
 -type action() :: {send, #{atom() => term()}}
                 | {send, #{atom() => term()}, #{hold => non_neg_integer() | infinity}}
@@ -138,7 +143,11 @@ child_spec(Spec = #{name := Name, kind := Kind}) ->
           {ok, #{inputs := [atom()], outputs := [atom()]}} | {error, term()}.
 interface(Kind, Module, Args) ->
     try case Kind of
-            behavior -> Module:interface();
+            behavior ->
+                case configured(Module) of
+                    true -> Module:interface(Args);
+                    false -> Module:interface()
+                end;
             device -> Module:interface(Args)
         end of
         #{inputs := Ins, outputs := Outs} = I when is_list(Ins), is_list(Outs) ->
@@ -151,6 +160,14 @@ interface(Kind, Module, Args) ->
         error:undef -> {error, {bad_module, Module}};
         Class:Reason -> {error, {bad_interface, {Module, {Class, Reason}}}}
     end.
+
+%% @doc Whether behavior module `Module' declares its ports from its options
+%% (`interface/1') rather than once for all (`interface/0').
+-spec configured(module()) -> boolean().
+configured(Module) ->
+    _ = code:ensure_loaded(Module),
+    erlang:function_exported(Module, interface, 1)
+        andalso not erlang:function_exported(Module, interface, 0).
 
 %% @doc Makes the process emit `Op' on `Out' as if its callback had.
 -spec inject(atom(), atom(), toroco_router_core:op()) -> ok | {error, term()}.

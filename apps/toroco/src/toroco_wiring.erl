@@ -391,6 +391,23 @@ node_spec(_Kind, Name, _Module, Opts) when not is_map(Opts) ->
 node_spec(device, Name, Module, Opts) ->
     {ok, toroco_device:spec(Name, Module, Opts)};
 node_spec(behavior, Name, Module, Opts) ->
+    case toroco_behavior:configured(Module) of
+        true -> configured_spec(Name, Module, Opts);
+        false -> plain_spec(Name, Module, Opts)
+    end.
+
+%% A module whose ports depend on its options (`interface/1'): it gets them
+%% all but the layer, `params' included.
+configured_spec(Name, Module, Opts) ->
+    case maps:get(layer, Opts, 0) of
+        L when is_integer(L), L >= 0 ->
+            {ok, #{kind => behavior, name => Name, module => Module, layer => L,
+                   args => maps:remove(layer, Opts)}};
+        L ->
+            {error, {bad_layer, {Name, L}}}
+    end.
+
+plain_spec(Name, Module, Opts) ->
     case {maps:keys(maps:without([layer, params], Opts)), maps:get(layer, Opts, 0),
           maps:get(params, Opts, #{})} of
         {[Bad | _], _, _} -> {error, {bad_option, {Name, Bad}}};
