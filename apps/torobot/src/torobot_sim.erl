@@ -349,14 +349,7 @@ handle_info({timeout, _Ref, tick}, S = #sim{bots = Bots, tick = Tick}) ->
                 end || #bot{world = W, handle = H} <- Bots],
     S1 = status(sense(S#sim{bots = move(Bots, Commands, Tick)})),
     publish(S1),
-    Worlds = [W || #bot{world = W} <- S1#sim.bots],
-    case lists:all(fun torobot_world:done/1, Worlds) of
-        true ->
-            S1#sim.caller ! {?MODULE, self(), {done, Worlds}},
-            {stop, normal, S1};
-        false ->
-            {noreply, schedule(S1)}
-    end;
+    next(S1, fun schedule/1);
 handle_info(lockstep, S = #sim{bots = Bots, tick = Tick}) ->
     %% robot after robot: readings, quiescence, wheels; then they all move
     Stepped = lockstep(Bots, S),
@@ -365,16 +358,7 @@ handle_info(lockstep, S = #sim{bots = Bots, tick = Tick}) ->
                     _ -> Motors
                 end || {_, Motors} <- Stepped],
     S1 = status(S#sim{bots = move([B || {B, _} <- Stepped], Commands, Tick)}),
-    S2 = publish_paced(S1),
-    Worlds = [W || #bot{world = W} <- S2#sim.bots],
-    case lists:all(fun torobot_world:done/1, Worlds) of
-        true ->
-            S2#sim.caller ! {?MODULE, self(), {done, Worlds}},
-            {stop, normal, S2};
-        false ->
-            self() ! lockstep,
-            {noreply, S2}
-    end;
+    next(publish_paced(S1), fun(S2) -> self() ! lockstep, S2 end);
 handle_info({'DOWN', _, process, Caller, _}, S = #sim{caller = Caller}) ->
     {stop, normal, S};
 handle_info(_Info, S) ->
@@ -393,6 +377,18 @@ terminate(_Reason, #sim{sock = Sock, status = Status, trace = Trace}) ->
     case Status of
         tty -> io:put_chars("\n");
         _ -> ok
+    end.
+
+%% After a tick: the caller has the final worlds once every robot is done,
+%% else the next tick is asked for.
+next(S = #sim{bots = Bots, caller = Caller}, Again) ->
+    Worlds = [W || #bot{world = W} <- Bots],
+    case lists:all(fun torobot_world:done/1, Worlds) of
+        true ->
+            Caller ! {?MODULE, self(), {done, Worlds}},
+            {stop, normal, S};
+        false ->
+            {noreply, Again(S)}
     end.
 
 %% Ticks are scheduled on the absolute clock from the start, so a late tick

@@ -31,7 +31,7 @@
 -module(toroco_slots).
 
 -export([new/1, admit/4, started/3, done/3, busy/2, expired/2, next_deadline/1,
-         remove/2, size/1, peers/1, is_member/2]).
+         timeout_action/1, remove/2, size/1, peers/1, is_member/2]).
 -export_type([slots/1, limits/0, refusal/0, expiry/0]).
 
 -type limits() :: #{max := pos_integer(),
@@ -128,6 +128,16 @@ next_deadline(S = #{conns := Cs}) ->
                           none -> Min
                       end
               end, infinity, Cs).
+
+%% @doc The shell's timer for {@link next_deadline/1}: a gen_statem
+%% absolute timeout `{timeout, slots}' (real time: strangers' sockets are
+%% not the simulated lab's) with content `expire', or none.
+-spec timeout_action(slots(_)) -> [gen_statem:action()].
+timeout_action(S) ->
+    case next_deadline(S) of
+        infinity -> [];
+        At -> [{{timeout, slots}, At, expire, [{abs, true}]}]
+    end.
 
 deadline(#{phase := busy}, _) ->
     none;

@@ -219,10 +219,7 @@ drop_client(Sock, Why, D = #{clients := Cs, bad := B, slots := Slots, closed_by 
 
 %% The clients' next deadline, as an absolute (real-time) timeout.
 deadline(#{slots := Slots}) ->
-    case toroco_slots:next_deadline(Slots) of
-        infinity -> [];
-        At -> [{{timeout, slots}, At, expire, [{abs, true}]}]
-    end.
+    toroco_slots:timeout_action(Slots).
 
 now_ms() ->
     erlang:monotonic_time(millisecond).

@@ -212,10 +212,7 @@ count(Why, D = #{closed_by := By}) ->
     D#{closed_by := By#{Why => maps:get(Why, By, 0) + 1}}.
 
 deadline(#{slots := Slots}) ->
-    case toroco_slots:next_deadline(Slots) of
-        infinity -> [];
-        At -> [{{timeout, slots}, At, expire, [{abs, true}]}]
-    end.
+    toroco_slots:timeout_action(Slots).
 
 now_ms() ->
     erlang:monotonic_time(millisecond).
