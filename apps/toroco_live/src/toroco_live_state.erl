@@ -85,7 +85,7 @@ node_json(#{name := N, info := Info, restarts := R, mailbox := Q, state := S}, R
                                || {O, Out} <- lists:sort(maps:to_list(maps:get(outputs, Info, #{})))],
              <<"reset">> => [src(Src) || Src <- maps:get(reset, Info, [])]},
     case Info of
-        #{device := Counters} -> Base#{<<"device">> => toroco_live_json:value(Counters)};
+        #{device := Counters} -> Base#{<<"device">> => toroco_live_json:value(texts(Counters))};
         #{} -> Base
     end.
 
@@ -127,3 +127,13 @@ output_json(N, O, Out, #{emits := Emits}) ->
 
 src(none) -> null;
 src({E, O}) -> [toroco_live_json:value(E), toroco_live_json:value(O)].
+
+%% A device's counters name paths and addresses as strings (the motors'
+%% `sysfs_root'): the page shows them as text, not as lists of codes.
+texts(M) when is_map(M) -> maps:map(fun(_, V) -> texts(V) end, M);
+texts(L) when is_list(L), L =/= [] ->
+    case io_lib:printable_unicode_list(L) of
+        true -> unicode:characters_to_binary(L);
+        false -> L
+    end;
+texts(V) -> V.
