@@ -57,11 +57,11 @@ release: compile
 	rebar3 as prod release
 
 # The board release booted on Debian 12 armhf's Erlang under qemu (root; slow,
-# not part of `make test'): README, "The board".
+# not part of `make test'): doc/operations.md, "The board".
 board-check: compile
 	scripts/board-emulate
 
-# CPU per event there, beside this machine's (README, "The emulated board"):
+# CPU per event there, beside this machine's (doc/operations.md, "The emulated board"):
 # the same step alone; BOARD_BENCH=1 make board-check runs both.
 board-bench: compile
 	BOARD_BENCH=only scripts/board-emulate
