@@ -60,7 +60,22 @@
 %% A module with `interface/1' (toroco_behavior) takes options of its own
 %% too, e.g. `toroco_lua''s `file'.
 -type behavior_opts() :: #{layer => non_neg_integer(), params => map(), atom() => term()}.
--type error_reason() :: term().
+%% What went wrong, and the culprit: the tag says what, the second element
+%% names the behavior, device, input, output, source, option or file
+%% (SPEC §4, "Errors"), e.g. `{unknown_output, {avoid_left, motors}}'.
+-type error_reason() ::
+        {unknown_name | unknown_input | unknown_output | not_a_behavior | not_running
+         | nodedown | duplicate_name | name_taken | duplicate_source | hierarchy
+         | inhibition_cycle | layer_removed | self_call | timeout | unknown_call
+         | bad_name | bad_module | bad_interface | bad_layer | bad_params | bad_option
+         | bad_options | bad_inputs | bad_input_spec | bad_inhibitors | bad_reset
+         | bad_source | bad_sources | bad_buffer | bad_hold | bad_max_age | bad_kind
+         | bad_kinds | bad_names | bad_watch | bad_wiring_term | wiring_file | file
+         | start_failed | restart_failed | suspend_failed | code_change_failed
+         | load_failed | no_object_code | old_code_in_use | unchanged | relay_failed
+         | watch_failed | dot_failed | no_graphviz, term()}
+      | {bad_option, term(), term()}
+      | not_running | unknown_request.
 
 %%====================================================================
 %% Nodes
