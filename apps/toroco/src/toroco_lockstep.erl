@@ -185,8 +185,15 @@ handle_cast(_Msg, S) ->
     {noreply, S}.
 
 -spec handle_info(term(), #s{}) -> {noreply, #s{}}.
+handle_info({?TAG, send, To, Msg}, S = #s{cell = undefined}) ->
+    %% sent as lockstep ended: on its way as in real time
+    toroco_wire:send(To, Msg),
+    {noreply, S};
 handle_info({?TAG, send, To, Msg}, S = #s{queue = Q}) ->
-    {noreply, run(S#s{queue = queue:in({To, Msg}, Q)})};
+    case is_step(Msg) of
+        true -> {noreply, run(S#s{queue = queue:in({To, Msg}, Q)})};
+        false -> raw(To, Msg), {noreply, S}
+    end;
 handle_info({?TAG, timer, Pid, Kind, Deadline, Msg}, S) ->
     #s{timers = Ts, owned = Owned, seq = Seq} = S1 = drop_timer(Pid, Kind, S),
     Key = {Deadline, Seq},
@@ -279,6 +286,30 @@ deliver(To, Msg, S = #s{steps = N}) ->
             S;
         undefined ->
             trace(To, undefined, Msg, S#s{lost = S#s.lost + 1})
+    end.
+
+%% The messages that are steps: those of the event path, which every
+%% receiver of them (the engine, the consumer shell) hands back as done.
+%% Anything else sent through toroco_wire (the wiring servers' directory
+%% exchange) goes as it would in real time, since its receiver would never
+%% say done.
+is_step(?WIRE_EVENT(_, _)) -> true;
+is_step(?WIRE_GATED(_, _)) -> true;
+is_step(?WIRE_IN(_, _)) -> true;
+is_step(?WIRE_IN(_, _, _)) -> true;
+is_step(?WIRE_ACK(_)) -> true;
+is_step(?WIRE_HELLO(_, _, _)) -> true;
+is_step(?WIRE_STATE(_, _, _, _)) -> true;
+is_step(?WIRE_RX(_, _)) -> true;
+is_step(?WIRE_UNSUB(_, _)) -> true;
+is_step(?WIRE_RESUBSCRIBE) -> true;
+is_step(_) -> false.
+
+raw(To, Msg) ->
+    try erlang:send(To, Msg, [noconnect, nosuspend]) of
+        _ -> ok
+    catch
+        error:badarg -> ok
     end.
 
 whereis_local(Pid) when is_pid(Pid), node(Pid) =:= node() -> Pid;
