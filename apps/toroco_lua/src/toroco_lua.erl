@@ -1,0 +1,352 @@
+%% @doc Behaviors written in Lua 5.1 against the original Torocó API (SPEC
+%% §16): a `toroco_behavior' callback module whose code is a Lua file, run in
+%% a state of the `lua_port' program ({@link toroco_lua_port}).
+%%
+%% A Lua behavior is a behavior like any other: a gen_statem in its layer,
+%% with suppression, inhibition, latches, holds, suspend/resume/reset/remove,
+%% the tap and recordings. Each input it gets is one activation of its Lua
+%% state, run to completion inside `handle_input/4' through a bounded call
+%% to the port's owner, and what the Lua code emitted comes back as the
+%% callback's actions: `set_output{motors_setvel = {20, 20}}' becomes
+%% `{set, #{motors_setvel => {20, 20}}}'. Time is the runtime's: the state
+%% reads `toroco_clock:now_ms()' and its timers (`wait_for_input' timeouts,
+%% `sched.sleep') are this process's gen_statem timeouts, so Lua behaviors
+%% run in lockstep too.
+%%
+%% The behavior ends with `{lua_error, File, Line, Message}' or `{lua_limit,
+%% File, budget | memory}' and its layer restarts it; if the program dies,
+%% every Lua behavior of the node ends with `{lua_port_down, Why}' and is
+%% restarted the same way, while Erlang behaviors go on.
+%%
+%% <b>Adding</b>: {@link add_behavior/2}; {@link interface/1} (the inputs and
+%% outputs a file uses). <b>Looking</b>: {@link waits/1}, {@link memory/1}.
+%% <b>Changing</b>: {@link reload/1}.
+-module(toroco_lua).
+-behaviour(toroco_behavior).
+
+-export([add_behavior/2, interface/1, waits/1, memory/1, reload/1]).
+-export([interface/0, init/1, handle_input/4, handle_event/4]).
+-export_type([opts/0]).
+
+%% `file' (required) the behavior's Lua file; `params' its `toroco.params';
+%% `layer'; `budget' VM instructions per activation and `memory' bytes per
+%% state (defaults: the application's env); `inputs'/`outputs' ports added
+%% to those found in the file (for names built at run time).
+-type opts() :: #{file := file:filename_all(), params => map(), layer => non_neg_integer(),
+                  budget => pos_integer(), memory => pos_integer(),
+                  inputs => [atom()], outputs => [atom()]}.
+
+-define(LOG, #{domain => [toroco, lua]}).
+
+%%====================================================================
+%% API
+%%====================================================================
+
+%% @doc Starts Lua behavior `Name' running `file'. The runtime's
+%% `toroco:add_behavior/3' takes a module whose interface is fixed, so each
+%% Lua behavior gets a small callback module of its own, `toroco_lua@Name',
+%% whose `interface/0' is the file's and whose callbacks are this module's.
+-spec add_behavior(toroco:name(), opts()) -> ok | {error, term()}.
+add_behavior(Name, Opts = #{file := _}) when is_atom(Name) ->
+    Args = maps:with([file, params, budget, memory, inputs, outputs], Opts),
+    case interface(Args) of
+        {ok, Interface} ->
+            case callback_module(Name, Interface) of
+                {ok, Module} ->
+                    toroco:add_behavior(Name, Module,
+                                        #{layer => maps:get(layer, Opts, 0),
+                                          params => Args#{name => Name}});
+                {error, _} = Error -> Error
+            end;
+        {error, _} = Error -> Error
+    end;
+add_behavior(Name, Opts) ->
+    {error, {bad_options, {Name, Opts}}}.
+
+%% @doc The inputs and outputs a Lua file uses: every `input.NAME' (or
+%% `input["NAME"]'), every key of a `send_output{...}'/`set_output{...}'
+%% table and every `output.NAME', plus the `inputs'/`outputs' given.
+-spec interface(#{file := file:filename_all(), _ => _}) ->
+          {ok, #{inputs := [atom()], outputs := [atom()]}} | {error, term()}.
+interface(Args = #{file := File}) ->
+    case file:read_file(File) of
+        {ok, Src} ->
+            Code = strip_comments(Src),
+            Ins = names(Code, "\\binput\\s*\\.\\s*([A-Za-z_][A-Za-z0-9_]*)")
+                ++ names(Code, "\\binput\\s*\\[\\s*['\"]([^'\"]+)['\"]\\s*\\]"),
+            Outs = output_keys(Code) ++ names(Code, "\\boutput\\s*\\.\\s*([A-Za-z_][A-Za-z0-9_]*)"),
+            {ok, #{inputs => lists:usort([binary_to_atom(I) || I <- Ins] ++ maps:get(inputs, Args, [])),
+                   outputs => lists:usort([binary_to_atom(O) || O <- Outs] ++ maps:get(outputs, Args, []))}};
+        {error, Why} ->
+            {error, {lua_file, {File, Why}}}
+    end.
+
+%% @doc What the tasks of Lua behavior `Name' wait for: `[#{task => T,
+%% input => I | none, timer => boolean()}]'.
+-spec waits(toroco:name()) -> {ok, [map()]} | {error, term()}.
+waits(Name) ->
+    behavior_call(Name, waits).
+
+%% @doc The bytes of Lua behavior `Name''s state.
+-spec memory(toroco:name()) -> {ok, non_neg_integer()} | {error, term()}.
+memory(Name) ->
+    behavior_call(Name, memory).
+
+%% @doc Re-reads the file of Lua behavior `Name' into a new state, all or
+%% nothing: a file that fails to load leaves the old state running and the
+%% reason is returned. The new state starts from scratch (its coroutines
+%% and triggers start again); the behavior's latches and holds stay. The
+%% interface is the one the behavior was added with.
+-spec reload(toroco:name()) -> ok | {error, term()}.
+reload(Name) ->
+    behavior_call(Name, reload).
+
+behavior_call(Name, Req) ->
+    try gen_statem:call(toroco_names:process(Name), {?MODULE, Req}, 10000)
+    catch exit:{noproc, _} -> {error, {not_running, Name}};
+          exit:{timeout, _} -> {error, {timeout, Name}}
+    end.
+
+%%====================================================================
+%% toroco_behavior
+%%====================================================================
+
+%% @doc The interface of `toroco_lua' itself is empty: a Lua behavior's
+%% ports come from its file ({@link interface/1}, {@link add_behavior/2}).
+-spec interface() -> #{inputs := [], outputs := []}.
+interface() -> #{inputs => [], outputs => []}.
+
+-spec init(map()) -> {ok, running, map(), [toroco_behavior:action()]} | {error, term()}.
+init(Args = #{file := File}) ->
+    Name = maps:get(name, Args, undefined),
+    case whereis(toroco_lua_port) of
+        undefined ->
+            {error, {lua_port_not_running, Name}};
+        Owner ->
+            D = #{name => Name, file => File, args => Args,
+                  owner => erlang:monitor(process, Owner), id => none},
+            case open(D) of
+                {ok, Id, Actions} -> {ok, running, D#{id := Id}, actions(Actions, D#{id := Id})};
+                {error, _} = Error -> Error
+            end
+    end.
+
+-spec handle_input(atom(), term(), running, map()) -> toroco_behavior:result().
+handle_input(Input, Value, _S, D = #{id := Id}) ->
+    activation(toroco_lua_port:input(Id, Input, Value, toroco_clock:now_ms()), D).
+
+-spec handle_event(gen_statem:event_type(), term(), running, map()) -> toroco_behavior:result().
+handle_event({timeout, {lua, Task}}, {lua_timer, Id, Task, Seq}, _S, D = #{id := Id}) ->
+    activation(toroco_lua_port:timer(Id, Task, Seq, toroco_clock:now_ms()), D);
+handle_event({timeout, {lua, _}}, {lua_timer, _OldId, _, _}, _S, _D) ->
+    keep_state_and_data;                      % a timer of the state before a reload
+handle_event(info, {'DOWN', MRef, process, _, Why}, _S, #{owner := MRef}) ->
+    {stop, {lua_port_down, Why}};
+handle_event(info, {toroco_lua_port, down, Why}, _S, _D) ->
+    {stop, {lua_port_down, Why}};
+handle_event({call, From}, {?MODULE, waits}, _S, #{id := Id}) ->
+    Reply = case toroco_lua_port:waits(Id) of
+                {ok, Ws} -> {ok, [#{task => T, input => waited(I), timer => Timer}
+                                  || [T, I, Timer] <- Ws]};
+                Error -> Error
+            end,
+    {keep_state_and_data, [{reply, From, Reply}]};
+handle_event({call, From}, {?MODULE, memory}, _S, #{id := Id}) ->
+    {keep_state_and_data, [{reply, From, toroco_lua_port:memory(Id)}]};
+handle_event({call, From}, {?MODULE, reload}, _S, D = #{id := Old, name := Name}) ->
+    case open(D) of
+        {ok, Id, Actions} ->
+            _ = toroco_lua_port:close(Old),
+            logger:notice("toroco_lua: ~p reloaded ~ts", [Name, maps:get(file, D)],
+                          ?LOG#{name => Name}),
+            D1 = D#{id := Id},
+            {keep_state, D1, [{reply, From, ok} | actions(Actions, D1)]};
+        {error, _} = Error ->
+            {keep_state_and_data, [{reply, From, Error}]}
+    end;
+%% The engine's default for what nobody handles: this module's handle_event
+%% is called through each behavior's own callback module, so it cannot fall
+%% through to the engine by a function_clause.
+handle_event({call, From}, Request, _S, #{name := Name}) ->
+    {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
+handle_event(Type, Content, _S, #{name := Name}) ->
+    logger:warning("toroco_lua: ~p ignored ~p event ~p", [Name, Type, Content],
+                   ?LOG#{name => Name}),
+    keep_state_and_data.
+
+%%====================================================================
+%% Activations
+%%====================================================================
+
+open(D = #{file := File, args := Args}) ->
+    Abs = filename:absname(File),
+    Limits = #{budget => maps:get(budget, Args, env(budget)),
+               memory => maps:get(memory, Args, env(memory))},
+    case toroco_lua_port:open(filename:basename(Abs), filename:dirname(Abs),
+                              maps:get(params, Args, #{}), Limits, toroco_clock:now_ms()) of
+        {ok, Id, Actions} -> {ok, Id, Actions};
+        {stopped, Reason, Actions} ->
+            _ = actions(Actions, D),
+            {error, reason(Reason, D)};
+        {error, _} = Error -> Error
+    end.
+
+env(Key) ->
+    {ok, V} = application:get_env(toroco_lua, Key),
+    V.
+
+activation({ok, Actions}, D) ->
+    {keep_state_and_data, actions(Actions, D)};
+activation({stopped, Reason, Actions}, D = #{name := Name}) ->
+    _ = actions(Actions, D),                  % its prints; emissions die with it
+    Why = reason(Reason, D),
+    logger:error("toroco_lua: ~p stopped: ~p", [Name, Why], ?LOG#{name => Name}),
+    {stop, Why};
+activation({error, {bad_frame, Why}}, #{name := Name}) ->
+    %% a value the port cannot take (a pid, a fun...): this event only
+    logger:warning("toroco_lua: ~p got a value that cannot cross to Lua (~p); dropped",
+                   [Name, Why], ?LOG#{name => Name}),
+    keep_state_and_data;
+activation({error, {lua_port_down, Why}}, _D) ->
+    {stop, {lua_port_down, Why}};
+activation({error, Why}, _D) ->
+    {stop, {lua_port, Why}}.
+
+%% {lua_error, File, Line, Message}: File as the user named it for the
+%% behavior's own file, else the module's path in the program's folder.
+reason({lua_error, Src, Line, Msg}, D) -> {lua_error, path(Src, D), Line, Msg};
+reason({lua_limit, Src, What}, D) -> {lua_limit, path(Src, D), What}.
+
+path(Src, #{file := File}) ->
+    case filename:basename(File) =:= unicode:characters_to_list(Src) of
+        true -> File;
+        false -> filename:join(filename:dirname(File), unicode:characters_to_list(Src))
+    end.
+
+waited(false) -> none;
+waited(I) -> binary_to_atom(I).
+
+%% The port's actions as the engine's: emissions and timers.
+actions(Actions, D) ->
+    lists:filtermap(fun(A) -> action(A, D) end, Actions).
+
+action({send, Out, V, Hold}, D) ->
+    with_output(Out, D, fun(O) -> case Hold of
+                                      default -> {send, #{O => V}};
+                                      _ -> {send, #{O => V}, #{hold => Hold}}
+                                  end
+                        end);
+action({set, Out, V}, D) ->
+    with_output(Out, D, fun(O) -> {set, #{O => V}} end);
+action({unset, all}, _D) ->
+    {true, unset};
+action({unset, Out}, D) ->
+    with_output(Out, D, fun(O) -> {unset, [O]} end);
+action({timer, Task, Seq, Ms}, #{id := Id}) ->
+    {true, {{timeout, {lua, Task}}, Ms, {lua_timer, Id, Task, Seq}}};
+action({cancel, Task}, _D) ->
+    {true, {{timeout, {lua, Task}}, cancel}};
+action({print, Text}, #{name := Name}) ->
+    logger:notice("~p: ~ts", [Name, Text], ?LOG#{name => Name}),
+    false.
+
+%% Output names are atoms the interface made when the behavior was added;
+%% a name made at run time that no atom has is dropped here, as the engine
+%% drops an undeclared output.
+with_output(Out, #{name := Name}, Fun) ->
+    try binary_to_existing_atom(Out) of
+        O -> {true, Fun(O)}
+    catch error:badarg ->
+            logger:warning("toroco_lua: ~p emitted on undeclared output ~ts; dropped",
+                           [Name, Out], ?LOG#{name => Name}),
+            false
+    end.
+
+%%====================================================================
+%% The file's interface
+%%====================================================================
+
+strip_comments(Src) ->
+    NoBlocks = re:replace(Src, "--\\[(=*)\\[.*?\\]\\1\\]", "", [global, dotall, {return, binary}]),
+    re:replace(NoBlocks, "--[^\\n]*", "", [global, {return, binary}]).
+
+names(Code, Re) ->
+    case re:run(Code, Re, [global, {capture, all_but_first, binary}]) of
+        {match, Ms} -> [N || [N] <- Ms];
+        nomatch -> []
+    end.
+
+%% The top-level keys of each send_output{...} / set_output{...} table.
+output_keys(Code) ->
+    case re:run(Code, "\\b(?:send|set)_output\\s*\\(?\\s*\\{", [global, {capture, first, index}]) of
+        {match, Ms} ->
+            lists:append([keys(Code, Start + Len) || [{Start, Len}] <- Ms]);
+        nomatch -> []
+    end.
+
+%% Walks the table after its opening brace: keys at depth 1 only.
+keys(Code, Pos) ->
+    keys(Code, Pos, 1, []).
+
+keys(Code, Pos, _Depth, Acc) when Pos >= byte_size(Code) -> Acc;
+keys(_Code, _Pos, 0, Acc) -> Acc;
+keys(Code, Pos, Depth, Acc) ->
+    case binary:at(Code, Pos) of
+        ${ -> keys(Code, Pos + 1, Depth + 1, Acc);
+        $} -> keys(Code, Pos + 1, Depth - 1, Acc);
+        _ when Depth =:= 1 ->
+            Rest = binary:part(Code, Pos, byte_size(Code) - Pos),
+            case re:run(Rest, "^(?:([A-Za-z_][A-Za-z0-9_]*)|\\[\\s*['\"]([^'\"]+)['\"]\\s*\\])\\s*=(?!=)",
+                        [{capture, all_but_first, binary}]) of
+                {match, [K]} -> keys(Code, Pos + byte_size(K), Depth, [K | Acc]);
+                {match, [<<>>, K]} -> keys(Code, Pos + byte_size(K), Depth, [K | Acc]);
+                nomatch ->
+                    case re:run(Rest, "^[A-Za-z0-9_]+", [{capture, first, index}]) of
+                        {match, [{0, L}]} -> keys(Code, Pos + L, Depth, Acc);
+                        nomatch -> keys(Code, Pos + 1, Depth, Acc)
+                    end
+            end;
+        _ -> keys(Code, Pos + 1, Depth, Acc)
+    end.
+
+%%====================================================================
+%% Each behavior's callback module
+%%====================================================================
+
+%% `toroco_lua@Name': interface/0 returns the file's ports; init/1,
+%% handle_input/4 and handle_event/4 are this module's.
+callback_module(Name, Interface) ->
+    Module = list_to_atom("toroco_lua@" ++ atom_to_list(Name)),
+    Src = io_lib:format(
+            "-module(~w).~n"
+            "-export([interface/0, init/1, handle_input/4, handle_event/4]).~n"
+            "interface() -> ~w.~n"
+            "init(A) -> toroco_lua:init(A).~n"
+            "handle_input(I, V, S, D) -> toroco_lua:handle_input(I, V, S, D).~n"
+            "handle_event(T, C, S, D) -> toroco_lua:handle_event(T, C, S, D).~n",
+            [Module, Interface]),
+    case forms(lists:flatten(Src)) of
+        {ok, Forms} ->
+            case compile:forms(Forms, [binary, return_errors]) of
+                {ok, Module, Bin} ->
+                    _ = code:purge(Module),
+                    case code:load_binary(Module, "toroco_lua", Bin) of
+                        {module, Module} -> {ok, Module};
+                        {error, Why} -> {error, {callback_module, {Name, Why}}}
+                    end;
+                Error -> {error, {callback_module, {Name, Error}}}
+            end;
+        Error -> {error, {callback_module, {Name, Error}}}
+    end.
+
+forms(Src) ->
+    {ok, Tokens, _} = erl_scan:string(Src),
+    parse(Tokens, [], []).
+
+parse([], [], Forms) -> {ok, lists:reverse(Forms)};
+parse([{dot, _} = Dot | T], Acc, Forms) ->
+    case erl_parse:parse_form(lists:reverse([Dot | Acc])) of
+        {ok, F} -> parse(T, [], [F | Forms]);
+        Error -> Error
+    end;
+parse([Tok | T], Acc, Forms) -> parse(T, [Tok | Acc], Forms).
