@@ -24,9 +24,9 @@
 -module(toroco_lua).
 -behaviour(toroco_behavior).
 
--export([add_behavior/2, interface/1, waits/1, memory/1, reload/1]).
+-export([add_behavior/2, load_main/2, interface/1, waits/1, memory/1, reload/1]).
 -export([interface/0, init/1, handle_input/4, handle_event/4]).
--export_type([opts/0]).
+-export_type([opts/0, main_opts/0]).
 
 %% `file' (required) the behavior's Lua file; `params' its `toroco.params';
 %% `layer'; `budget' VM instructions per activation and `memory' bytes per
@@ -35,6 +35,13 @@
 -type opts() :: #{file := file:filename_all(), params => map(), layer => non_neg_integer(),
                   budget => pos_integer(), memory => pos_integer(),
                   inputs => [atom()], outputs => [atom()]}.
+
+%% `layers' the layer of each behavior main.lua loads (default 0: the
+%% original has no layers, only priorities); `params' the main file's
+%% `toroco.params'; `budget' and `memory' for the
+%% main file's own state and every behavior it loads.
+-type main_opts() :: #{layers => #{atom() => non_neg_integer()}, params => map(),
+                       budget => pos_integer(), memory => pos_integer()}.
 
 -define(LOG, #{domain => [toroco, lua]}).
 
@@ -49,7 +56,11 @@
 -spec add_behavior(toroco:name(), opts()) -> ok | {error, term()}.
 add_behavior(Name, Opts = #{file := _}) when is_atom(Name) ->
     Args = maps:with([file, params, budget, memory, inputs, outputs], Opts),
-    case interface(Args) of
+    case whereis(toroco_names:process(Name)) =:= undefined andalso interface(Args) of
+        false ->
+            %% the name is taken: its callback module is running, leave it be
+            %% and let the runtime say why
+            toroco:add_behavior(Name, toroco_lua, #{layer => maps:get(layer, Opts, 0)});
         {ok, Interface} ->
             case callback_module(Name, Interface) of
                 {ok, Module} ->
@@ -62,6 +73,85 @@ add_behavior(Name, Opts = #{file := _}) when is_atom(Name) ->
     end;
 add_behavior(Name, Opts) ->
     {error, {bad_options, {Name, Opts}}}.
+
+%% @doc Runs a `main.lua' of the original and turns its `load_behavior',
+%% `set_inputs', `set_inhibitors' (and `suspend_behavior',
+%% `resume_behavior', `remove_behavior') calls into the node's behaviors and
+%% wiring, in the order it made them; `run()' is where it ends. Behavior
+%% paths are relative to the main file, `.lua' optional. Devices it names
+%% must be on the node already (`device.mouse.left' is the source `{mouse,
+%% left}'). Its source lists are the original's, lowest priority first;
+%% the runtime's are highest first, so each is turned round. The first
+%% call refused stops there, with the main file's line.
+-spec load_main(file:filename_all(), main_opts()) ->
+          {ok, #{behaviors := [atom()]}} | {error, {file:filename_all(), non_neg_integer(), term()}}.
+load_main(Path, Opts) ->
+    Abs = filename:absname(Path),
+    Limits = #{budget => maps:get(budget, Opts, env(budget)),
+               memory => maps:get(memory, Opts, env(memory))},
+    D = #{name => main, file => Path, id => none},
+    case toroco_lua_port:open(filename:basename(Abs), filename:dirname(Abs),
+                              maps:get(params, Opts, #{}), Limits, toroco_clock:now_ms()) of
+        {ok, Id, Actions} ->
+            _ = toroco_lua_port:close(Id),
+            _ = [print(Text, D) || {print, Text} <- Actions],
+            Ctx = #{dir => filename:dirname(Path), opts => Opts},
+            apply_main([{Op, Line, Args} || {main, Op, Line, Args} <- Actions], Path, Ctx, []);
+        {stopped, {lua_error, _, Line, Msg} = R, _} ->
+            {error, {path(element(2, R), D), Line, Msg}};
+        {stopped, {lua_limit, Src, What}, _} ->
+            {error, {path(Src, D), 0, {lua_limit, What}}};
+        {error, Why} ->
+            {error, {Path, 0, Why}}
+    end.
+
+apply_main([], _Path, _Ctx, Loaded) ->
+    {ok, #{behaviors => lists:reverse(Loaded)}};
+apply_main([{Op, Line, Args} | Rest], Path, Ctx, Loaded) ->
+    case main_call(Op, Args, Ctx) of
+        ok -> apply_main(Rest, Path, Ctx, Loaded);
+        {loaded, Name} -> apply_main(Rest, Path, Ctx, [Name | Loaded]);
+        {error, Why} -> {error, {Path, Line, Why}}
+    end.
+
+%% One wiring call of Lua code (main.lua, or a behavior changing the
+%% network), relative to the folder `dir' of the file that made it.
+main_call(<<"load_behavior">>, [Name, File, Params], #{dir := Dir, opts := Opts}) ->
+    B = binary_to_atom(Name),
+    Layer = maps:get(B, maps:get(layers, Opts, #{}), 0),
+    Limits = maps:with([budget, memory], Opts),
+    case toroco_lua:add_behavior(B, Limits#{file => lua_file(Dir, File), layer => Layer,
+                                            params => table(Params)}) of
+        ok -> {loaded, B};
+        Error -> Error
+    end;
+main_call(<<"set_inputs">>, [R, Inputs], _Ctx) ->
+    toroco:set_inputs(binary_to_atom(R),
+                      maps:from_list([{binary_to_atom(I), lists:reverse(sources(Ss))}
+                                      || {I, Ss} <- maps:to_list(table(Inputs))]));
+main_call(<<"set_inhibitors">>, [E, Outputs], _Ctx) ->
+    toroco:set_inhibitors(binary_to_atom(E),
+                          maps:from_list([{binary_to_atom(O), sources(Ss)}
+                                          || {O, Ss} <- maps:to_list(table(Outputs))]));
+main_call(<<"suspend_behavior">>, [B], _Ctx) -> toroco:suspend_behavior(binary_to_atom(B));
+main_call(<<"resume_behavior">>, [B], _Ctx) -> toroco:resume_behavior(binary_to_atom(B));
+main_call(<<"remove_behavior">>, [B], _Ctx) -> toroco:remove_behavior(binary_to_atom(B));
+main_call(<<"run">>, _, _Ctx) -> ok;
+main_call(Op, Args, _Ctx) -> {error, {bad_main_call, {Op, Args}}}.
+
+sources(Ss) -> [{binary_to_atom(E), binary_to_atom(O)} || [E, O] <- Ss].
+
+%% An empty Lua table crosses as [] (SPEC §16); as a set of keys it is #{}.
+table([]) -> #{};
+table(M) when is_map(M) -> M.
+
+%% `path' or `path.lua', relative to `Dir'.
+lua_file(Dir, File) ->
+    P = filename:join(Dir, unicode:characters_to_list(File)),
+    case filename:extension(P) =:= ".lua" orelse filelib:is_regular(P) of
+        true -> P;
+        false -> P ++ ".lua"
+    end.
 
 %% @doc The inputs and outputs a Lua file uses: every `input.NAME' (or
 %% `input["NAME"]'), every key of a `send_output{...}'/`set_output{...}'
@@ -246,9 +336,21 @@ action({timer, Task, Seq, Ms}, #{id := Id}) ->
     {true, {{timeout, {lua, Task}}, Ms, {lua_timer, Id, Task, Seq}}};
 action({cancel, Task}, _D) ->
     {true, {{timeout, {lua, Task}}, cancel}};
-action({print, Text}, #{name := Name}) ->
-    logger:notice("~p: ~ts", [Name, Text], ?LOG#{name => Name}),
+action({print, Text}, D) ->
+    print(Text, D),
+    false;
+action({main, Op, _Line, Args}, #{name := Name, file := File, args := Args0}) ->
+    %% a behavior changing the network (the thesis' suspender, add/remove)
+    Ctx = #{dir => filename:dirname(File), opts => maps:with([budget, memory], Args0)},
+    case main_call(Op, Args, Ctx) of
+        {error, Why} ->
+            logger:warning("toroco_lua: ~p: ~ts refused: ~p", [Name, Op, Why], ?LOG#{name => Name});
+        _ -> ok
+    end,
     false.
+
+print(Text, #{name := Name}) ->
+    logger:notice("~p: ~ts", [Name, Text], ?LOG#{name => Name}).
 
 %% Output names are atoms the interface made when the behavior was added;
 %% a name made at run time that no atom has is dropped here, as the engine

@@ -41,7 +41,8 @@
                 | {unset, all | binary()}
                 | {timer, pos_integer(), pos_integer(), non_neg_integer()}
                 | {cancel, pos_integer()}
-                | {print, binary()}.
+                | {print, binary()}
+                | {main, binary(), non_neg_integer(), term()}.
 -type stop_reason() :: {lua_error, binary(), non_neg_integer(), binary()}
                      | {lua_limit, binary(), budget | memory}.
 -type result() :: {ok, [action()]} | {stopped, stop_reason(), [action()]} | {error, term()}.

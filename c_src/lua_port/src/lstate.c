@@ -124,6 +124,25 @@ static int l_unset(lua_State *L)
     return 0;
 }
 
+/* C.main(op, line, args): a wiring call, {main, Op, Line, Args} */
+static int l_main(lua_State *L)
+{
+    struct lstate *s = of(L);
+    size_t n;
+    const char *op = luaL_checklstring(L, 1, &n);
+    long line = (long)luaL_checknumber(L, 2);
+    ei_x_buff *x;
+
+    s->scratch.index = 0;
+    term_encode(L, 3, &s->scratch);
+    x = action(s, 4);
+    ei_x_encode_atom(x, "main");
+    ei_x_encode_binary(x, op, (long)n);
+    ei_x_encode_long(x, line);
+    ei_x_append_buf(x, s->scratch.buff, s->scratch.index);
+    return 0;
+}
+
 static int l_print(lua_State *L)
 {
     struct lstate *s = of(L);
@@ -251,6 +270,7 @@ static int l_loadmodule(lua_State *L)
 static const luaL_Reg port_functions[] = {
     {"emit", l_emit}, {"unset", l_unset}, {"print", l_print}, {"timer", l_timer},
     {"cancel", l_cancel}, {"now", l_now}, {"fail", l_fail}, {"loadmodule", l_loadmodule},
+    {"main", l_main},
     {NULL, NULL}};
 
 /* ---- activations ------------------------------------------------------- */

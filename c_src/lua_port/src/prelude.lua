@@ -163,13 +163,61 @@ function M.unset_output(o)
   if o == nil then C.unset() else C.unset(output_name(o)) end
 end
 
-local function main_only(name)
-  return function() error(name .. ' is for main.lua (toroco_lua:load_main/2)', 2) end
+-- The wiring calls of a main.lua (and of behaviors that change the network,
+-- as the thesis' suspender and add/remove examples do): each is an action
+-- {main, Op, Line, Args} that Erlang carries out, in order.
+local function name_of(d, what)
+  if type(d) == 'table' and (d.kind == 'behavior' or d.kind == 'device') then return d.name end
+  error(what .. ': behavior.NAME or device.NAME expected, got ' .. tostring(d), 3)
 end
-for _, f in ipairs {'load_behavior', 'add_behavior', 'set_inputs', 'set_inhibitors',
-                    'suspend_behavior', 'resume_behavior', 'remove_behavior', 'run',
-                    'configure_polling'} do
-  M[f] = main_only(f)
+
+local function source_of(s, what)
+  if type(s) == 'table' and s.kind == 'source' then return {s.emitter, s.name} end
+  error(what .. ': a source (device.D.E or behavior.B.E) expected, got ' .. tostring(s), 4)
+end
+
+-- One source or a list of them, as the original takes them (lowest
+-- priority first: Erlang turns the list round).
+local function sources_of(v, what)
+  if type(v) == 'table' and v.kind == 'source' then return {source_of(v, what)} end
+  if type(v) ~= 'table' then error(what .. ': a source or a list of sources expected', 3) end
+  local out = {}
+  for k, s in ipairs(v) do out[k] = source_of(s, what) end
+  return out
+end
+
+local function main(op, args)
+  local info = getinfo(3, 'l')
+  C.main(op, info and info.currentline or 0, args)
+end
+
+function M.load_behavior(b, path, ps)
+  if type(path) ~= 'string' then error('load_behavior: a path expected', 2) end
+  main('load_behavior', {name_of(b, 'load_behavior'), path, ps or {}})
+end
+function M.set_inputs(receiver, inputs)
+  local r = name_of(receiver, 'set_inputs')
+  if type(inputs) ~= 'table' then error('set_inputs: a table of inputs expected', 2) end
+  local t = {}
+  for i, v in pairs(inputs) do t[i] = sources_of(v, 'set_inputs') end
+  main('set_inputs', {r, t})
+end
+function M.set_inhibitors(emitter, outputs)
+  local e = name_of(emitter, 'set_inhibitors')
+  if type(outputs) ~= 'table' then error('set_inhibitors: a table of outputs expected', 2) end
+  local t = {}
+  for o, v in pairs(outputs) do t[o] = sources_of(v, 'set_inhibitors') end
+  main('set_inhibitors', {e, t})
+end
+for _, f in ipairs {'suspend_behavior', 'resume_behavior', 'remove_behavior'} do
+  M[f] = function(b) main(f, {name_of(b, f)}) end
+end
+function M.run() main('run', {}) end
+function M.add_behavior()
+  error('add_behavior: functions cannot cross to Erlang; put them in a file and use load_behavior', 2)
+end
+function M.configure_polling()
+  error('configure_polling is not supported yet', 2)
 end
 
 local sched = {}

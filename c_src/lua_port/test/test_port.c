@@ -246,6 +246,21 @@ static void an_idle_state_is_small(void)
     port_free(p);
 }
 
+static void a_main_file_records_its_wiring(void)
+{
+    struct port *p = port_new();
+
+    CHECK_STR(open_file(p, 13, "main.lua", BUDGET, MEM),
+              "{reply,1,{ok,["
+              "{main,<<\"load_behavior\">>,6,[<<\"avoid\">>,<<\"behaviors/avoid\">>,#{<<\"speed\">>=>20}]},"
+              "{main,<<\"set_inputs\">>,7,[<<\"avoid\">>,#{<<\"update\">>=>[[<<\"ir\">>,<<\"left\">>]]}]},"
+              "{main,<<\"set_inputs\">>,8,[<<\"motors\">>,#{<<\"setvel2mtr\">>=>"
+              "[[<<\"cruise\">>,<<\"motors\">>],[<<\"avoid\">>,<<\"motors\">>]]}]},"
+              "{main,<<\"set_inhibitors\">>,9,[<<\"cruise\">>,#{<<\"motors\">>=>[[<<\"avoid\">>,<<\"busy\">>]]}]},"
+              "{main,<<\"run\">>,10,[]}]}}");
+    port_free(p);
+}
+
 const struct test_case port_tests[] = {
     TEST_CASE(ping_answers_the_protocol_version),
     TEST_CASE(a_trigger_latches_and_waits_with_a_timeout),
@@ -257,4 +272,5 @@ const struct test_case port_tests[] = {
     TEST_CASE(the_sandbox_keeps_only_safe_libraries),
     TEST_CASE(bad_frames_get_an_error_not_a_crash),
     TEST_CASE(an_idle_state_is_small),
+    TEST_CASE(a_main_file_records_its_wiring),
     {NULL, NULL}};
