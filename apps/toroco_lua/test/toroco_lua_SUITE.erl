@@ -16,7 +16,7 @@
          lua_error_names_file_and_line/1, endless_loop_hits_the_budget/1,
          endless_allocation_hits_the_memory_cap/1,
          port_killed_every_lua_behavior_back/1, bad_frames_are_answered/1,
-         reload_all_or_nothing/1]).
+         reload_all_or_nothing/1, reload_under_1khz_input/1]).
 
 -define(WAIT, 3000).
 
@@ -33,7 +33,7 @@ groups() ->
      {faults, [], [lua_error_names_file_and_line, endless_loop_hits_the_budget,
                    endless_allocation_hits_the_memory_cap,
                    port_killed_every_lua_behavior_back, bad_frames_are_answered]},
-     {reload, [], [reload_all_or_nothing]}].
+     {reload, [], [reload_all_or_nothing, reload_under_1khz_input]}].
 
 init_per_testcase(_Case, Config) ->
     {ok, _} = application:ensure_all_started(toroco_hw),
@@ -293,6 +293,35 @@ reload_all_or_nothing(Config) ->
     ?assertMatch({error, {lua_error, File, 1, _}}, toroco_lua:reload(v)),
     ok = toroco:inject({s, ask}, 3),
     await(a, answer, [{<<"v1">>, 1}, {<<"v2">>, 2}, {<<"v2">>, 3}]).
+
+reload_under_1khz_input(doc) ->
+    ["A reload while the behavior gets 1 kHz input loses nothing: every event is "
+     "answered once, in order, by the old code and then by the new"];
+reload_under_1khz_input(Config) ->
+    File = filename:join(?config(priv_dir, Config), "busy.lua"),
+    {ok, V1} = file:read_file(data(Config, "version1.lua")),
+    ok = file:write_file(File, V1),
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [ask]}),
+    actuator(a, [answer]),
+    ok = toroco_lua:add_behavior(v, #{file => File}),
+    ok = toroco:set_inputs(v, #{ask => [{s, ask}]}),
+    ok = toroco:set_inputs(a, #{answer => [{v, answer}]}),
+    N = 1000,
+    %% the load: one event a millisecond (pacing, not waiting on anything)
+    _ = spawn_link(fun() -> [begin ok = toroco:inject({s, ask}, K), receive after 1 -> ok end end
+                             || K <- lists:seq(1, N)] end),
+    ok = toroco_fake_actuator:await(a, fun(H) -> length(H) >= 300 end, 10000),
+    ok = file:write_file(File, binary:replace(V1, <<"'v1'">>, <<"'v2'">>)),
+    ok = toroco_lua:reload(v),
+    ok = toroco_fake_actuator:await(a, fun(H) -> length(H) >= N end, 20000),
+    Answers = values(a, answer),
+    ?assertEqual(lists:seq(1, N), [K || {_, K} <- Answers]),
+    Tags = [T || {T, _} <- Answers],
+    {Old, New} = lists:splitwith(fun(T) -> T =:= <<"v1">> end, Tags),
+    ct:pal("~b answers by the old code, ~b by the new", [length(Old), length(New)]),
+    ?assert(length(Old) >= 300),
+    ?assert(length(New) > 0),
+    ?assertEqual([], [T || T <- New, T =/= <<"v2">>]).
 
 %%% ---------------------------------------------------------------------
 %%% Helpers
