@@ -16,7 +16,8 @@
          lua_error_names_file_and_line/1, endless_loop_hits_the_budget/1,
          endless_allocation_hits_the_memory_cap/1,
          port_killed_every_lua_behavior_back/1, bad_frames_are_answered/1,
-         reload_all_or_nothing/1, reload_under_1khz_input/1]).
+         reload_all_or_nothing/1, reload_under_1khz_input/1,
+         load_main_errors_name_the_line/1]).
 
 -define(WAIT, 3000).
 
@@ -29,7 +30,8 @@ all() ->
 groups() ->
     [{api, [], [interface_from_the_file, values_cross_both_ways,
                 wait_for_input_with_and_without_timeout, sleep_on_the_runtime_clock,
-                latches_reach_the_actuator, print_goes_to_the_logger]},
+                latches_reach_the_actuator, print_goes_to_the_logger,
+                load_main_errors_name_the_line]},
      {faults, [], [lua_error_names_file_and_line, endless_loop_hits_the_budget,
                    endless_allocation_hits_the_memory_cap,
                    port_killed_every_lua_behavior_back, bad_frames_are_answered]},
@@ -166,6 +168,18 @@ print_goes_to_the_logger(Config) ->
     receive {lua_log, avoid, Text} -> ?assertMatch({_, _}, binary:match(Text, <<"Avoiding!">>))
     after ?WAIT -> ct:fail(no_print)
     end.
+
+load_main_errors_name_the_line(doc) ->
+    ["load_main/2 stops at the first refused call with the main file's line, and "
+     "at a main file that does not compile"];
+load_main_errors_name_the_line(Config) ->
+    Main = data(Config, "bad_main/main.lua"),
+    ?assertMatch({error, {Main, 6, {unknown_name, nowhere}}}, toroco_lua:load_main(Main, #{})),
+    %% what came before the refused call stays: the behavior is there
+    ?assertMatch(#{kind := behavior}, toroco:inspect(e)),
+    Syntax = data(Config, "bad_main/syntax.lua"),
+    ?assertMatch({error, {Syntax, 3, <<"unexpected symbol near '<eof>'">>}},
+                 toroco_lua:load_main(Syntax, #{})).
 
 %%% ---------------------------------------------------------------------
 %%% Faults
