@@ -17,7 +17,7 @@
          endless_allocation_hits_the_memory_cap/1,
          port_killed_every_lua_behavior_back/1, bad_frames_are_answered/1,
          reload_all_or_nothing/1, reload_under_1khz_input/1,
-         load_main_errors_name_the_line/1]).
+         load_main_errors_name_the_line/1, lockstep_timers_at_simulated_deadlines/1]).
 
 -define(WAIT, 3000).
 
@@ -25,7 +25,7 @@ suite() ->
     [{timetrap, {seconds, 60}}].
 
 all() ->
-    [{group, api}, {group, faults}, {group, reload}].
+    [{group, api}, {group, faults}, {group, reload}, {group, lockstep}].
 
 groups() ->
     [{api, [], [interface_from_the_file, values_cross_both_ways,
@@ -35,7 +35,8 @@ groups() ->
      {faults, [], [lua_error_names_file_and_line, endless_loop_hits_the_budget,
                    endless_allocation_hits_the_memory_cap,
                    port_killed_every_lua_behavior_back, bad_frames_are_answered]},
-     {reload, [], [reload_all_or_nothing, reload_under_1khz_input]}].
+     {reload, [], [reload_all_or_nothing, reload_under_1khz_input]},
+     {lockstep, [], [lockstep_timers_at_simulated_deadlines]}].
 
 init_per_testcase(_Case, Config) ->
     {ok, _} = application:ensure_all_started(toroco_hw),
@@ -45,7 +46,8 @@ init_per_testcase(_Case, Config) ->
     ok = logger:set_primary_config(level, notice),     % print() is a notice
     [{primary_level, Level} | Config].
 
-end_per_testcase(_Case, Config) ->
+end_per_testcase(Case, Config) ->
+    _ = Case =:= lockstep_timers_at_simulated_deadlines andalso toroco_clock:realtime(),
     _ = logger:remove_handler(lua_suite),
     ok = logger:set_primary_config(level, ?config(primary_level, Config)),
     %% the behaviors first, so none sees its port go
@@ -336,6 +338,44 @@ reload_under_1khz_input(Config) ->
     ?assert(length(Old) >= 300),
     ?assert(length(New) > 0),
     ?assertEqual([], [T || T <- New, T =/= <<"v2">>]).
+
+%%% ---------------------------------------------------------------------
+%%% Lockstep
+%%% ---------------------------------------------------------------------
+
+lockstep_timers_at_simulated_deadlines(doc) ->
+    ["In lockstep a Lua behavior's wait_for_input timeout and sched.sleep fire at "
+     "their simulated deadlines, to the millisecond, and its clock is the world's"];
+lockstep_timers_at_simulated_deadlines(Config) ->
+    {module, _} = code:ensure_loaded(toroco_clock),
+    case erlang:function_exported(toroco_clock, lockstep, 1) of
+        false -> {skip, "this runtime has no lockstep yet"};
+        true -> lockstep(Config)
+    end.
+
+lockstep(Config) ->
+    ok = toroco_clock:lockstep(#{}),
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [go, more]}),
+    actuator(a, [got, more, timeout, tick]),
+    ok = toroco_lua:add_behavior(w, #{file => data(Config, "waiter.lua")}),
+    ok = toroco:set_inputs(w, #{go => [{s, go}], more => [{s, more}]}),
+    ok = toroco:set_inputs(a, #{got => [{w, got}], more => [{w, more}],
+                                timeout => [{w, timeout}]}),
+    {ok, _} = toroco_clock:tick(100, []),
+    ok = toroco:inject({s, go}, 1),
+    ok = toroco_clock:settle(),
+    {ok, _} = toroco_clock:tick(299, []),
+    ?assertEqual([{got, 1, 100}], toroco_fake_actuator:history(a)),
+    {ok, _} = toroco_clock:tick(1000, []),
+    ?assertEqual([{got, 1, 100}, {timeout, 1, 300}], toroco_fake_actuator:history(a)),
+    ok = toroco_fake_actuator:clear(a),
+    ok = toroco_lua:add_behavior(t, #{file => data(Config, "sleeper.lua")}),
+    ok = toroco:set_inputs(a, #{tick => [{t, tick}]}),
+    ok = toroco_clock:settle(),
+    {ok, _} = toroco_clock:tick(1200, []),
+    %% a tick at start (unwired yet: lost) and then one every 50 ms
+    Ticks = [{N, T} || {tick, N, T} <- toroco_fake_actuator:history(a)],
+    ?assertEqual([{K + 1, 1000 + 50 * K} || K <- lists:seq(1, 4)], Ticks).
 
 %%% ---------------------------------------------------------------------
 %%% Helpers
