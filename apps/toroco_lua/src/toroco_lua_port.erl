@@ -9,6 +9,12 @@
 %% callers wait in a FIFO queue (a frame the program could not read, a
 %% `bad_frame', answers the oldest).
 %%
+%% The budget of a Lua activation counts VM instructions, so one long C call
+%% (a pathological string pattern) would hang the program with it. The
+%% owner watches the request at the head of the queue: one unanswered after
+%% `stuck_ms' (app env, default 2000) gets the program killed, and it is
+%% handled as any death of the program.
+%%
 %% If the program dies, every caller waiting gets `{error, {lua_port_down,
 %% Why}}', every Lua behavior that opened a state is told (below) and stops,
 %% so its layer restarts it, and a new program is started at once.
@@ -49,6 +55,7 @@
 -type limits() :: #{budget := pos_integer(), memory := pos_integer()}.
 
 -define(CALL_TIMEOUT, 5000).
+-define(STUCK_MS, 2000).
 -define(LOG, #{domain => [toroco, lua]}).
 
 -record(d, {port :: port(),
@@ -150,20 +157,33 @@ start_port() ->
 -spec handle_event(gen_statem:event_type(), term(), up, #d{}) ->
           gen_statem:event_handler_result(up).
 handle_event({call, From}, {request, Req}, _S, D) ->
-    {keep_state, send(Req, From, D)};
+    keep(D, send(Req, From, D));
 handle_event({call, From}, {open, Pid, {File, Dir, Params, B, M}, Now}, _S,
              D = #d{next_id = Id}) ->
     D1 = add_client(Pid, Id, D#d{next_id = Id + 1}),
-    {keep_state, send({open, Id, Now, File, Dir, Params, B, M}, From, D1)};
+    keep(D, send({open, Id, Now, File, Dir, Params, B, M}, From, D1));
 handle_event({call, From}, {raw, Bin}, _S, D = #d{port = Port, pending = Q, next_ref = Ref}) ->
     true = port_command(Port, Bin),
-    {keep_state, D#d{pending = queue:in({Ref, From, raw}, Q), next_ref = Ref + 1}};
+    keep(D, D#d{pending = queue:in({Ref, From, raw}, Q), next_ref = Ref + 1});
 handle_event({call, From}, os_pid, _S, #d{os_pid = OsPid}) ->
     {keep_state_and_data, [{reply, From, OsPid}]};
 handle_event(info, {Port, {data, Bin}}, _S, D = #d{port = Port}) ->
-    {keep_state, answer(decode(Bin), D)};
+    keep(D, answer(decode(Bin), D));
 handle_event(info, {Port, {exit_status, Status}}, _S, D = #d{port = Port}) ->
     restart({exit_status, Status}, D);
+handle_event({timeout, stuck}, Ref, _S, #d{pending = Q, os_pid = OsPid}) ->
+    case queue:peek(Q) of
+        {value, {Ref, _, Req}} ->
+            logger:error("toroco_lua_port: lua_port has not answered ~p in ~b ms; killing it",
+                         [element(1, Req), stuck_ms()], ?LOG),
+            %% kill(1) as a port of its own: nothing here waits for it
+            _ = open_port({spawn_executable, os:find_executable("kill")},
+                          [{args, ["-9", integer_to_list(OsPid)]}, exit_status]),
+            keep_state_and_data;
+        _ -> keep_state_and_data
+    end;
+handle_event(info, {_OtherPort, {exit_status, _}}, _S, _D) ->
+    keep_state_and_data;                      % the kill(1) above
 handle_event(info, {'EXIT', Port, Why}, _S, D = #d{port = Port}) ->
     restart(Why, D);
 handle_event(info, {'DOWN', _MRef, process, Pid, _Why}, _S, D = #d{clients = Cs}) ->
@@ -186,6 +206,18 @@ terminate(_Reason, _S, #d{port = Port}) ->
 %%====================================================================
 %% Frames
 %%====================================================================
+
+%% The new data, and the watchdog moved to the new head of the queue if the
+%% head changed.
+keep(#d{pending = Q0}, D = #d{pending = Q}) ->
+    case {queue:peek(Q0), queue:peek(Q)} of
+        {Same, Same} -> {keep_state, D};
+        {_, empty} -> {keep_state, D, [{{timeout, stuck}, cancel}]};
+        {_, {value, {Ref, _, _}}} -> {keep_state, D, [{{timeout, stuck}, stuck_ms(), Ref}]}
+    end.
+
+stuck_ms() ->
+    application:get_env(toroco_lua, stuck_ms, ?STUCK_MS).
 
 %% Sends {Op, Ref, Args...}; the caller waits in the queue.
 send(Req, From, D = #d{port = Port, next_ref = Ref, pending = Q}) ->
@@ -251,6 +283,7 @@ restart(Why, D = #d{pending = Q, clients = Cs}) ->
                          Pid ! {?MODULE, down, Why}
                  end, Cs),
     case start_port() of
-        {ok, D1} -> {keep_state, D1#d{next_id = D#d.next_id, next_ref = D#d.next_ref}};
+        {ok, D1} -> {keep_state, D1#d{next_id = D#d.next_id, next_ref = D#d.next_ref},
+                     [{{timeout, stuck}, cancel}]};
         {error, Reason} -> {stop, Reason}
     end.

@@ -14,7 +14,7 @@
          wait_for_input_with_and_without_timeout/1, sleep_on_the_runtime_clock/1,
          latches_reach_the_actuator/1, print_goes_to_the_logger/1,
          lua_error_names_file_and_line/1, endless_loop_hits_the_budget/1,
-         endless_allocation_hits_the_memory_cap/1,
+         endless_allocation_hits_the_memory_cap/1, hung_port_is_killed/1,
          port_killed_every_lua_behavior_back/1, bad_frames_are_answered/1,
          reload_all_or_nothing/1, reload_under_1khz_input/1,
          load_main_errors_name_the_line/1, lockstep_timers_at_simulated_deadlines/1]).
@@ -33,7 +33,7 @@ groups() ->
                 latches_reach_the_actuator, print_goes_to_the_logger,
                 load_main_errors_name_the_line]},
      {faults, [], [lua_error_names_file_and_line, endless_loop_hits_the_budget,
-                   endless_allocation_hits_the_memory_cap,
+                   endless_allocation_hits_the_memory_cap, hung_port_is_killed,
                    port_killed_every_lua_behavior_back, bad_frames_are_answered]},
      {reload, [], [reload_all_or_nothing, reload_under_1khz_input]},
      {lockstep, [], [lockstep_timers_at_simulated_deadlines]}].
@@ -222,6 +222,18 @@ endless_allocation_hits_the_memory_cap(Config) ->
     Reason = fault(f, <<"memory">>),
     ?assertMatch({lua_limit, _, memory}, Reason),
     back(f),
+    ok = toroco:inject({s, kind}, <<"again">>),
+    await(a, alive, [<<"ok">>, <<"again">>]).
+
+hung_port_is_killed(doc) ->
+    ["A C call the budget cannot see into (a pattern that backtracks for ages) hangs "
+     "the program: its owner kills it after stuck_ms and every Lua behavior restarts"];
+hung_port_is_killed(Config) ->
+    faulty(data(Config, "faulty.lua")),
+    OsPid = toroco_lua_port:os_pid(),
+    ?assertMatch({lua_port_down, _}, fault(f, <<"pattern">>)),
+    back(f),
+    ?assertNotEqual(OsPid, toroco_lua_port:os_pid()),
     ok = toroco:inject({s, kind}, <<"again">>),
     await(a, alive, [<<"ok">>, <<"again">>]).
 
@@ -416,7 +428,7 @@ fault(Name, Kind) ->
     Ref = erlang:monitor(process, whereis(toroco_names:process(Name))),
     ok = toroco:inject({s, kind}, Kind),
     receive {'DOWN', Ref, process, _, Why} -> Why
-    after ?WAIT -> ct:fail({not_stopped, Name, Kind})
+    after 2 * ?WAIT -> ct:fail({not_stopped, Name, Kind})
     end.
 
 %% Waits (bounded) for behavior Name to be registered and running again.

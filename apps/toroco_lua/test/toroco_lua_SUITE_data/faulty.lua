@@ -9,6 +9,8 @@ local function fault(event, kind)
     lib.spin()
   elseif kind == 'memory' then
     lib.hoard()
+  elseif kind == 'pattern' then
+    lib.backtrack()
   end
   toroco.send_output {alive = {kind}}
 end
