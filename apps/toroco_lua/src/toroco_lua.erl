@@ -342,12 +342,22 @@ action({print, Text}, D) ->
 action({main, Op, _Line, Args}, #{name := Name, file := File, args := Args0}) ->
     %% a behavior changing the network (the thesis' suspender, add/remove)
     Ctx = #{dir => filename:dirname(File), opts => maps:with([budget, memory], Args0)},
+    Self = atom_to_binary(Name),
+    case Op =/= <<"load_behavior">> andalso Args =:= [Self] of
+        true ->
+            %% from its own callback it would wait on itself
+            logger:warning("toroco_lua: ~p cannot ~ts itself; ignored", [Name, Op],
+                           ?LOG#{name => Name});
+        false -> main_call_logged(Op, Args, Ctx, Name)
+    end,
+    false.
+
+main_call_logged(Op, Args, Ctx, Name) ->
     case main_call(Op, Args, Ctx) of
         {error, Why} ->
             logger:warning("toroco_lua: ~p: ~ts refused: ~p", [Name, Op, Why], ?LOG#{name => Name});
         _ -> ok
-    end,
-    false.
+    end.
 
 print(Text, #{name := Name}) ->
     logger:notice("~p: ~ts", [Name, Text], ?LOG#{name => Name}).
