@@ -261,6 +261,19 @@ static void a_main_file_records_its_wiring(void)
     port_free(p);
 }
 
+static void holds_unsets_and_prints_cross_as_actions(void)
+{
+    struct port *p = port_new();
+
+    CHECK_STR(open_file(p, 14, "outputs.lua", BUDGET, MEM), "{reply,1,{ok,[]}}");
+    CHECK_STR(input2(p, 14, 1, "go", 3, 4),
+              "{reply,2,{ok,[{print,<<\"go\t3\t4\tnil\">>},"
+              "{send,<<\"held\">>,3,infinity},"
+              "{set,<<\"latched\">>,{#{<<\"x\">>=>1},[<<\"two\">>]}},"
+              "{unset,<<\"latched\">>}]}}");
+    port_free(p);
+}
+
 const struct test_case port_tests[] = {
     TEST_CASE(ping_answers_the_protocol_version),
     TEST_CASE(a_trigger_latches_and_waits_with_a_timeout),
@@ -273,4 +286,5 @@ const struct test_case port_tests[] = {
     TEST_CASE(bad_frames_get_an_error_not_a_crash),
     TEST_CASE(an_idle_state_is_small),
     TEST_CASE(a_main_file_records_its_wiring),
+    TEST_CASE(holds_unsets_and_prints_cross_as_actions),
     {NULL, NULL}};
