@@ -15,6 +15,7 @@
          latches_reach_the_actuator/1, print_goes_to_the_logger/1,
          lua_error_names_file_and_line/1, endless_loop_hits_the_budget/1,
          endless_allocation_hits_the_memory_cap/1, hung_port_is_killed/1,
+         lua_faults_leave_erlang_layers_flowing/1,
          port_killed_every_lua_behavior_back/1, bad_frames_are_answered/1,
          reload_all_or_nothing/1, reload_under_1khz_input/1,
          load_main_errors_name_the_line/1, lockstep_timers_at_simulated_deadlines/1]).
@@ -34,6 +35,7 @@ groups() ->
                 load_main_errors_name_the_line]},
      {faults, [], [lua_error_names_file_and_line, endless_loop_hits_the_budget,
                    endless_allocation_hits_the_memory_cap, hung_port_is_killed,
+                   lua_faults_leave_erlang_layers_flowing,
                    port_killed_every_lua_behavior_back, bad_frames_are_answered]},
      {reload, [], [reload_all_or_nothing, reload_under_1khz_input]},
      {lockstep, [], [lockstep_timers_at_simulated_deadlines]}].
@@ -234,6 +236,35 @@ hung_port_is_killed(Config) ->
     ?assertMatch({lua_port_down, _}, fault(f, <<"pattern">>)),
     back(f),
     ?assertNotEqual(OsPid, toroco_lua_port:os_pid()),
+    ok = toroco:inject({s, kind}, <<"again">>),
+    await(a, alive, [<<"ok">>, <<"again">>]).
+
+lua_faults_leave_erlang_layers_flowing(doc) ->
+    ["Under 1 kHz input to an Erlang behavior, a Lua behavior beside it errs, loops, "
+     "hoards memory and loses its port, restarting each time: the Erlang path loses "
+     "no event and keeps its order"];
+lua_faults_leave_erlang_layers_flowing(Config) ->
+    faulty(data(Config, "faulty.lua")),
+    ok = toroco:add_device(m, toroco_fake_sensor, #{outputs => [left, right]}),
+    actuator(b, [signal]),
+    ok = toroco:add_behavior(signaller, torobot_ex_signaller, #{}),
+    ok = toroco:set_inputs(signaller, #{left => [{m, left}], right => [{m, right}]}),
+    ok = toroco:set_inputs(b, #{signal => [{signaller, signal}]}),
+    N = 1000,
+    _ = spawn_link(fun() -> [begin ok = toroco:inject({m, left}, K), receive after 1 -> ok end end
+                             || K <- lists:seq(1, N)] end),
+    Reasons = [begin R = fault(f, Kind), back(f), R end
+               || Kind <- [<<"error">>, <<"loop">>, <<"memory">>]],
+    ?assertMatch([{lua_error, _, 7, _}, {lua_limit, _, budget}, {lua_limit, _, memory}], Reasons),
+    OsPid = toroco_lua_port:os_pid(),
+    Ref = erlang:monitor(process, whereis(toroco_names:process(f))),
+    _ = os:cmd("kill -9 " ++ integer_to_list(OsPid)),
+    receive {'DOWN', Ref, process, _, {lua_port_down, _}} -> ok
+    after ?WAIT -> ct:fail(not_stopped)
+    end,
+    back(f),
+    ok = toroco_fake_actuator:await(b, fun(H) -> length(H) >= N end, 20000),
+    ?assertEqual([{left, K} || K <- lists:seq(1, N)], values(b, signal)),
     ok = toroco:inject({s, kind}, <<"again">>),
     await(a, alive, [<<"ok">>, <<"again">>]).
 
