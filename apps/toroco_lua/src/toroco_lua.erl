@@ -171,8 +171,8 @@ interface(Args = #{file := File}) ->
             {error, {lua_file, {File, Why}}}
     end.
 
-%% @doc What the tasks of Lua behavior `Name' wait for: `[#{task => T,
-%% input => I | none, timer => boolean()}]'.
+%% @doc What the tasks of Lua behavior `Name' wait for: `[#{task => T, kind =>
+%% file | coroutine | trigger, input => I | none, timer => boolean()}]'.
 -spec waits(toroco:name()) -> {ok, [map()]} | {error, term()}.
 waits(Name) ->
     behavior_call(Name, waits).
@@ -236,8 +236,9 @@ handle_event(info, {toroco_lua_port, down, Why}, _S, _D) ->
     {stop, {lua_port_down, Why}};
 handle_event({call, From}, {?MODULE, waits}, _S, #{id := Id}) ->
     Reply = case toroco_lua_port:waits(Id) of
-                {ok, Ws} -> {ok, [#{task => T, input => waited(I), timer => Timer}
-                                  || [T, I, Timer] <- Ws]};
+                {ok, Ws} -> {ok, [#{task => T, kind => binary_to_atom(K), input => waited(I),
+                                    timer => Timer}
+                                  || [T, K, I, Timer] <- Ws]};
                 Error -> Error
             end,
     {keep_state_and_data, [{reply, From, Reply}]};

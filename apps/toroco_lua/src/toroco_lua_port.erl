@@ -108,7 +108,7 @@ input(Id, Input, Value, Now) ->
 timer(Id, Task, Seq, Now) ->
     request({timer, Id, Now, Task, Seq}).
 
-%% @doc What each task of the state waits for: `[[Task, Input | false, TimerPending]]'.
+%% @doc What each task of the state waits for: `[[Task, Kind, Input | false, TimerPending]]'.
 -spec waits(id()) -> {ok, list()} | {error, term()}.
 waits(Id) ->
     request({waits, Id}).

@@ -110,7 +110,7 @@ wait_for_input_with_and_without_timeout(Config) ->
     ok = toroco_lua:add_behavior(w, #{file => data(Config, "waiter.lua")}),
     ok = toroco:set_inputs(w, #{go => [{s, go}], more => [{s, more}]}),
     ok = toroco:set_inputs(a, #{got => [{w, got}], more => [{w, more}], timeout => [{w, timeout}]}),
-    ?assertMatch({ok, [#{input := go, timer := false}]}, toroco_lua:waits(w)),
+    ?assertMatch({ok, [#{kind := coroutine, input := go, timer := false}]}, toroco_lua:waits(w)),
     ok = toroco:inject({s, go}, 1),
     await(a, timeout, [1]),
     H = toroco_fake_actuator:history(a),

@@ -67,10 +67,12 @@ local function run(t, ...)
   end
 end
 
-local function spawn(fn, ...)
+-- kind: 'file' (the file's body), 'coroutine' (a function it returned, or
+-- sched.run's) or 'trigger'
+local function spawn(kind, fn, ...)
   next_task = next_task + 1
   local args = {n = select('#', ...), ...}
-  local t = {id = next_task, seq = 0}
+  local t = {id = next_task, seq = 0, kind = kind}
   t.co = co_create(function() return fn(unpack(args, 1, args.n)) end)
   tasks[t.id] = t
   run(t)
@@ -140,7 +142,7 @@ function M.trigger(input, handler)
   local name = input_name(input)
   if type(handler) ~= 'function' then error('trigger: handler must be a function', 2) end
   local event = M.input[name]
-  local t = spawn(function()
+  local t = spawn('trigger', function()
     while true do
       local vals = wait(name, nil, 'trigger')
       handler(event, unpack(vals, 1, vals.n))
@@ -224,7 +226,7 @@ local sched = {}
 function sched.sleep(seconds)
   wait(nil, ms(seconds) or nil, 'sched.sleep')
 end
-function sched.run(fn, ...) return spawn(fn, ...) end
+function sched.run(fn, ...) return spawn('coroutine', fn, ...) end
 
 -- ---- the sandbox ---------------------------------------------------------
 
@@ -280,12 +282,12 @@ local entry = {}
 -- (alone or in tables) start as tasks; triggers started when made.
 function entry.boot(chunk)
   local function start(v)
-    if type(v) == 'function' then spawn(v)
+    if type(v) == 'function' then spawn('coroutine', v)
     elseif type(v) == 'table' and v.kind ~= 'trigger' then
       for _, w in ipairs(v) do start(w) end
     end
   end
-  spawn(function()
+  spawn('file', function()
     local rets = {n = 0}
     local function pack(...) rets = {n = select('#', ...), ...} end
     pack(chunk())
@@ -317,11 +319,11 @@ function entry.timer(id, seq)
   end
 end
 
--- What the tasks wait for, for inspect: {{task, input or false, timer}}.
+-- What the tasks wait for, for inspect: {{task, kind, input or false, timer}}.
 function entry.waits()
   local out = {}
   for id, t in pairs(tasks) do
-    out[#out + 1] = {id, t.input or false, t.timer or false}
+    out[#out + 1] = {id, t.kind, t.input or false, t.timer or false}
   end
   sort(out, function(a, b) return a[1] < b[1] end)
   return out

@@ -121,7 +121,7 @@ static void a_trigger_latches_and_waits_with_a_timeout(void)
               "{reply,2,{ok,[{print,<<\"x\tx\t20\t20\">>},"
               "{set,<<\"motors_setvel\">>,{20,20}},"
               "{timer,2,1,500}]}}");
-    CHECK_STR(on_state(p, "waits", 1), "{reply,5,{ok,[[2,<<\"x\">>,true]]}}");
+    CHECK_STR(on_state(p, "waits", 1), "{reply,5,{ok,[[2,<<\"trigger\">>,<<\"x\">>,true]]}}");
     /* the timeout: wait_for_input gives nil, so {v} holds no value */
     CHECK_STR(timer(p, 1, 2, 1), "{reply,4,{ok,[{send,<<\"out\">>,{},250}]}}");
     /* a stale timer (an old sequence number) does nothing */
