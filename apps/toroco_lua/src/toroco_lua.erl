@@ -24,6 +24,8 @@
 -module(toroco_lua).
 -behaviour(toroco_behavior).
 
+-include("toroco_lua_port.hrl").
+
 -export([add_behavior/2, load_main/2, interface/1, waits/1, memory/1, reload/1]).
 -export([interface/0, init/1, handle_input/4, handle_event/4]).
 -export_type([opts/0, main_opts/0]).
@@ -232,7 +234,7 @@ handle_event({timeout, {lua, _}}, {lua_timer, _OldId, _, _}, _S, _D) ->
     keep_state_and_data;                      % a timer of the state before a reload
 handle_event(info, {'DOWN', MRef, process, _, Why}, _S, #{owner := MRef}) ->
     {stop, {lua_port_down, Why}};
-handle_event(info, {toroco_lua_port, down, Why}, _S, _D) ->
+handle_event(info, ?LUA_PORT_DOWN(Why), _S, _D) ->
     {stop, {lua_port_down, Why}};
 handle_event({call, From}, {?MODULE, waits}, _S, #{id := Id}) ->
     Reply = case toroco_lua_port:waits(Id) of

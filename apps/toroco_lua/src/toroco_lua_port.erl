@@ -35,6 +35,8 @@
 -module(toroco_lua_port).
 -behaviour(gen_statem).
 
+-include("toroco_lua_port.hrl").
+
 -export([start_link/0, os_pid/0, ping/0, raw/1,
          open/5, input/4, timer/4, waits/1, memory/1, close/1]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3]).
@@ -280,7 +282,7 @@ restart(Why, D = #d{pending = Q, clients = Cs}) ->
     [reply(From, {error, {lua_port_down, Why}}) || {_, From, _} <- queue:to_list(Q)],
     maps:foreach(fun(Pid, {MRef, _}) ->
                          erlang:demonitor(MRef, [flush]),
-                         Pid ! {?MODULE, down, Why}
+                         Pid ! ?LUA_PORT_DOWN(Why)
                  end, Cs),
     case start_port() of
         {ok, D1} -> {keep_state, D1#d{next_id = D#d.next_id, next_ref = D#d.next_ref},
