@@ -236,10 +236,13 @@ print = function(...)
   C.print(concat(parts, '\t'))
 end
 
+-- The runtime's clock only (lockstep): os.time() its seconds, os.clock()
+-- the seconds since this state started, as the original's CPU clock was.
 local os_time, os_date, os_difftime = os.time, os.date, os.difftime
+local started = C.now()
 os = {
   time = function(t) if t ~= nil then return os_time(t) end return floor(C.now() / 1000) end,
-  clock = function() return C.now() / 1000 end,
+  clock = function() return (C.now() - started) / 1000 end,
   date = function(f, t) return os_date(f, t or floor(C.now() / 1000)) end,
   difftime = os_difftime,
 }
