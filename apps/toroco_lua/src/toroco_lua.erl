@@ -215,6 +215,8 @@ init(Args = #{file := File}) ->
         undefined ->
             {error, {lua_port_not_running, Name}};
         Owner ->
+            %% a reset runs init/1 again in this process: its last state goes
+            ok = toroco_lua_port:close_all(),
             D = #{name => Name, file => File, args => Args,
                   owner => erlang:monitor(process, Owner), id => none},
             case open(D) of

@@ -30,15 +30,16 @@
 %%     <td>a behavior with states stopped</td><td>the owner closes its states</td></tr>
 %% </table>
 %%
-%% Functions: life `start_link/0', `os_pid/0'; requests `open/5', `input/4',
-%% `timer/4', `waits/1', `memory/1', `close/1', `ping/0'; tests `raw/1'.
+%% Functions: life `start_link/0', `os_pid/0', `states/0'; requests
+%% `open/5', `input/4', `timer/4', `waits/1', `memory/1', `close/1',
+%% `close_all/0', `ping/0'; tests `raw/1'.
 -module(toroco_lua_port).
 -behaviour(gen_statem).
 
 -include("toroco_lua_port.hrl").
 
--export([start_link/0, os_pid/0, ping/0, raw/1,
-         open/5, input/4, timer/4, waits/1, memory/1, close/1]).
+-export([start_link/0, os_pid/0, ping/0, raw/1, states/0,
+         open/5, input/4, timer/4, waits/1, memory/1, close/1, close_all/0]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3]).
 -export_type([id/0, action/0, result/0, limits/0]).
 
@@ -123,6 +124,18 @@ memory(Id) ->
 close(Id) ->
     request({close, Id}).
 
+%% @doc Closes every state the calling process has: a behavior that starts
+%% again in the same process (Brooks' reset runs init/1 anew) leaves none
+%% of its last life behind.
+-spec close_all() -> ok.
+close_all() ->
+    gen_statem:call(?MODULE, {close_all, self()}, ?CALL_TIMEOUT).
+
+%% @doc How many states are open, all processes together.
+-spec states() -> non_neg_integer().
+states() ->
+    gen_statem:call(?MODULE, states, ?CALL_TIMEOUT).
+
 request(Req) ->
     try gen_statem:call(?MODULE, {request, Req}, ?CALL_TIMEOUT)
     catch
@@ -169,6 +182,18 @@ handle_event({call, From}, {raw, Bin}, _S, D = #d{port = Port, pending = Q, next
     keep(D, D#d{pending = queue:in({Ref, From, raw}, Q), next_ref = Ref + 1});
 handle_event({call, From}, os_pid, _S, #d{os_pid = OsPid}) ->
     {keep_state_and_data, [{reply, From, OsPid}]};
+handle_event({call, From}, states, _S, #d{clients = Cs}) ->
+    {keep_state_and_data, [{reply, From, lists:sum([length(Ids) || {_, Ids} <- maps:values(Cs)])}]};
+handle_event({call, From}, {close_all, Pid}, _S, D = #d{clients = Cs}) ->
+    case maps:take(Pid, Cs) of
+        {{MRef, Ids}, Cs1} ->
+            erlang:demonitor(MRef, [flush]),
+            D1 = lists:foldl(fun(Id, Acc) -> send({close, Id}, none, Acc) end,
+                             D#d{clients = Cs1}, Ids),
+            {keep_state, D1, [{reply, From, ok} | watch(D, D1)]};
+        error ->
+            {keep_state_and_data, [{reply, From, ok}]}
+    end;
 handle_event(info, {Port, {data, Bin}}, _S, D = #d{port = Port}) ->
     keep(D, answer(decode(Bin), D));
 handle_event(info, {Port, {exit_status, Status}}, _S, D = #d{port = Port}) ->
@@ -211,11 +236,14 @@ terminate(_Reason, _S, #d{port = Port}) ->
 
 %% The new data, and the watchdog moved to the new head of the queue if the
 %% head changed.
-keep(#d{pending = Q0}, D = #d{pending = Q}) ->
+keep(D0, D) ->
+    {keep_state, D, watch(D0, D)}.
+
+watch(#d{pending = Q0}, #d{pending = Q}) ->
     case {queue:peek(Q0), queue:peek(Q)} of
-        {Same, Same} -> {keep_state, D};
-        {_, empty} -> {keep_state, D, [{{timeout, stuck}, cancel}]};
-        {_, {value, {Ref, _, _}}} -> {keep_state, D, [{{timeout, stuck}, stuck_ms(), Ref}]}
+        {Same, Same} -> [];
+        {_, empty} -> [{{timeout, stuck}, cancel}];
+        {_, {value, {Ref, _, _}}} -> [{{timeout, stuck}, stuck_ms(), Ref}]
     end.
 
 stuck_ms() ->

@@ -15,7 +15,7 @@
          latches_reach_the_actuator/1, print_goes_to_the_logger/1,
          lua_error_names_file_and_line/1, endless_loop_hits_the_budget/1,
          endless_allocation_hits_the_memory_cap/1, hung_port_is_killed/1,
-         lua_faults_leave_erlang_layers_flowing/1,
+         lua_faults_leave_erlang_layers_flowing/1, reset_starts_a_fresh_state/1,
          port_killed_every_lua_behavior_back/1, bad_frames_are_answered/1,
          reload_all_or_nothing/1, reload_under_1khz_input/1,
          load_main_errors_name_the_line/1, lockstep_timers_at_simulated_deadlines/1]).
@@ -31,7 +31,7 @@ all() ->
 groups() ->
     [{api, [], [interface_from_the_file, values_cross_both_ways,
                 wait_for_input_with_and_without_timeout, sleep_on_the_runtime_clock,
-                latches_reach_the_actuator, print_goes_to_the_logger,
+                latches_reach_the_actuator, print_goes_to_the_logger, reset_starts_a_fresh_state,
                 load_main_errors_name_the_line]},
      {faults, [], [lua_error_names_file_and_line, endless_loop_hits_the_budget,
                    endless_allocation_hits_the_memory_cap, hung_port_is_killed,
@@ -160,6 +160,25 @@ latches_reach_the_actuator(Config) ->
     ok = toroco:inject({ir, update}, 0),
     await(motors, setvel, [{10, 10}, {20, -20}, {11, 11}]),
     #{outputs := #{motors_setvel := #{latch := none}}} = toroco:inspect(avoid).
+
+reset_starts_a_fresh_state(doc) ->
+    ["Brooks' reset runs a Lua behavior's file again in a fresh state, and the old "
+     "state is closed: resets leave one state, not one each"];
+reset_starts_a_fresh_state(Config) ->
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [value, reset]}),
+    actuator(a, [booted, echo]),
+    ok = toroco_lua:add_behavior(lb, #{file => data(Config, "boot.lua")}),
+    ok = toroco:set_inputs(lb, #{value => [{s, value}]}),
+    ok = toroco:set_inputs(a, #{booted => [{lb, booted}], echo => [{lb, echo}]}),
+    ok = toroco:set_reset(lb, [{s, reset}]),
+    ?assertEqual(1, toroco_lua_port:states()),
+    [begin
+         ok = toroco:inject({s, reset}, K),
+         await(a, booted, lists:duplicate(K, {}))
+     end || K <- lists:seq(1, 5)],
+    ok = toroco:inject({s, value}, 7),
+    await(a, echo, [7]),
+    ?assertEqual(1, toroco_lua_port:states()).
 
 print_goes_to_the_logger(doc) ->
     ["print() reaches the logger with the behavior's name"];
