@@ -282,6 +282,7 @@ result(Other, _Ref, _Req) -> {error, {lua_port_answer, Other}}.
 forget({reply, _, {stopped, _, _}}, Req, D) -> drop_id(element(2, Req), D);
 forget(_, {close, Id}, D) -> drop_id(Id, D);
 forget({reply, _, {error, _}}, {open, Id, _, _, _, _, _, _}, D) -> drop_id(Id, D);
+forget({bad_frame, _}, {open, Id, _, _, _, _, _, _}, D) -> drop_id(Id, D);
 forget(_, _, D) -> D.
 
 reply(none, _) -> ok;

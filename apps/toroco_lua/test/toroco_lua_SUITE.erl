@@ -336,6 +336,10 @@ bad_frames_are_answered(Config) ->
     ?assertEqual(OsPid, toroco_lua_port:os_pid()),
     ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [value]}),
     actuator(a, [echo]),
+    %% params that cannot cross: the behavior does not start, nothing is left open
+    ?assertMatch({error, _}, toroco_lua:add_behavior(lb, #{file => data(Config, "echo.lua"),
+                                                           params => #{me => self()}})),
+    ?assertEqual(0, toroco_lua_port:states()),
     ok = toroco_lua:add_behavior(lb, #{file => data(Config, "echo.lua")}),
     ok = toroco:set_inputs(lb, #{value => [{s, value}]}),
     ok = toroco:set_inputs(a, #{echo => [{lb, echo}]}),
