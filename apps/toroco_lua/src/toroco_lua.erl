@@ -297,10 +297,11 @@ activation({stopped, Reason, Actions}, D = #{name := Name}) ->
     Why = reason(Reason, D),
     logger:error("toroco_lua: ~p stopped: ~p", [Name, Why], ?LOG#{name => Name}),
     {stop, Why};
-activation({error, {bad_frame, Why}}, #{name := Name}) ->
-    %% a value the port cannot take (a pid, a fun...): this event only
+activation({error, {Bad, Why}}, #{name := Name}) when Bad =:= bad_frame; Bad =:= bad_value ->
+    %% a value the port cannot take (a pid, a fun, too many values): this
+    %% event only
     logger:warning("toroco_lua: ~p got a value that cannot cross to Lua (~p); dropped",
-                   [Name, Why], ?LOG#{name => Name}),
+                   [Name, {Bad, Why}], ?LOG#{name => Name}),
     keep_state_and_data;
 activation({error, {lua_port_down, Why}}, _D) ->
     {stop, {lua_port_down, Why}};

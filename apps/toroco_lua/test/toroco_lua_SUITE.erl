@@ -345,6 +345,7 @@ bad_frames_are_answered(Config) ->
     ok = toroco:set_inputs(a, #{echo => [{lb, echo}]}),
     Pid = whereis(toroco_names:process(lb)),
     ok = toroco:inject({s, value}, self()),
+    ok = toroco:inject({s, value}, list_to_tuple(lists:seq(1, 300))),
     ok = toroco:inject({s, value}, 5),
     await(a, echo, [5]),
     ?assertEqual(Pid, whereis(toroco_names:process(lb))).

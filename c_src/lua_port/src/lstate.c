@@ -443,11 +443,12 @@ struct lstate *lstate_open(long long id, const struct lstate_opts *opts,
     return s;
 }
 
-void lstate_input(struct lstate *s, const char *input, struct term_reader *value,
+bool lstate_input(struct lstate *s, const char *input, struct term_reader *value,
                   long long now_ms)
 {
     struct activation a = {.s = s, .kind = ACT_INPUT, .terms = value, .input = input};
     activate(&a, now_ms);
+    return !a.bad_term;
 }
 
 void lstate_timer(struct lstate *s, long long task, long long seq, long long now_ms)

@@ -51,8 +51,10 @@ struct lstate {
  * a state with `failed' set. */
 struct lstate *lstate_open(long long id, const struct lstate_opts *opts,
                            struct term_reader *params, long long now_ms);
-/* An input's arrival: `value' is the event's term (a tuple: several values). */
-void lstate_input(struct lstate *s, const char *input, struct term_reader *value,
+/* An input's arrival: `value' is the event's term (a tuple: several values).
+ * false, and nothing ran, if the value cannot be taken (a tuple of more than
+ * TERM_MAX_VALUES values). */
+bool lstate_input(struct lstate *s, const char *input, struct term_reader *value,
                   long long now_ms);
 /* A timer the state asked for fired. */
 void lstate_timer(struct lstate *s, long long task, long long seq, long long now_ms);

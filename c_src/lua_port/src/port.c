@@ -195,7 +195,8 @@ static void do_input(struct port *p, struct term_reader *r, size_t arity, long l
         { reply_error(x, ref, "bad_request", ref); return; }
     if ((k = find(p, id)) < 0)
         { reply_error(x, ref, "unknown_state", id); return; }
-    lstate_input(p->states[k], input, r, now);
+    if (!lstate_input(p->states[k], input, r, now))
+        { reply_error(x, ref, "bad_value", id); return; }
     activation_reply(p, k, x, ref);
 }
 

@@ -346,7 +346,7 @@ int term_push_values(lua_State *L, struct term_reader *r)
     size_t n;
 
     if (tag == T_SMALL_TUPLE || tag == T_LARGE_TUPLE) {
-        if (!term_tuple(r, &n) || n > r->len - r->i || n > 200)
+        if (!term_tuple(r, &n) || n > r->len - r->i || n > TERM_MAX_VALUES)
             return -1;
         luaL_checkstack(L, (int)n + 4, "too many values");
         for (size_t k = 0; k < n; k++)

@@ -24,6 +24,7 @@
 
 #define TERM_MAX_DEPTH 32
 #define TERM_ATOM_MAX 256          /* bytes of an atom's UTF-8 text, plus NUL */
+#define TERM_MAX_VALUES 200        /* values of one event (a tuple's elements) */
 
 struct term_reader {
     const unsigned char *b;
@@ -49,7 +50,8 @@ bool term_skip(struct term_reader *r);
  * raise a Lua error (memory): call it in protected mode. */
 bool term_push(lua_State *L, struct term_reader *r);
 /* Pushes an event's values: a tuple's elements one by one, any other term
- * as one value. Returns how many were pushed, or -1 if malformed. */
+ * as one value. Returns how many were pushed, or -1 if malformed or more
+ * than TERM_MAX_VALUES. */
 int term_push_values(lua_State *L, struct term_reader *r);
 
 /* Encodes the Lua value at idx. Raises a Lua error naming what cannot

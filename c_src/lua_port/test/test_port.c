@@ -228,6 +228,14 @@ static void bad_frames_get_an_error_not_a_crash(void)
     ei_x_encode_long(&x, 11);
     CHECK_STR(handle(p, &x), "{reply,10,{error,{bad_request,10}}}");
     CHECK_STR(input2(p, 99, 1, "x", 1, 1), "{reply,2,{error,{unknown_state,99}}}");
+    head(&x, "input", 6, 12);                /* 201 values: refused, nothing ran */
+    ei_x_encode_long(&x, 11);
+    ei_x_encode_long(&x, 1);
+    ei_x_encode_atom(&x, "x");
+    ei_x_encode_tuple_header(&x, 201);
+    for (int k = 0; k < 201; k++)
+        ei_x_encode_long(&x, k);
+    CHECK_STR(handle(p, &x), "{reply,12,{error,{bad_value,11}}}");
     CHECK_STR(open_file(p, 11, "echo.lua", BUDGET, MEM), "{reply,1,{error,{duplicate_state,11}}}");
     /* the state is still there and answers */
     CHECK(strstr(input2(p, 11, 1, "x", 5, 6), "{set,") != NULL);
