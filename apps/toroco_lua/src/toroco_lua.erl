@@ -30,11 +30,15 @@
 -export([interface/0, init/1, handle_input/4, handle_event/4]).
 -export_type([opts/0, main_opts/0]).
 
-%% `file' (required) the behavior's Lua file; `params' its `toroco.params';
+%% `file' (required) the behavior's Lua file; `root' the program's folder,
+%% where its `require' and `load_behavior' paths start (default: the file's
+%% folder; `load_main/2' gives the main file's, as the original ran from
+%% there); `params' its `toroco.params';
 %% `layer'; `budget' VM instructions per activation and `memory' bytes per
 %% state (defaults: the application's env); `inputs'/`outputs' ports added
 %% to those found in the file (for names built at run time).
--type opts() :: #{file := file:filename_all(), params => map(), layer => non_neg_integer(),
+-type opts() :: #{file := file:filename_all(), root => file:filename_all(),
+                  params => map(), layer => non_neg_integer(),
                   budget => pos_integer(), memory => pos_integer(),
                   inputs => [atom()], outputs => [atom()]}.
 
@@ -57,7 +61,7 @@
 %% whose `interface/0' is the file's and whose callbacks are this module's.
 -spec add_behavior(toroco:name(), opts()) -> ok | {error, term()}.
 add_behavior(Name, Opts = #{file := _}) when is_atom(Name) ->
-    Args = maps:with([file, params, budget, memory, inputs, outputs], Opts),
+    Args = maps:with([file, root, params, budget, memory, inputs, outputs], Opts),
     case whereis(toroco_names:process(Name)) =:= undefined andalso interface(Args) of
         false ->
             %% the name is taken: its callback module is running, leave it be
@@ -91,13 +95,13 @@ load_main(Path, Opts) ->
     Abs = filename:absname(Path),
     Limits = #{budget => maps:get(budget, Opts, env(budget)),
                memory => maps:get(memory, Opts, env(memory))},
-    D = #{name => main, file => Path, id => none},
+    D = #{name => main, file => Path, args => #{}, id => none},
     case toroco_lua_port:open(filename:basename(Abs), filename:dirname(Abs),
                               maps:get(params, Opts, #{}), Limits, toroco_clock:now_ms()) of
         {ok, Id, Actions} ->
             _ = toroco_lua_port:close(Id),
             _ = [print(Text, D) || {print, Text} <- Actions],
-            Ctx = #{dir => filename:dirname(Path), opts => Opts},
+            Ctx = #{root => filename:dirname(Path), opts => Opts},
             apply_main([{Op, Line, Args} || {main, Op, Line, Args} <- Actions], Path, Ctx, []);
         {stopped, {lua_error, _, Line, Msg} = R, _} ->
             {error, {path(element(2, R), D), Line, Msg}};
@@ -117,13 +121,13 @@ apply_main([{Op, Line, Args} | Rest], Path, Ctx, Loaded) ->
     end.
 
 %% One wiring call of Lua code (main.lua, or a behavior changing the
-%% network), relative to the folder `dir' of the file that made it.
-main_call(<<"load_behavior">>, [Name, File, Params], #{dir := Dir, opts := Opts}) ->
+%% network); paths start at the program's folder `root'.
+main_call(<<"load_behavior">>, [Name, File, Params], #{root := Root, opts := Opts}) ->
     B = binary_to_atom(Name),
     Layer = maps:get(B, maps:get(layers, Opts, #{}), 0),
     Limits = maps:with([budget, memory], Opts),
-    case toroco_lua:add_behavior(B, Limits#{file => lua_file(Dir, File), layer => Layer,
-                                            params => table(Params)}) of
+    case toroco_lua:add_behavior(B, Limits#{file => lua_file(Root, File), root => Root,
+                                            layer => Layer, params => table(Params)}) of
         ok -> {loaded, B};
         Error -> Error
     end;
@@ -274,11 +278,11 @@ handle_event(Type, Content, _S, #{name := Name}) ->
 %%====================================================================
 
 open(D = #{file := File, args := Args}) ->
-    Abs = filename:absname(File),
+    {Root, Rel} = root(File, Args),
     Limits = #{budget => maps:get(budget, Args, env(budget)),
                memory => maps:get(memory, Args, env(memory))},
-    case toroco_lua_port:open(filename:basename(Abs), filename:dirname(Abs),
-                              maps:get(params, Args, #{}), Limits, toroco_clock:now_ms()) of
+    case toroco_lua_port:open(Rel, Root, maps:get(params, Args, #{}), Limits,
+                              toroco_clock:now_ms()) of
         {ok, Id, Actions} -> {ok, Id, Actions};
         {stopped, Reason, Actions} ->
             _ = actions(Actions, D),
@@ -313,10 +317,25 @@ activation({error, Why}, _D) ->
 reason({lua_error, Src, Line, Msg}, D) -> {lua_error, path(Src, D), Line, Msg};
 reason({lua_limit, Src, What}, D) -> {lua_limit, path(Src, D), What}.
 
-path(Src, #{file := File}) ->
-    case filename:basename(File) =:= unicode:characters_to_list(Src) of
-        true -> File;
-        false -> filename:join(filename:dirname(File), unicode:characters_to_list(Src))
+path(Src, #{file := File, args := Args}) ->
+    {Root, Rel} = root(File, Args),
+    case unicode:characters_to_list(Src) of
+        Rel -> File;
+        Other -> filename:join(Root, Other)
+    end.
+
+%% The program's folder and the file's path inside it; a file outside the
+%% folder given is its own folder's.
+root(File, Args) ->
+    Abs = unicode:characters_to_list(filename:absname(File)),
+    Root = unicode:characters_to_list(filename:absname(maps:get(root, Args, filename:dirname(Abs)))),
+    case string:prefix(Abs, Root ++ "/") of
+        nomatch -> {filename:dirname(Abs), filename:basename(Abs)};
+        Rel ->
+            case filelib:safe_relative_path(Rel, Root) of
+                unsafe -> {filename:dirname(Abs), filename:basename(Abs)};
+                Safe -> {Root, Safe}
+            end
     end.
 
 waited(false) -> none;
@@ -347,7 +366,7 @@ action({print, Text}, D) ->
     false;
 action({main, Op, _Line, Args}, #{name := Name, file := File, args := Args0}) ->
     %% a behavior changing the network (the thesis' suspender, add/remove)
-    Ctx = #{dir => filename:dirname(File), opts => maps:with([budget, memory], Args0)},
+    Ctx = #{root => element(1, root(File, Args0)), opts => maps:with([budget, memory], Args0)},
     Self = atom_to_binary(Name),
     case Op =/= <<"load_behavior">> andalso Args =:= [Self] of
         true ->

@@ -18,7 +18,7 @@
          lua_faults_leave_erlang_layers_flowing/1, reset_starts_a_fresh_state/1,
          port_killed_every_lua_behavior_back/1, bad_frames_are_answered/1,
          reload_all_or_nothing/1, reload_under_1khz_input/1,
-         load_main_errors_name_the_line/1, lockstep_timers_at_simulated_deadlines/1]).
+         load_main_errors_name_the_line/1, load_main_from_the_program_folder/1, lockstep_timers_at_simulated_deadlines/1]).
 
 -define(WAIT, 3000).
 
@@ -32,7 +32,7 @@ groups() ->
     [{api, [], [interface_from_the_file, values_cross_both_ways,
                 wait_for_input_with_and_without_timeout, sleep_on_the_runtime_clock,
                 latches_reach_the_actuator, print_goes_to_the_logger, reset_starts_a_fresh_state,
-                load_main_errors_name_the_line]},
+                load_main_errors_name_the_line, load_main_from_the_program_folder]},
      {faults, [], [lua_error_names_file_and_line, endless_loop_hits_the_budget,
                    endless_allocation_hits_the_memory_cap, hung_port_is_killed,
                    lua_faults_leave_erlang_layers_flowing,
@@ -191,6 +191,17 @@ print_goes_to_the_logger(Config) ->
     receive {lua_log, avoid, Text} -> ?assertMatch({_, _}, binary:match(Text, <<"Avoiding!">>))
     after ?WAIT -> ct:fail(no_print)
     end.
+
+load_main_from_the_program_folder(doc) ->
+    ["A program runs from its main file's folder, as the original did: a behavior "
+     "under behaviors/ requires a module of the program's lib/"];
+load_main_from_the_program_folder(Config) ->
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [value]}),
+    actuator(a, [twice]),
+    ?assertEqual({ok, #{behaviors => [user]}},
+                 toroco_lua:load_main(data(Config, "prog/main.lua"), #{})),
+    ok = toroco:inject({s, value}, 21),
+    await(a, twice, [42]).
 
 load_main_errors_name_the_line(doc) ->
     ["load_main/2 stops at the first refused call with the main file's line, and "

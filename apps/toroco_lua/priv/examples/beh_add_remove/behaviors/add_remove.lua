@@ -15,7 +15,7 @@ end
 
 local function on_right(event, value)
   if value == 'pressed' and not present then
-    toroco.load_behavior(behavior.echo, 'release_echo')
+    toroco.load_behavior(behavior.echo, 'behaviors/release_echo')
     toroco.set_inputs(behavior.echo, {left = device.mouse.left, right = device.mouse.right})
     toroco.set_inputs(device.actuator, {signal = behavior.echo.signal})
     present = true
