@@ -141,21 +141,34 @@ end
 function M.trigger(input, handler)
   local name = input_name(input)
   if type(handler) ~= 'function' then error('trigger: handler must be a function', 2) end
-  local event = M.input[name]
   local t = spawn('trigger', function()
     while true do
       local vals = wait(name, nil, 'trigger')
-      handler(event, unpack(vals, 1, vals.n))
+      handler(name, unpack(vals, 1, vals.n))     -- the input's name, as the original
     end
   end)
   return {kind = 'trigger', input = name, task = t.id}
 end
 
+-- As the original: {v1, v2, timeout = s} holds the output's suppressions
+-- and inhibitions s seconds; {release = true} ends them and sends nothing.
+-- A second table {o = s} gives the holds too.
 local function emit(kind, outs, holds)
   if type(outs) ~= 'table' then error(kind .. '_output: a table of outputs expected', 3) end
   for o, values in pairs(outs) do
+    local name = output_name(o)
     local hold = holds and holds[o]
-    C.emit(kind, output_name(o), values, hold and (ms(hold) or 'infinity') or nil)
+    if type(values) == 'table' and kind == 'send' and values.release then
+      C.unset(name)
+    else
+      if type(values) == 'table' and values.timeout ~= nil then
+        hold = hold or values.timeout
+        local only = {}
+        for k = 1, #values do only[k] = values[k] end
+        values = only
+      end
+      C.emit(kind, name, values, hold and (ms(hold) or 'infinity') or nil)
+    end
   end
 end
 

@@ -278,7 +278,9 @@ static void holds_unsets_and_prints_cross_as_actions(void)
               "{reply,2,{ok,[{print,<<\"go\t3\t4\tnil\">>},"
               "{send,<<\"held\">>,3,infinity},"
               "{set,<<\"latched\">>,{#{<<\"x\">>=>1},[<<\"two\">>]}},"
-              "{unset,<<\"latched\">>}]}}");
+              "{unset,<<\"latched\">>},"
+              "{send,<<\"timed\">>,{3,4},500},"
+              "{unset,<<\"timed\">>}]}}");
     port_free(p);
 }
 

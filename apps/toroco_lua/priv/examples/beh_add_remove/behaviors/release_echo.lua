@@ -6,7 +6,7 @@ local n = 0
 local function echo(event, value)
   if value == 'released' then
     n = n + 1
-    toroco.send_output {signal = {'released', event.name, n}}
+    toroco.send_output {signal = {'released', event, n}}
   end
 end
 

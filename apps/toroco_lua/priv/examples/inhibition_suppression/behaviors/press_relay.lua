@@ -4,7 +4,7 @@ local input = toroco.input
 
 local function relay(event, value)
   if value == 'pressed' then
-    toroco.send_output {signal = {'lower', event.name}}
+    toroco.send_output {signal = {'lower', event}}
   end
 end
 

@@ -6,13 +6,13 @@ local window = toroco.params.window
 
 local function on_left(event, value)
   if value == 'released' then
-    toroco.send_output({signal = {'upper', 'suppress'}}, {signal = window})
+    toroco.send_output {signal = {'upper', 'suppress', timeout = window}}
   end
 end
 
 local function on_right(event, value)
   if value == 'released' then
-    toroco.send_output({inhibit = {'on'}}, {inhibit = window})
+    toroco.send_output {inhibit = {'on', timeout = window}}
     toroco.send_output {signal = {'upper', 'inhibit'}}
   end
 end
