@@ -299,9 +299,17 @@ static int boot(lua_State *L)
     struct activation *a = lua_touserdata(L, 1);
     struct lstate *s = a->s;
 
-    luaL_openlibs(L);
-    lua_pushnil(L);
-    lua_setglobal(L, "io");
+    /* only the libraries the sandbox keeps (and debug, which the prelude
+     * takes getinfo from and then removes): io and package never exist */
+    static const luaL_Reg libs[] = {
+        {"", luaopen_base}, {LUA_TABLIBNAME, luaopen_table}, {LUA_STRLIBNAME, luaopen_string},
+        {LUA_MATHLIBNAME, luaopen_math}, {LUA_OSLIBNAME, luaopen_os},
+        {LUA_DBLIBNAME, luaopen_debug}, {NULL, NULL}};
+    for (const luaL_Reg *lib = libs; lib->func != NULL; lib++) {
+        lua_pushcfunction(L, lib->func);
+        lua_pushstring(L, lib->name);
+        lua_call(L, 1, 0);
+    }
     if (luaL_loadbuffer(L, prelude_lua, prelude_lua_len, "=toroco") != 0)
         return lua_error(L);
     lua_newtable(L);
@@ -322,6 +330,9 @@ static int boot(lua_State *L)
     if (load_source(L, s->dir, s->file) != 0)
         return lua_error(L);
     lua_call(L, 1, 0);
+    /* what the sandbox took away and the file's loading left: an idle
+     * state starts small */
+    lua_gc(L, LUA_GCCOLLECT, 0);
     return 0;
 }
 
