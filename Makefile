@@ -1,5 +1,6 @@
 # The two commands of the README, and their parts.
 #   make run   - the Torobot in the simulated world (default config);
+#                make run LOCKSTEP=1 runs it in lockstep (as fast as the CPU allows);
 #                make run ROBOT=wall_follower runs a library robot of config/robots/
 #   make test  - every test suite: C port, detector, Common Test, PropEr, Dialyzer
 .PHONY: run test deps compile port port-test lua-port lua-port-test detector detector-test ct dialyzer bench release board-check board-bench clean eval
@@ -47,11 +48,14 @@ test:
 	scripts/test
 
 run: compile
-	SPEED=$(SPEED) SPLIT=$(SPLIT) scripts/run $(if $(ROBOT),config/worlds/$(ROBOT).world _build/$(ROBOT).svg config/robots/$(ROBOT).wiring,$(WORLD))
+	SPEED=$(SPEED) SPLIT=$(SPLIT) LOCKSTEP=$(LOCKSTEP) TRACE=$(TRACE) scripts/run $(if $(ROBOT),config/worlds/$(ROBOT).world _build/$(ROBOT).svg config/robots/$(ROBOT).wiring,$(WORLD))
 
 # The simulated lab: the wiring on N generated worlds, scored (SPEC §14).
+# Lockstep by default; TIME=realtime [SPEED=10] for real time, and
+# NODES=a@host,b@host spreads the runs over those nodes (README).
 eval: compile
-	scripts/eval $(N) $(SEED) $(WIRING)
+	TIME=$(TIME) NODES=$(NODES) scripts/eval $(N) $(SEED) $(WIRING) \
+	  $(if $(filter command line environment,$(origin SPEED)),$(SPEED),10)
 
 bench: compile
 	scripts/bench
@@ -60,11 +64,11 @@ release: compile
 	rebar3 as prod release
 
 # The board release booted on Debian 12 armhf's Erlang under qemu (root; slow,
-# not part of `make test'): README, "The board".
+# not part of `make test'): doc/operations.md, "The board".
 board-check: compile
 	scripts/board-emulate
 
-# CPU per event there, beside this machine's (README, "The emulated board"):
+# CPU per event there, beside this machine's (doc/operations.md, "The emulated board"):
 # the same step alone; BOARD_BENCH=1 make board-check runs both.
 board-bench: compile
 	BOARD_BENCH=only scripts/board-emulate

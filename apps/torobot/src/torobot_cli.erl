@@ -10,18 +10,28 @@
 
 -export([main/1, format_error/1, await_node/2]).
 
-%% @doc `[WorldFile, SvgFile, Status, WiringFile]' or the same and
-%% `Speed', as `erl -run' passes them; `Status' is `tty' (rewrite one line)
-%% or `lines'. Never returns.
+%% @doc `[WorldFile, SvgFile, Status, WiringFile]', then optionally
+%% `Speed', `Time' (`realtime' or `lockstep') and a trace path (lockstep),
+%% as `erl -run' passes them; `Status' is `tty' (rewrite one line) or
+%% `lines'. Never returns.
 -spec main([string()]) -> no_return().
 main([World, Svg, Status, Wiring]) ->
     main([World, Svg, Status, Wiring, "1"]);
 main([World, Svg, Status, Wiring, Speed]) ->
-    Opts = #{svg => Svg, wiring => Wiring, speed => speed(Speed),
+    main([World, Svg, Status, Wiring, Speed, "realtime"]);
+main([World, Svg, Status, Wiring, Speed, Time]) ->
+    main([World, Svg, Status, Wiring, Speed, Time, ""]);
+main([World, Svg, Status, Wiring, Speed, Time, Trace]) ->
+    Base = #{svg => Svg, wiring => Wiring,
              status => case Status of
                            "tty" -> tty;
                            _ -> true
                        end},
+    Opts = case {Time, Trace} of
+               {"lockstep", ""} -> Base#{time => lockstep};
+               {"lockstep", _} -> Base#{time => lockstep, trace => Trace};
+               _ -> Base#{speed => speed(Speed)}
+           end,
     case torobot_sim:run(World, Opts) of
         {ok, Summary} ->
             io:format("svg: ~ts~n~s~n", [Svg, torobot_sim:summary_json(Summary)]),

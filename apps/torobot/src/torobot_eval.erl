@@ -26,17 +26,35 @@
 -define(PLOT_H, 300).
 -define(PAD, 40).
 
-%% @doc `[N, Seed, Wiring, OutDir, Speed, Runs]', as `erl -run' passes
-%% them: runs N generated worlds from Seed, prints the table, writes the
-%% files, and ends the node (exit 0; 2 when refused, the culprit on stderr).
+%% @doc `[N, Seed, Wiring, OutDir, Speed, Runs, Time, Nodes]', as `erl -run'
+%% passes them: runs N generated worlds from Seed, prints the table, writes
+%% the files, and ends the node (exit 0; 2 when refused, the culprit on
+%% stderr). Time is `lockstep' or `realtime' (Speed counts only then);
+%% Nodes is empty for this node alone, else node names separated by
+%% commas, to which this node (distributed, by `scripts/eval') connects.
+%% Without the last two: lockstep on this node.
 -spec main([string()]) -> no_return().
 main([N, Seed, Wiring, OutDir, Speed, Runs]) ->
+    main([N, Seed, Wiring, OutDir, Speed, Runs, "lockstep", ""]);
+main([N, Seed, Wiring, OutDir, Speed, Runs, Time, NodeList]) ->
+    Nodes = case string:lexemes(NodeList, ", ") of
+                [] -> [node()];
+                Names -> [list_to_atom(Name) || Name <- Names]
+            end,
+    _ = [io:format(standard_error, "eval: cannot reach node ~ts (its runs fail)~n", [Node])
+         || Node <- Nodes, Node =/= node(), not net_kernel:connect_node(Node)],
     Opts = #{worlds => {generated, list_to_integer(N), list_to_integer(Seed)},
-             wiring => Wiring, speed => number(Speed), runs => list_to_integer(Runs)},
+             wiring => Wiring, speed => number(Speed), runs => list_to_integer(Runs),
+             time => list_to_atom(Time), nodes => Nodes},
     case torobot_batch:run(Opts) of
         {ok, Report} ->
             ok = write(Report, OutDir),
             io:put_chars(markdown(Report)),
+            case Nodes of
+                [Here] when Here =:= node() -> ok;
+                _ -> io:format("~nRuns dealt to ~ts.~n",
+                               [lists:join(", ", [atom_to_list(Nd) || Nd <- Nodes])])
+            end,
             io:format("~nwritten to ~ts: report.md worlds.csv runs.csv time_to_red.svg "
                       "success.svg trajectories.svg~n", [OutDir]),
             halt(0);
@@ -74,9 +92,13 @@ write(Report, Dir) ->
 %% @doc The report as a Markdown table, a row per world and the overall.
 -spec markdown(torobot_batch:report()) -> iodata().
 markdown(#{worlds := Rows, overall := Overall, speed := Speed, wiring := Wiring,
-           wall_ms := WallMs, failures := Failures}) ->
-    [io_lib:format("Wiring ~ts, speed ~p, ~b runs in ~.1f s of wall time.~n~n",
-                   [Wiring, Speed, maps:get(runs, Overall) + maps:get(failed, Overall),
+           wall_ms := WallMs, failures := Failures} = Report) ->
+    Time = case maps:get(time, Report, realtime) of
+               lockstep -> "lockstep";
+               realtime -> io_lib:format("real time at speed ~p", [Speed])
+           end,
+    [io_lib:format("Wiring ~ts, ~s, ~b runs in ~.1f s of wall time.~n~n",
+                   [Wiring, Time, maps:get(runs, Overall) + maps:get(failed, Overall),
                     WallMs / 1000]),
      "| world | runs | success | red p50 (s) | red p90 (s) | wall contacts/min | "
      "blue contacts/min | distance (m) |\n",

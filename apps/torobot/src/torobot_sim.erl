@@ -35,13 +35,28 @@
 %% lands L * S world ms later, so it is on time while L * S stays under a
 %% tick (`make bench' finds the highest speed that keeps the outcome).
 %%
+%% Lockstep (`time => lockstep', SPEC §14): the world is the robots'
+%% clock. Each tick, robot after robot in file order, the world hands a
+%% robot the time and its readings (`torobot_sim_robot:step/5': steps of
+%% the robot's event path, not UDP nor the port's timing), waits until its
+%% event path is quiescent, and takes the velocities its servos apply then;
+%% then it moves every robot. No tick waits on a real clock, so the run
+%% goes as fast as the CPU allows and its outcome depends only on the
+%% world, the wiring and the seed. `trace => Path' writes every step of
+%% every robot's event path (emissions, deliveries, acks, timers, stimuli)
+%% and every change of the wheels, one line each with its simulated time
+%% in ms (a robot's name first in a world of named robots): two runs of
+%% the same world give byte-identical files. `speed' means nothing there.
+%%
 %% At the end the SVG is written (one picture, every robot) and everything
 %% the run started is stopped: the peers, the applications if it started
 %% them in this node, else the behaviors and devices it added.
 %%
 %% Options of {@link run/2}: `svg' (a path; no picture without it),
 %% `wiring' (default: app env `wiring' of `torobot', else
-%% `config/torobot.wiring'), `speed' (a number > 0, default 1), `nodes'
+%% `config/torobot.wiring'), `time' (`realtime', the default, or
+%% `lockstep'), `trace' (a path, lockstep only), `speed' (a number > 0,
+%% default 1, real time only), `nodes'
 %% (`local' or `peer'; see above), `status' (`false', the default; `true'
 %% prints a status line each world second; `tty' rewrites one line in
 %% place; or a fun called with each line). {@link simulate/2} is {@link
@@ -59,7 +74,8 @@
 
 -type status() :: boolean() | tty | fun((iodata()) -> any()).
 -type opts() :: #{svg => file:name_all(), wiring => file:name_all(), status => status(),
-                  speed => number(), nodes => local | peer}.
+                  speed => number(), nodes => local | peer, time => realtime | lockstep,
+                  trace => file:name_all()}.
 %% A world file, or the terms of one (as `torobot_worlds:generate/2' makes).
 -type world_spec() :: file:name_all() | [tuple()].
 %% One robot's summary, or one per robot for a world of named robots.
@@ -75,7 +91,8 @@
               ir = #{} :: map(),
               sensors :: torobot_sensors:state(),
               readings = #{} :: map(),
-              winner = none :: atom()}).
+              winner = none :: atom(),
+              motors = none :: none | {{number(), number()}, atom()}}).
 
 -record(sim, {bots = [] :: [#bot{}],
               caller :: pid(),
@@ -85,7 +102,12 @@
               t0 :: integer() | undefined,
               ticks = 0 :: non_neg_integer(),
               sock :: gen_udp:socket() | undefined,
-              next_status = 1000 :: non_neg_integer()}).
+              next_status = 1000 :: non_neg_integer(),
+              time = realtime :: realtime | lockstep,
+              trace :: file:io_device() | undefined,
+              published = 0 :: integer()}).
+
+-define(OPTIONS, [svg, wiring, status, speed, nodes, time, trace]).
 
 %%====================================================================
 %% API
@@ -93,10 +115,12 @@
 
 %% @doc Runs the Torobot in a world to the world's end and returns the
 %% summary (`torobot_world:summary/1'; for a world of named robots, a map
-%% of robot name to summary). Fails with `{error, {world, World, Reason}}'
-%% for a bad world, `{error, {wiring, File, Reason}}' for a bad wiring
-%% file, `{error, {speed, S}}' for a bad speed, or `{error, {Step,
-%% Reason}}' when the applications, a device, a node or the run fail.
+%% of robot name to summary). Fails with `{error, {bad_option, Key}}' for
+%% an option it does not know, `{error, {world, World, Reason}}' for a bad
+%% world, `{error, {wiring, File, Reason}}' for a bad wiring file, `{error,
+%% {speed, S}}', `{error, {time, T}}' or `{error, {trace, P}}' for a bad
+%% value, or `{error, {Step, Reason}}' when the applications, a device, a
+%% node or the run fail.
 -spec run(world_spec(), opts()) -> {ok, summary()} | {error, term()}.
 run(WorldSpec, Opts) ->
     case simulate(WorldSpec, Opts) of
@@ -118,7 +142,17 @@ simulate(WorldSpec, Opts) when is_map(Opts) ->
     WiringFile = maps:get(wiring, Opts,
                           application:get_env(torobot, wiring, "config/torobot.wiring")),
     Speed = maps:get(speed, Opts, 1),
+    Time = maps:get(time, Opts, realtime),
+    Trace = maps:get(trace, Opts, undefined),
+    Unknown = lists:sort(maps:keys(Opts) -- ?OPTIONS),
     case {load(WorldSpec), file:consult(WiringFile)} of
+        _ when Unknown =/= [] ->
+            {error, {bad_option, hd(Unknown)}};
+        _ when Time =/= realtime, Time =/= lockstep ->
+            {error, {time, Time}};
+        _ when Trace =/= undefined, Time =/= lockstep; Trace =/= undefined,
+                                                     not (is_list(Trace) orelse is_binary(Trace)) ->
+            {error, {trace, Trace}};
         {{error, Reason}, _} ->
             {error, {world, WorldSpec, Reason}};
         {_, {error, Reason}} ->
@@ -131,7 +165,8 @@ simulate(WorldSpec, Opts) when is_map(Opts) ->
                                               true -> peer;
                                               false -> local
                                           end),
-            case with_robots(Worlds, Nodes, Opts#{wiring => WiringFile, speed => Speed}) of
+            case with_robots(Worlds, Nodes, Opts#{wiring => WiringFile, speed => Speed,
+                                                  time => Time}) of
                 {ok, [Final]} when not Named -> {ok, Final};
                 {ok, Finals} -> {ok, Finals};
                 {error, _} = Error -> Error
@@ -185,11 +220,13 @@ load(File) ->
     torobot_world:load_all(File).
 
 with_robots(Worlds, Nodes, Opts) ->
-    #{wiring := WiringFile, speed := Speed} = Opts,
+    #{wiring := WiringFile, speed := Speed, time := Time} = Opts,
+    Trace = maps:get(trace, Opts, undefined),
     {ok, Sim} = gen_server:start(?MODULE, {self(), maps:get(status, Opts, false), Speed,
-                                           torobot_world:tick_ms(hd(Worlds))}, []),
+                                           torobot_world:tick_ms(hd(Worlds)), Time, Trace}, []),
     MRef = monitor(process, Sim),
-    RobotOpts = #{wiring => WiringFile, speed => Speed,
+    RobotOpts = #{wiring => WiringFile, speed => Speed, time => Time,
+                  trace => Trace =/= undefined,
                   thresholds => torobot_world:ir_thresholds(hd(Worlds)),
                   sensors => [{Name, Outputs(hd(Worlds))}
                               || {Name, Outputs} <- torobot_sensors:devices()]},
@@ -204,7 +241,12 @@ with_robots(Worlds, Nodes, Opts) ->
                  ok -> ok;
                  {error, GoFailed} -> throw({failed, {go, GoFailed}})
              end,
-        Timeout = round(torobot_world:duration_ms(hd(Worlds)) / Speed) + ?GRACE_MS,
+        %% a run in lockstep goes as fast as the CPU allows: given as long
+        %% as real time would take, it is stuck
+        Timeout = case Time of
+                      realtime -> round(torobot_world:duration_ms(hd(Worlds)) / Speed);
+                      lockstep -> torobot_world:duration_ms(hd(Worlds))
+                  end + ?GRACE_MS,
         receive
             {?MODULE, Sim, {done, Finals}} ->
                 demonitor(MRef, [flush]),
@@ -254,12 +296,32 @@ svg(_Worlds, #{}) ->
 %% The world's process
 %%====================================================================
 
--spec init({pid(), status(), number(), pos_integer()}) -> {ok, #sim{}}.
-init({Caller, Status, Speed, Tick}) ->
+-spec init({pid(), status(), number(), pos_integer(), realtime | lockstep,
+            file:name_all() | undefined}) -> {ok, #sim{}} | {stop, term()}.
+init({Caller, Status, Speed, Tick, Time, TracePath}) ->
     monitor(process, Caller),
-    {ok, #sim{caller = Caller, status = Status, speed = Speed, tick = Tick}}.
+    S = #sim{caller = Caller, status = Status, speed = Speed, tick = Tick, time = Time},
+    case TracePath of
+        undefined ->
+            {ok, S};
+        _ ->
+            ok = filelib:ensure_dir(TracePath),
+            case file:open(TracePath, [write, raw, binary, {delayed_write, 65536, 200}]) of
+                {ok, Fd} -> {ok, S#sim{trace = Fd}};
+                {error, Reason} -> {stop, {trace, TracePath, Reason}}
+            end
+    end.
 
 -spec handle_call(term(), gen_server:from(), #sim{}) -> {reply, term(), #sim{}}.
+handle_call({go, Bots}, _From, S = #sim{time = lockstep}) ->
+    case lists:filter(fun(R) -> R =/= ok end,
+                      [torobot_sim_robot:go(B#bot.handle) || B <- Bots]) of
+        [] ->
+            self() ! lockstep,
+            {reply, ok, S#sim{bots = Bots, t0 = erlang:monotonic_time(microsecond)}};
+        [Error | _] ->
+            {reply, Error, S}
+    end;
 handle_call({go, Bots}, _From, S) ->
     {ok, Sock} = gen_udp:open(0, [binary, {ip, {127, 0, 0, 1}}]),
     case lists:filter(fun(R) -> R =/= ok end,
@@ -287,28 +349,46 @@ handle_info({timeout, _Ref, tick}, S = #sim{bots = Bots, tick = Tick}) ->
                 end || #bot{world = W, handle = H} <- Bots],
     S1 = status(sense(S#sim{bots = move(Bots, Commands, Tick)})),
     publish(S1),
-    Worlds = [W || #bot{world = W} <- S1#sim.bots],
-    case lists:all(fun torobot_world:done/1, Worlds) of
-        true ->
-            S1#sim.caller ! {?MODULE, self(), {done, Worlds}},
-            {stop, normal, S1};
-        false ->
-            {noreply, schedule(S1)}
-    end;
+    next(S1, fun schedule/1);
+handle_info(lockstep, S = #sim{bots = Bots, tick = Tick}) ->
+    %% robot after robot: readings, quiescence, wheels; then they all move
+    Stepped = lockstep(Bots, S),
+    Commands = [case Motors of
+                    done -> done;
+                    _ -> Motors
+                end || {_, Motors} <- Stepped],
+    S1 = status(S#sim{bots = move([B || {B, _} <- Stepped], Commands, Tick)}),
+    next(publish_paced(S1), fun(S2) -> self() ! lockstep, S2 end);
 handle_info({'DOWN', _, process, Caller, _}, S = #sim{caller = Caller}) ->
     {stop, normal, S};
 handle_info(_Info, S) ->
     {noreply, S}.
 
 -spec terminate(term(), #sim{}) -> ok.
-terminate(_Reason, #sim{sock = Sock, status = Status}) ->
+terminate(_Reason, #sim{sock = Sock, status = Status, trace = Trace}) ->
     case Sock of
         undefined -> ok;
         _ -> gen_udp:close(Sock)
     end,
+    case Trace of
+        undefined -> ok;
+        _ -> ok = file:close(Trace)
+    end,
     case Status of
         tty -> io:put_chars("\n");
         _ -> ok
+    end.
+
+%% After a tick: the caller has the final worlds once every robot is done,
+%% else the next tick is asked for.
+next(S = #sim{bots = Bots, caller = Caller}, Again) ->
+    Worlds = [W || #bot{world = W} <- Bots],
+    case lists:all(fun torobot_world:done/1, Worlds) of
+        true ->
+            Caller ! {?MODULE, self(), {done, Worlds}},
+            {stop, normal, S};
+        false ->
+            {noreply, Again(S)}
     end.
 
 %% Ticks are scheduled on the absolute clock from the start, so a late tick
@@ -357,6 +437,55 @@ sense(B = #bot{world = W0, handle = H, ir = Last, port = Port, readings = LastRe
             _ = [gen_udp:send(Sock, {127, 0, 0, 1}, Port, Datagram)
                  || Datagram <- torobot_world:camera(W)],
             B#bot{world = W, ir = Ir, sensors = Sensors, readings = Readings}
+    end.
+
+%% Lockstep: each robot in turn gets its readings of the world as it is
+%% now (the others where they are) and answers once quiescent.
+lockstep(Bots, S) ->
+    [lockstep(B, [O || O <- Bots, O =/= B], S) || B <- Bots].
+
+lockstep(B = #bot{world = W0, handle = H, ir = Last, readings = LastReadings}, Others,
+         #sim{trace = Trace}) ->
+    W = torobot_world:set_others(W0, [torobot_world:body(O#bot.world) || O <- Others]),
+    case torobot_world:done(W) of
+        true ->
+            {B#bot{world = W}, done};
+        false ->
+            T = torobot_world:time_ms(W),
+            Ir = torobot_world:ir(W),
+            {Readings, Sensors} = torobot_sensors:read(W, B#bot.sensors),
+            {Wheels, Winner, Lines} =
+                torobot_sim_robot:step(H, T, changed(Ir, Last), changed(Readings, LastReadings),
+                                       torobot_world:camera(W)),
+            Motors = {Wheels, Winner},
+            trace(Trace, torobot_world:name(W), T, Lines, Motors, B#bot.motors),
+            {B#bot{world = W, ir = Ir, sensors = Sensors, readings = Readings, motors = Motors},
+             Motors}
+    end.
+
+changed(Now, Before) ->
+    maps:filter(fun(K, V) -> maps:get(K, Before, undefined) =/= V end, Now).
+
+trace(undefined, _Name, _T, _Lines, _Motors, _Before) ->
+    ok;
+trace(Fd, Name, T, Lines, Motors, Before) ->
+    Prefix = case Name of
+                 undefined -> [];
+                 _ -> [atom_to_binary(Name), $\s]
+             end,
+    Wheels = case Motors of
+                 Before -> [];
+                 {{L, R}, Winner} -> [io_lib:format("~b wheels ~0p ~0p ~0p~n", [T, L, R, Winner])]
+             end,
+    ok = file:write(Fd, [[Prefix, Line] || Line <- Lines ++ Wheels]).
+
+%% The dashboard's view, at most 20 times a second of real time however
+%% fast the world goes.
+publish_paced(S = #sim{published = Last}) ->
+    Now = erlang:monotonic_time(millisecond),
+    case Now - Last >= 50 of
+        true -> publish(S), S#sim{published = Now};
+        false -> S
     end.
 
 %% The dashboard's view of the world (toroco_live_world's message, written

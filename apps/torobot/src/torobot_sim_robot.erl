@@ -32,13 +32,26 @@
 %% debounce, so the press lasts 60 real ms and {@link go/1} answers once
 %% the motors are on: the world starts when the robot is switched on.
 %%
+%% Lockstep (`time => lockstep', SPEC §14): the node's clock is the world's
+%% (`toroco_clock:lockstep/1'). The world calls {@link step/5} each tick
+%% with the simulated time and the readings; they reach the devices as
+%% steps (`toroco_pru_sensors:stimulus/3' runs the IR hysteresis in the VM,
+%% `toroco_udp_camera:stimulus/2' takes the detector's datagrams without
+%% UDP, `torobot_sim_sensor:stimulus/2'), in a fixed order, and the answer
+%% comes once the robot's event path is quiescent: the wheels then, the
+%% winner and the trace lines. {@link go/1} hands the button's press and
+%% release in as steps at time 0. The servos' watchdog is off: it guards
+%% real hardware against a stalled VM, and the world is the clock.
+%%
 %% Messages, all within this module: the world calls `wheels' (answer
-%% `{Wheels, Winner}') and `go' (answer `ok'), and casts `{sense, Ir}';
-%% `torobot_sim_wheels' sends `{torobot_sim_wheels, Wheels}'.
+%% `{Wheels, Winner}'), `go' (answer `ok') and, in lockstep, `{step, T,
+%% Ir, Readings, Datagrams}' (answer `{Wheels, Winner, TraceLines}'), and
+%% casts `{sense, Ir}'; `torobot_sim_wheels' sends `{torobot_sim_wheels,
+%% Wheels}'.
 -module(torobot_sim_robot).
 -behaviour(gen_server).
 
--export([start/1, stop/0, go/1, wheels/1, sense/3]).
+-export([start/1, stop/0, go/1, wheels/1, sense/3, step/5]).
 -export([start_peer/1, stop_peer/1]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2, terminate/2]).
 
@@ -47,6 +60,8 @@
 -type opts() :: #{wiring := file:name_all(),
                   thresholds := #{threshold_high := 0..1023, threshold_low := 0..1023},
                   speed := number(),
+                  time => realtime | lockstep,
+                  trace => boolean(),
                   sensors => [{atom(), [atom()]}]}.
 %% Where a robot runs: this node, or a peer node.
 -type handle() :: local | {peer, pid()}.
@@ -64,7 +79,7 @@
                 started :: [atom()],
                 behaviors :: [atom()],
                 sensors :: [atom()],
-                clock :: {previous, number()},
+                clock :: {previous, number()} | lockstep,
                 going :: {gen_server:from(), integer()} | undefined}).
 
 %%====================================================================
@@ -130,6 +145,15 @@ sense(local, Ir, Readings) ->
 sense({peer, Peer}, Ir, Readings) ->
     peer:cast(Peer, gen_server, cast, [?MODULE, {sense, Ir, Readings}]).
 
+%% @doc Lockstep: moves the robot's clock to `T' (world ms), hands it the
+%% readings that changed and the camera's datagrams, and answers once its
+%% event path is quiescent with the velocities the servos apply, the
+%% behavior winning the motors and the trace lines of the step.
+-spec step(handle(), integer(), #{left | right => 0..1023}, #{atom() => #{atom() => term()}},
+           [binary()]) -> {{number(), number()}, atom() | none, [iodata()]}.
+step(Robot, T, Ir, Readings, Datagrams) ->
+    call(Robot, {step, T, Ir, Readings, Datagrams}).
+
 %% @doc Starts a node for one robot (an OTP `peer' on this machine, over
 %% its standard I/O: not distributed, so robots never form a cluster) with
 %% this node's code path and application environment, and the robot on it.
@@ -185,12 +209,13 @@ call({peer, Peer}, Request) ->
 init(#{wiring := Wiring, thresholds := Thresholds, speed := Speed,
        started := Started, behaviors := Behaviors} = Opts) ->
     Sensors = maps:get(sensors, Opts, []),
+    Lockstep = maps:get(time, Opts, realtime) =:= lockstep,
     process_flag(trap_exit, true),
     S = #robot{started = Started, behaviors = Behaviors,
                sensors = [Name || {Name, _} <- Sensors],
-               clock = set_clock(Speed)},
+               clock = set_clock(Speed, Lockstep, maps:get(trace, Opts, false))},
     try
-        ok = step(devices, add_devices(Thresholds, Sensors)),
+        ok = step(devices, add_devices(Thresholds, Sensors, Lockstep)),
         ok = step(wheels, toroco:add_device(wheels, torobot_sim_wheels, #{sim => self()})),
         ok = step({wiring, Wiring}, toroco:load_wiring(Wiring)),
         ok = step(wheels, toroco:set_inputs(wheels, #{applied => [{motors, applied}]})),
@@ -205,6 +230,27 @@ init(#{wiring := Wiring, thresholds := Thresholds, speed := Speed,
           {reply, term(), #robot{}} | {noreply, #robot{}}.
 handle_call(wheels, _From, S = #robot{wheels = Wheels}) ->
     {reply, {Wheels, winner()}, S};
+handle_call({step, T, Ir, Readings, Datagrams}, _From, S = #robot{wheels = W0}) ->
+    Stimuli = [toroco_pru_sensors:stimulus(ir, Side, Raw) || {Side, Raw} <- lists:sort(maps:to_list(Ir))]
+        ++ [torobot_sim_sensor:stimulus(N, R) || {N, R} <- lists:sort(maps:to_list(Readings))]
+        ++ [toroco_udp_camera:stimulus(camera, D) || D <- Datagrams],
+    case toroco_clock:tick(T, Stimuli) of
+        {ok, Lines} ->
+            Wheels = applied(W0),
+            {reply, {Wheels, winner(), Lines}, S#robot{wheels = Wheels}};
+        {error, Reason} ->
+            {stop, {lockstep, Reason}, {error, Reason}, S}
+    end;
+handle_call(go, _From, S = #robot{clock = lockstep, wheels = W0}) ->
+    %% the press and the release, at time 0, each to quiescence
+    Press = [toroco_clock:tick(0, [toroco_gpio_button:stimulus(push, Edge)])
+             || Edge <- [pressed, released]],
+    Wheels = applied(W0),
+    case {lists:usort([element(1, P) || P <- Press]), motors_enabled()} of
+        {[ok], true} -> {reply, ok, S#robot{wheels = Wheels}};
+        {[ok], false} -> {reply, {error, motors_not_enabled}, S#robot{wheels = Wheels}};
+        _ -> {reply, {error, {lockstep, Press}}, S}
+    end;
 handle_call(go, From, S) ->
     case toroco_gpio_button:sim_button(push, 0) of
         ok ->
@@ -260,12 +306,15 @@ step(_Step, ok) -> ok;
 step(Step, {error, Reason}) -> throw({step, Step, Reason});
 step(Step, Other) -> throw({step, Step, Other}).
 
-add_devices(#{threshold_high := High, threshold_low := Low}, Sensors) ->
+add_devices(#{threshold_high := High, threshold_low := Low}, Sensors, Lockstep) ->
     Ir = fun(Channel) -> #{channel => Channel, mode => analog_threshold,
                            threshold_high => High, threshold_low => Low} end,
     Devices = [{ir, toroco_pru_sensors, #{sensors => [{left, Ir(0)}, {right, Ir(1)}],
                                           backend => sim}},
-               {motors, toroco_servo_motors, #{backend => sim}},
+               {motors, toroco_servo_motors, case Lockstep of
+                                                 true -> #{backend => sim, watchdog_ms => 0};
+                                                 false -> #{backend => sim}
+                                             end},
                {camera, toroco_udp_camera, #{port => 0, ip => {127, 0, 0, 1}}},
                {push, toroco_gpio_button, #{line => 0, backend => sim}}]
         ++ [{Name, torobot_sim_sensor, #{outputs => Outputs}} || {Name, Outputs} <- Sensors],
@@ -323,12 +372,26 @@ winner() ->
         _:_ -> none
     end.
 
-%% The runtime's clock runs at the world's speed for the run.
-set_clock(Speed) ->
+%% The velocities the wheels device reported while the step ran (it sends
+%% them before the step is done, so they are here when the tick answers).
+applied(W) ->
+    receive
+        {torobot_sim_wheels, W1} -> applied(W1)
+    after 0 -> W
+    end.
+
+%% The runtime's clock runs at the world's speed for the run, or is the
+%% world's in lockstep.
+set_clock(_Speed, true, Trace) ->
+    ok = toroco_clock:lockstep(#{trace => Trace}),
+    lockstep;
+set_clock(Speed, false, _Trace) ->
     Previous = toroco_clock:speed(),
     ok = toroco_clock:set_speed(Speed),
     {previous, Previous}.
 
+restore_clock(lockstep) ->
+    toroco_clock:realtime();
 restore_clock({previous, Speed}) ->
     _ = toroco_clock:set_speed(Speed),
     ok.

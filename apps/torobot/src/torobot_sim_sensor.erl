@@ -4,17 +4,24 @@
 %%
 %% `torobot_sim' adds one per device of `torobot_sensors:devices/0'
 %% (`range', `bumper', `odometry', `light', `beacon') and calls
-%% {@link feed/2} each tick. Options: `outputs' (required).
+%% {@link feed/2} each tick (in lockstep, {@link stimulus/2} hands the
+%% same readings in as a step). Options: `outputs' (required).
 -module(torobot_sim_sensor).
 -behaviour(toroco_device).
 
--export([feed/2]).
+-export([feed/2, stimulus/2]).
 -export([interface/1, init/2, handle_input/4, handle_event/4, info/2]).
 
 %% @doc Hands readings `#{Out => Value}' to device `Name' (asynchronous).
 -spec feed(atom(), #{atom() => term()}) -> ok.
 feed(Name, Readings) ->
-    gen_statem:cast(toroco_names:process(Name), {?MODULE, Readings}).
+    toroco_device:cast(Name, {?MODULE, Readings}).
+
+%% @doc Lockstep: readings for device `Name', as a stimulus for
+%% `toroco_clock:tick/2'.
+-spec stimulus(atom(), #{atom() => term()}) -> toroco_clock:stimulus().
+stimulus(Name, Readings) ->
+    {Name, {?MODULE, Readings}}.
 
 -spec interface(map()) -> #{inputs := [], outputs := [atom()]}.
 interface(#{outputs := Outs}) when is_list(Outs) -> #{inputs => [], outputs => Outs};
@@ -29,7 +36,8 @@ handle_input(_Input, _Value, _State, _D) ->
     keep_state_and_data.
 
 -spec handle_event(gen_statem:event_type(), term(), sensing, map()) -> toroco_behavior:result().
-handle_event(cast, {?MODULE, Readings}, _State, D = #{outputs := Outs, last := Last, emitted := N}) ->
+handle_event(Type, {?MODULE, Readings}, _State, D = #{outputs := Outs, last := Last, emitted := N})
+  when Type =:= cast; Type =:= info ->
     Changed = maps:filter(fun(Out, V) -> lists:member(Out, Outs) andalso
                                              maps:get(Out, Last, undefined) =/= V
                           end, Readings),

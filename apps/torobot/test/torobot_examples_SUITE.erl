@@ -2,8 +2,14 @@
 %% through `torobot_examples' as a user runs them, driven by scripted mouse
 %% and sensor events, with the exact sequence each actuator input must get.
 %%
-%% Events are injected one at a time and each expected delivery awaited before
-%% the next, since the runtime promises no order across different sources.
+%% The verification programs and the line follower (whose scripted lap
+%% plays two sensors' timed scripts side by side) run in lockstep (SPEC
+%% §14): the runtime's clock
+%% is virtual, each injected event is followed by quiescence, and waiting
+%% means moving simulated time, so their timeouts and holds are checked to
+%% the millisecond. The other groups run in real time: events are injected
+%% one at a time and each expected delivery awaited before the next, since
+%% the runtime promises no order across different sources.
 %% Where an event must have no effect, the chain it travels is settled (every
 %% process on it answers a call, so what was sent has been handled) before the
 %% record is checked; and every case ends with an exact check of the whole
@@ -26,11 +32,27 @@ groups() ->
                     mouse_follows_and_reopens_its_device]},
      {runner, [], [run_and_stop_every_example, unknown_example_is_refused]}].
 
+init_per_group(G, Config) when G =:= verification; G =:= line_follower ->
+    [{lockstep, true} | Config];
+init_per_group(_, Config) ->
+    Config.
+
+end_per_group(_, _Config) ->
+    ok.
+
 init_per_testcase(_TC, Config) ->
+    case ?config(lockstep, Config) of
+        true ->
+            {ok, _} = application:ensure_all_started(torobot),
+            ok = toroco_clock:lockstep(#{});
+        _ ->
+            ok
+    end,
     Config.
 
 end_per_testcase(_TC, _Config) ->
     _ = (catch torobot_examples:stop()),
+    _ = (catch toroco_clock:realtime()),
     _ = application:stop(torobot),
     _ = application:stop(toroco_hw),
     _ = application:stop(toroco),
@@ -45,7 +67,30 @@ run(Example) -> run(Example, #{}).
 %% The console is left out unless a case is about it: the record is enough.
 run(Example, Opts) -> ok = torobot_examples:run(Example, maps:merge(#{console => false}, Opts)).
 
-mouse(Button, Event) -> ok = toroco:inject({mouse, Button}, Event).
+mouse(Button, Event) -> ok = toroco:inject({mouse, Button}, Event), settle().
+
+lockstep() -> toroco_clock:mode() =:= lockstep.
+
+%% In lockstep: returns once everything the events so far caused is handled.
+settle() ->
+    case lockstep() of
+        true -> ok = toroco_clock:settle();
+        false -> ok
+    end.
+
+%% Lets `Ms' of the runtime's time pass: simulated in lockstep, else real.
+pass(Ms) ->
+    case lockstep() of
+        true -> {ok, _} = toroco_clock:tick(toroco_clock:now_ms() + Ms, []), ok;
+        false -> timer:sleep(Ms)
+    end.
+
+%% In lockstep a measured delay is exact; in real time within its bounds.
+delay(Ms, Exact, Low, High) ->
+    case lockstep() of
+        true -> Exact = Ms;
+        false -> true = Ms >= Low andalso Ms < High
+    end.
 
 grey(Side, Reading) -> ok = toroco:inject({Side, reading}, Reading).
 
@@ -65,9 +110,16 @@ expect(A, Expected) -> expect(A, Expected, 3000).
 expect(A, Expected, Timeout) ->
     Ins = inputs_of(A),
     Want = want(Ins, Expected),
-    case toroco_fake_actuator:await(A, fun(H) -> by_input(Ins, H) =:= Want end, Timeout) of
-        ok -> ok;
-        {error, timeout} -> ct:fail({expected, Want, got, by_input(A)})
+    case lockstep() of
+        true ->
+            %% simulated time moves in 10 ms steps until the record is right
+            wait_until(fun() -> by_input(Ins, toroco_fake_actuator:history(A)) =:= Want end,
+                       Timeout, fun() -> ct:fail({expected, Want, got, by_input(A)}) end);
+        false ->
+            case toroco_fake_actuator:await(A, fun(H) -> by_input(Ins, H) =:= Want end, Timeout) of
+                ok -> ok;
+                {error, timeout} -> ct:fail({expected, Want, got, by_input(A)})
+            end
     end.
 
 want(Ins, Expected) ->
@@ -78,6 +130,7 @@ want(Ins, Expected) ->
 %% (done twice so both are after each other), then checks that `A' got
 %% exactly `Expected' and nothing more.
 nothing_more(Chain, A, Expected) ->
+    settle(),
     _ = [{toroco:inspect(N), toroco:inspect(N)} || N <- Chain ++ [A]],
     Want = want(inputs_of(A), Expected),
     case by_input(A) of
@@ -89,20 +142,26 @@ nothing_more(Chain, A, Expected) ->
 delivered_at(A, In, Value) ->
     lists:last([T || {I, V, T} <- toroco_fake_actuator:history(A), I =:= In, V =:= Value]).
 
-now_ms() -> erlang:monotonic_time(millisecond).
+%% The runtime's time (simulated in lockstep; the fake actuator stamps
+%% deliveries with it).
+now_ms() -> toroco_clock:now_ms().
 
-%% Polls a condition every 10 ms, at most Timeout ms.
+%% Checks a condition every 10 ms of the runtime's time (simulated in
+%% lockstep), at most Timeout ms.
 wait_until(Fun, Timeout) ->
-    Deadline = now_ms() + Timeout,
-    wait_until(Fun, Deadline, Timeout).
+    wait_until(Fun, Timeout, fun() -> ct:fail({condition_not_met_within, Timeout}) end).
 
-wait_until(Fun, Deadline, Timeout) ->
+wait_until(Fun, Timeout, Fail) ->
+    settle(),
+    wait_until(Fun, now_ms() + Timeout, Timeout, Fail).
+
+wait_until(Fun, Deadline, Timeout, Fail) ->
     case Fun() of
         true -> ok;
         _ ->
             case now_ms() > Deadline of
-                true -> ct:fail({condition_not_met_within, Timeout});
-                false -> timer:sleep(10), wait_until(Fun, Deadline, Timeout)
+                true -> Fail();
+                false -> pass(10), wait_until(Fun, Deadline, Timeout, Fail)
             end
     end.
 
@@ -172,7 +231,7 @@ inhibition_suppression(_) ->
                         end end, 5000),
     Held1 = now_ms() - T1,
     ct:pal("suppression hold seen expired ~p ms after upper's event", [Held1]),
-    true = Held1 >= 2000,
+    delay(Held1, 2500, 2000, infinity),
     %% Lower is heard at `signal' again.
     mouse(right, pressed),
     Sig2 = [{lower, left}, {upper, suppress}, {lower, right}],
@@ -195,7 +254,7 @@ inhibition_suppression(_) ->
     wait_until(fun() -> not maps:get(inhibited, output_info(lower, signal)) end, 5000),
     Held2 = now_ms() - T2,
     ct:pal("inhibition seen lifted ~p ms after upper's event", [Held2]),
-    true = Held2 >= 2000,
+    delay(Held2, 2500, 2000, infinity),
     %% Lower is heard everywhere again; the whole record is exact.
     mouse(left, pressed),
     expect(actuator, #{signal => Sig3 ++ [{lower, left}],
@@ -212,7 +271,7 @@ wait_for_event_trigger(_) ->
     mouse(left, released),
     mouse(right, pressed),
     mouse(right, released),
-    timer:sleep(2500),                       % the semantics is time: let the wait run out
+    pass(2500),                              % the semantics is time: let the wait run out
     nothing_more(Chain, actuator, #{signal => [armed]}),
     %% A right press with no wait running is ignored.
     mouse(right, pressed),
@@ -222,18 +281,18 @@ wait_for_event_trigger(_) ->
     mouse(left, pressed),
     expect(actuator, #{signal => [armed, armed]}),
     TArmed = lists:last([T || {signal, armed, T} <- toroco_fake_actuator:history(actuator)]),
-    timer:sleep(1000),
+    pass(1000),
     mouse(left, pressed),
     expect(actuator, #{signal => [armed, armed, timeout]}, 5000),
     Waited = delivered_at(actuator, signal, timeout) - TArmed,
     ct:pal("timeout came ~p ms after armed", [Waited]),
-    true = Waited >= 1500 andalso Waited < 2800,      % a restarted wait would take 3000
+    delay(Waited, 2000, 1500, 2800),                  % a restarted wait would take 3000
     %% A late right press is ignored; a new wait works again.
     mouse(right, pressed),
     mouse(left, pressed),
     expect(actuator, #{signal => [armed, armed, timeout, armed]}),
     mouse(right, pressed),
-    timer:sleep(2500),
+    pass(2500),
     nothing_more(Chain, actuator, #{signal => [armed, armed, timeout, armed]}).
 
 wait_for_event_coroutine() ->
@@ -259,7 +318,7 @@ wait_for_event_coroutine(_) ->
     expect(actuator, #{signal => [left_seen, sequence_done, left_seen, timeout]}, 5000),
     Waited = delivered_at(actuator, signal, timeout) - TSeen,
     ct:pal("timeout came ~p ms after left_seen", [Waited]),
-    true = Waited >= 1500 andalso Waited < 4000,
+    delay(Waited, 2000, 1500, 4000),
     mouse(right, pressed),                   % late: waiting for left again
     nothing_more(Chain, actuator, #{signal => [left_seen, sequence_done, left_seen, timeout]}),
     mouse(left, pressed),

@@ -1,6 +1,7 @@
 %% The simulated lab (SPEC §14): generated worlds (torobot_worlds), batch
-%% evaluation (torobot_batch through torobot_sim:batch/1) and what make eval
-%% writes (torobot_eval). Speed and several robots are run in
+%% evaluation (torobot_batch through torobot_sim:batch/1, in lockstep unless
+%% said otherwise, on one node and spread over peer nodes on loopback) and
+%% what make eval writes (torobot_eval). Speed and several robots are run in
 %% torobot_scenarios_SUITE, with the Torobot's scenarios.
 -module(torobot_lab_SUITE).
 
@@ -14,17 +15,42 @@ suite() ->
     [{timetrap, {minutes, 3}}].
 
 all() ->
-    [{group, generated}, {group, batch}].
+    [{group, generated}, {group, batch}, {group, nodes}].
 
 groups() ->
     [{generated, [parallel], [generate_1000_seeds, generate_options, percentiles, bad_speed]},
-     {batch, [], [batch_refuses_bad_world, batch_refuses_bad_wiring, batch_20_generated]}].
+     {batch, [], [batch_refuses_bad_option, batch_refuses_bad_world, batch_refuses_bad_wiring,
+                  batch_20_generated, batch_lockstep_repeats]},
+     %% distributed: this node gets a name for the group, peers on loopback
+     {nodes, [], [batch_two_nodes_same_report, batch_node_gone]}].
 
 init_per_suite(Config) ->
     Root = root(),
     [{root, Root}, {wiring, filename:join([Root, "config", "torobot.wiring"])} | Config].
 
 end_per_suite(_Config) ->
+    ok.
+
+init_per_group(nodes, Config) ->
+    _ = os:cmd("epmd -daemon"),
+    Started = case node() of
+                  nonode@nohost ->
+                      Name = list_to_atom("torobot_lab" ++ integer_to_list(
+                                                             erlang:unique_integer([positive]))
+                                          ++ "@127.0.0.1"),
+                      {ok, _} = net_kernel:start([Name, longnames]),
+                      true;
+                  _ ->
+                      false
+              end,
+    [{stop_dist, Started} | Config];
+init_per_group(_Group, Config) ->
+    Config.
+
+end_per_group(nodes, Config) ->
+    _ = ?config(stop_dist, Config) andalso net_kernel:stop(),
+    ok;
+end_per_group(_Group, _Config) ->
     ok.
 
 %%====================================================================
@@ -87,6 +113,20 @@ bad_speed(Config) ->
 %% Batch
 %%====================================================================
 
+batch_refuses_bad_option() ->
+    [{doc, "A batch refuses an option it does not know, and a bad time or node list, naming "
+      "it, before any world is run or generated."}].
+batch_refuses_bad_option(Config) ->
+    Opts = #{worlds => {generated, 2, 1}, wiring => ?config(wiring, Config)},
+    ?assertEqual({error, {bad_option, colour}}, torobot_sim:batch(Opts#{colour => red})),
+    ?assertEqual({error, {bad_option, trace}}, torobot_sim:batch(Opts#{trace => "t.txt"})),
+    ?assertEqual({error, {time, fast}}, torobot_sim:batch(Opts#{time => fast})),
+    ?assertEqual({error, {nodes, []}}, torobot_sim:batch(Opts#{nodes => []})),
+    ?assertEqual({error, {nodes, here}}, torobot_sim:batch(Opts#{nodes => here})),
+    Twice = [node(), node()],
+    ?assertEqual({error, {nodes, Twice}}, torobot_sim:batch(Opts#{nodes => Twice})),
+    ?assertEqual({error, {parallel, 0}}, torobot_sim:batch(Opts#{parallel => 0})).
+
 batch_refuses_bad_world() ->
     [{doc, "A batch with one bad world file is refused naming that file and its reason."}].
 batch_refuses_bad_world(Config) ->
@@ -112,10 +152,10 @@ batch_refuses_bad_wiring(Config) ->
     ?assertNotEqual(nomatch, string:find(io_lib:format("~p", [Reason]), "nowhere")).
 
 batch_20_generated() ->
-    [{doc, "batch/1 on 20 generated worlds, two at a time at speed 20: a row per world and "
+    [{doc, "batch/1 on 20 generated worlds, two at a time in lockstep: a row per world and "
       "an overall row whose figures agree with the runs, and make eval's files."}].
 batch_20_generated(Config) ->
-    {ok, Report} = torobot_sim:batch(#{worlds => {generated, 20, 100}, speed => 20,
+    {ok, Report} = torobot_sim:batch(#{worlds => {generated, 20, 100},
                                        parallel => 2, wiring => ?config(wiring, Config),
                                        generate => #{duration_s => 20}}),
     #{worlds := Rows, overall := Overall, runs := Runs, failures := Failures} = Report,
@@ -150,9 +190,153 @@ batch_20_generated(Config) ->
     {Grid, []} = xmerl_scan:file(filename:join(Dir, "trajectories.svg")),
     ?assertEqual(20, length(xmerl_xpath:string("//polyline", Grid))).
 
+batch_lockstep_repeats() ->
+    [{doc, "In lockstep (the batch's default) a batch of generated worlds run twice, two "
+      "at a time and then one at a time, gives the same report but for its wall time, "
+      "and each run's summary is exactly that of the world run alone."}].
+batch_lockstep_repeats(Config) ->
+    Opts = small_batch(Config),
+    {ok, First} = torobot_sim:batch(Opts#{parallel => 2}),
+    {ok, Second} = torobot_sim:batch(Opts#{parallel => 1}),
+    ct:log("~s", [torobot_eval:markdown(First)]),
+    ?assertMatch(#{time := lockstep, failures := [], overall := #{runs := 6, failed := 0}},
+                 First),
+    same_report(First, Second),
+    #{worlds := {generated, N, Seed}, generate := GenOpts} = Opts,
+    Alone = [begin
+                 {ok, Summary} = torobot_sim:run(torobot_worlds:generate(S, GenOpts),
+                                                 #{time => lockstep, nodes => peer,
+                                                   wiring => ?config(wiring, Config)}),
+                 Summary
+             end || S <- lists:seq(Seed, Seed + N - 1)],
+    ?assertEqual([Summary || Summary <- Alone, _Run <- [1, 2]],
+                 [Summary || #{summary := Summary} <- maps:get(runs, First)]).
+
+batch_two_nodes_same_report() ->
+    [{doc, "The same lockstep batch spread over two peer nodes on loopback gives the report "
+      "of one node, row for row."}].
+batch_two_nodes_same_report(Config) ->
+    Opts = small_batch(Config),
+    {ok, Here} = torobot_sim:batch(Opts),
+    with_peers(2, fun([A, B]) ->
+                          {ok, Spread} = torobot_sim:batch(Opts#{nodes => [A, B]}),
+                          ct:log("~s", [torobot_eval:markdown(Spread)]),
+                          ?assertEqual([], maps:get(failures, Spread)),
+                          same_report(Here, Spread)
+                  end).
+
+batch_node_gone() ->
+    [{doc, "A node that is not connected, or goes down mid-batch, has its runs reported as "
+      "failures naming it; the other node's runs are whole and nothing hangs."}].
+batch_node_gone(Config) ->
+    Opts = small_batch(Config),
+    {ok, Here} = torobot_sim:batch(Opts),
+    Nowhere = 'torobot_lab_nowhere@127.0.0.1',
+    with_peers(2, fun([A, B]) ->
+                          %% not connected: B's share is every other run
+                          {ok, Partly} = torobot_sim:batch(Opts#{nodes => [A, Nowhere]}),
+                          check_share_failed(Here, Partly, Nowhere, not_connected),
+                          %% B goes down once its first worker is up
+                          Self = self(),
+                          Batch = spawn_link(fun() ->
+                                                     Self ! {batch, torobot_sim:batch(
+                                                                      Opts#{nodes => [A, B]})}
+                                             end),
+                          ok = until(fun() -> has_worker(B) end, 30000),
+                          [Peer] = [P || {P, N} <- get(lab_peers), N =:= B],
+                          ok = peer:stop(Peer),
+                          {ok, Cut} = receive {batch, Result} -> Result
+                                      after 60000 -> ct:fail({batch_hangs, Batch})
+                                      end,
+                          ct:log("~s", [torobot_eval:markdown(Cut)]),
+                          #{failures := Failures, runs := Runs} = Cut,
+                          ?assertNotEqual([], Failures),
+                          [?assertMatch({node, B, _}, Why) || {_, _, Why} <- Failures],
+                          %% A's share is whole and is what one node gives
+                          ASide = [R || R = #{world := W, run := I} <- Runs,
+                                        lists:member({W, I}, share_of(1, Opts))],
+                          ?assertEqual([R || R = #{world := W, run := I} <- maps:get(runs, Here),
+                                             lists:member({W, I}, share_of(1, Opts))],
+                                       ASide)
+                  end).
+
 %%====================================================================
 %% Helpers
 %%====================================================================
+
+%% A few short generated worlds, in lockstep: three worlds run twice.
+small_batch(Config) ->
+    #{worlds => {generated, 3, 40}, runs => 2, wiring => ?config(wiring, Config),
+      generate => #{duration_s => 15}}.
+
+%% Two reports are the same but for the wall time.
+same_report(A, B) ->
+    ?assertEqual(maps:get(worlds, A), maps:get(worlds, B)),
+    ?assertEqual(maps:get(overall, A), maps:get(overall, B)),
+    ?assertEqual([maps:remove(final, R) || R <- maps:get(runs, A)],
+                 [maps:remove(final, R) || R <- maps:get(runs, B)]),
+    ?assertEqual(maps:get(runs, A), maps:get(runs, B)),
+    ?assertEqual(maps:remove(wall_ms, A), maps:remove(wall_ms, B)).
+
+%% The (world, run) pairs dealt to the K-th of two nodes: every other job.
+share_of(K, #{worlds := {generated, N, Seed}, runs := Runs}) ->
+    Jobs = [{iolist_to_binary(["seed ", integer_to_list(S)]), I}
+            || S <- lists:seq(Seed, Seed + N - 1), I <- lists:seq(1, Runs)],
+    [Job || {J, Job} <- lists:enumerate(Jobs), (J - 1) rem 2 =:= K - 1].
+
+check_share_failed(Here, Partly, Gone, Reason) ->
+    #{failures := Failures, runs := Runs} = Partly,
+    Jobs = [{W, I} || #{world := W, run := I} <- maps:get(runs, Here)],
+    Theirs = [Job || {J, Job} <- lists:enumerate(Jobs), J rem 2 =:= 0],
+    ?assertEqual([{W, I, {node, Gone, Reason}} || {W, I} <- Theirs], Failures),
+    ?assertEqual([R || R = #{world := W, run := I} <- maps:get(runs, Here),
+                       not lists:member({W, I}, Theirs)],
+                 Runs).
+
+%% N distributed peers on loopback with this node's code path and cookie,
+%% stopped after Fun whatever happens (only these: the batch's own workers
+%% go with them).
+with_peers(N, Fun) ->
+    Root = code:root_dir(),
+    Paths = [P || P <- code:get_path(), not lists:prefix(Root, P)],
+    Peers = [begin
+                 Name = list_to_atom("torobot_lab_peer" ++
+                                         integer_to_list(erlang:unique_integer([positive]))),
+                 {ok, P, Node} = peer:start_link(
+                                   #{name => Name, host => "127.0.0.1", longnames => true,
+                                     args => ["-setcookie", atom_to_list(erlang:get_cookie()),
+                                              "-connect_all", "false", "-pa" | Paths]}),
+                 {P, Node}
+             end || _ <- lists:seq(1, N)],
+    put(lab_peers, Peers),
+    try
+        Fun([Node || {_, Node} <- Peers])
+    after
+        [catch peer:stop(P) || {P, _} <- Peers]
+    end.
+
+%% A batch's worker (torobot_batch:worker/2) is running on Node.
+has_worker(Node) ->
+    try
+        Pids = erpc:call(Node, erlang, processes, [], 5000),
+        lists:member({initial_call, {torobot_batch, worker, 2}},
+                     [erpc:call(Node, erlang, process_info, [Pid, initial_call], 5000)
+                      || Pid <- Pids])
+    catch
+        error:{erpc, _} -> false
+    end.
+
+%% Waits until Pred holds, checking every 20 ms, at most Ms.
+until(Pred, Ms) when Ms =< 0 ->
+    case Pred() of
+        true -> ok;
+        false -> {timeout, Pred}
+    end;
+until(Pred, Ms) ->
+    case Pred() of
+        true -> ok;
+        false -> receive after 20 -> until(Pred, Ms - 20) end
+    end.
 
 %% Objects clear of every wall (the arena's too) and of each other; the
 %% robot clear of everything.

@@ -3,7 +3,8 @@
 %%
 %% <b>Nodes</b>: {@link add_behavior/3}, {@link add_device/3}, {@link
 %% remove_behavior/1}, {@link remove_device/1}, {@link suspend_behavior/1},
-%% {@link resume_behavior/1}.
+%% {@link resume_behavior/1}, {@link reset_behavior/1}, {@link
+%% restart_behavior/1}.
 %%
 %% <b>Wiring</b>: {@link set_inputs/2} (suppression: sources highest priority
 %% first), {@link set_inhibitors/2} (inhibition), {@link set_reset/2}, {@link
@@ -23,13 +24,21 @@
 %% the receiver's node wires its inputs, that of the emitter's node its
 %% inhibitors; `inspect/0' covers every connected node.
 %%
+%% The runtime's API is this module, `toroco_clock' (time: the simulated
+%% lab's speed and lockstep, SPEC §14) and the behaviours a callback module
+%% implements, `toroco_behavior' and `toroco_device' (with
+%% `toroco_device:call/3' and `cast/2', a device module's way to its own
+%% process wherever it runs), and `toroco_slots' (the connection bounds
+%% every listener of the project applies). Every other module of the application is
+%% private: the other applications use none of them (a test checks it).
+%%
 %% Every call returns `ok' or `{error, Reason}' with a reason naming the
 %% offending behavior, device, input or output; a refused wiring change
 %% changes nothing. The semantics are those of SPEC §4.
 -module(toroco).
 
 -export([add_behavior/3, add_device/3, remove_behavior/1, remove_device/1,
-         suspend_behavior/1, resume_behavior/1,
+         suspend_behavior/1, resume_behavior/1, reset_behavior/1, restart_behavior/1,
          set_inputs/2, set_inhibitors/2, set_reset/2, load_wiring/1,
          inject/2, inject/3, inspect/0, inspect/1,
          top/0, watch/2, unwatch/0, wiring_dot/0, reload/1,
@@ -48,8 +57,25 @@
 -type source_spec() :: source() | {Emitter :: name(), Output :: atom(), #{hold => hold()}}.
 -type input_spec() :: [source_spec()]
                     | #{sources := [source_spec()], buffer => all | latest, idle => term()}.
--type behavior_opts() :: #{layer => non_neg_integer(), params => map()}.
--type error_reason() :: term().
+%% A module with `interface/1' (toroco_behavior) takes options of its own
+%% too, e.g. `toroco_lua''s `file'.
+-type behavior_opts() :: #{layer => non_neg_integer(), params => map(), atom() => term()}.
+%% What went wrong, and the culprit: the tag says what, the second element
+%% names the behavior, device, input, output, source, option or file
+%% (SPEC §4, "Errors"), e.g. `{unknown_output, {avoid_left, motors}}'.
+-type error_reason() ::
+        {unknown_name | unknown_input | unknown_output | not_a_behavior | not_running
+         | nodedown | duplicate_name | name_taken | duplicate_source | hierarchy
+         | inhibition_cycle | layer_removed | self_call | timeout | unknown_call
+         | bad_name | bad_module | bad_interface | bad_layer | bad_params | bad_option
+         | bad_options | bad_inputs | bad_input_spec | bad_inhibitors | bad_reset
+         | bad_source | bad_sources | bad_buffer | bad_hold | bad_max_age | bad_kind
+         | bad_kinds | bad_names | bad_watch | bad_wiring_term | wiring_file | file
+         | start_failed | restart_failed | suspend_failed | code_change_failed
+         | load_failed | no_object_code | old_code_in_use | unchanged | relay_failed
+         | watch_failed | dot_failed | no_graphviz, term()}
+      | {bad_option, term(), term()}
+      | not_running | unknown_request.
 
 %%====================================================================
 %% Nodes
@@ -117,6 +143,28 @@ suspend_behavior(Name) ->
 resume_behavior(Name) ->
     on(Name, fun() -> with_behavior(Name, fun toroco_behavior:resume/1) end,
        fun() -> resume_behavior(Name) end).
+
+%% @doc Brooks' reset (SPEC §4): the behavior's latches and holds are
+%% cleared and it starts again from `init/1' in the same process, as an
+%% event on one of its `set_reset/2' sources does.
+-spec reset_behavior(name()) -> ok | {error, error_reason()}.
+reset_behavior(Name) ->
+    on(Name, fun() -> with_behavior(Name, fun toroco_behavior:reset_behavior/1) end,
+       fun() -> reset_behavior(Name) end).
+
+%% @doc Stops the behavior's process and has its layer's supervisor start a
+%% new one (a restart: counted in `inspect/1''s `restarts', not towards the
+%% layer's restart intensity). Its latches are gone, as after a crash.
+-spec restart_behavior(name()) -> ok | {error, error_reason()}.
+restart_behavior(Name) ->
+    on(Name, fun() ->
+                     case toroco_wiring:call({node, Name}) of
+                         {ok, #{kind := behavior, layer := L}} -> toroco_layers_sup:restart(L, Name);
+                         {ok, #{kind := device}} -> {error, {not_a_behavior, Name}};
+                         Err -> Err
+                     end
+             end,
+       fun() -> restart_behavior(Name) end).
 
 with_behavior(Name, Fun) ->
     case toroco_wiring:call({node, Name}) of

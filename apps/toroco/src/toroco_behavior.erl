@@ -19,6 +19,15 @@
 %% nothing of the previous incarnation survives) and to its input routers
 %% (which re-deliver each input's latched winner).
 %%
+%% Time: a callback module reads time only with `toroco_clock:now_ms/0' and
+%% sets timers only with gen_statem's timeout actions (`state_timeout',
+%% `{timeout, Name}', event timeouts, relative times): the engine turns them
+%% into the runtime's clock, scaled by the simulated lab's speed, or kept by
+%% `toroco_lockstep' in simulated time when a world is the clock (SPEC §14).
+%% A module that reads the OS clock, calls `erlang:send_after' or sends
+%% itself messages to time things cannot run in lockstep. Absolute timeouts
+%% (`{abs, true}') stay in real time: they are for real hardware.
+%%
 %% Devices (`toroco_device') run on this same engine with `kind => device'.
 -module(toroco_behavior).
 -behaviour(gen_statem).
@@ -26,11 +35,16 @@
 -include("toroco_wire.hrl").
 
 -export([start_link/1, child_spec/1]).
--export([inject/3, info/1, suspend/1, resume/1, interface/3]).
+-export([inject/3, info/1, suspend/1, resume/1, reset_behavior/1, interface/3, configured/1]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3, code_change/4]).
 -export_type([spec/0, action/0, actions/0, result/0]).
 
 -callback interface() -> #{inputs := [atom()], outputs := [atom()]}.
+%% A behavior whose ports depend on its options (a Lua behavior's on its
+%% file) exports `interface/1' instead: it and `init/1' get the options of
+%% `toroco:add_behavior/3' but `layer' (`params' among them), and any
+%% option is accepted.
+-callback interface(Opts :: map()) -> #{inputs := [atom()], outputs := [atom()]}.
 %% `{error, Reason}' refuses to start: `add_behavior' answers
 %% `{error, {start_failed, {Name, Reason}}}' (the library's bad parameters).
 -callback init(Params :: map()) ->
@@ -46,7 +60,7 @@
     {ok, NewState :: term(), NewData :: term()}.
 -callback terminate(Reason :: term(), State :: term(), Data :: term()) ->
     {emit, actions()} | term().
--optional_callbacks([handle_event/4, code_change/4, terminate/3]).
+-optional_callbacks([interface/0, interface/1, handle_event/4, code_change/4, terminate/3]).
 
 -type action() :: {send, #{atom() => term()}}
                 | {send, #{atom() => term()}, #{hold => non_neg_integer() | infinity}}
@@ -92,6 +106,9 @@
             suspended = false :: boolean(),
             queued = [] :: [{gen_statem:event_type(), term()}],
             user_events = false :: boolean(),
+            %% in lockstep, the timeouts set with toroco_lockstep and their
+            %% simulated deadlines (gen_statem keeps none of them)
+            vtimers = #{} :: #{term() => integer()},
             %% the observer tap's sinks that concern this process (SPEC §10)
             tap = #{} :: toroco_tap:sinks(),
             idle = off :: toroco_wire:idle(),
@@ -126,7 +143,11 @@ child_spec(Spec = #{name := Name, kind := Kind}) ->
           {ok, #{inputs := [atom()], outputs := [atom()]}} | {error, term()}.
 interface(Kind, Module, Args) ->
     try case Kind of
-            behavior -> Module:interface();
+            behavior ->
+                case configured(Module) of
+                    true -> Module:interface(Args);
+                    false -> Module:interface()
+                end;
             device -> Module:interface(Args)
         end of
         #{inputs := Ins, outputs := Outs} = I when is_list(Ins), is_list(Outs) ->
@@ -139,6 +160,14 @@ interface(Kind, Module, Args) ->
         error:undef -> {error, {bad_module, Module}};
         Class:Reason -> {error, {bad_interface, {Module, {Class, Reason}}}}
     end.
+
+%% @doc Whether behavior module `Module' declares its ports from its options
+%% (`interface/1') rather than once for all (`interface/0').
+-spec configured(module()) -> boolean().
+configured(Module) ->
+    _ = code:ensure_loaded(Module),
+    erlang:function_exported(Module, interface, 1)
+        andalso not erlang:function_exported(Module, interface, 0).
 
 %% @doc Makes the process emit `Op' on `Out' as if its callback had.
 -spec inject(atom(), atom(), toroco_router_core:op()) -> ok | {error, term()}.
@@ -155,6 +184,10 @@ suspend(Name) -> call(Name, '$toroco_suspend').
 
 -spec resume(atom()) -> ok | {error, term()}.
 resume(Name) -> call(Name, '$toroco_resume').
+
+%% @doc Brooks' reset of a running behavior (see `toroco:reset_behavior/1').
+-spec reset_behavior(atom()) -> ok | {error, term()}.
+reset_behavior(Name) -> call(Name, '$toroco_reset').
 
 call(Name, Req) ->
     toroco_wire:call(toroco_names:process(Name), Req, 5000, Name).
@@ -222,6 +255,14 @@ start_user(E = #e{kind = Kind, module = M, args = Args, name = Name}) ->
 
 -spec handle_event(gen_statem:event_type(), term(), term(), #e{}) ->
           gen_statem:event_handler_result(term()).
+%% Lockstep (toroco_lockstep): one message of the event path, or a timer,
+%% handled as it would be in real time; the step is done once the events
+%% it inserts are handled too.
+handle_event(info, ?WIRE_STEP(Token, Msg), S, E) ->
+    toroco_wire:step_done(Token, step(Msg, S, E));
+handle_event(internal, ?WIRE_STEP_DONE(Token), _S, _E) ->
+    toroco_lockstep:done(Token),
+    keep_state_and_data;
 %% The idle tick (toroco_wire:idle_arm/0), whatever the callback module's
 %% state; the first event after hibernating arms it again.
 handle_event(info, ?WIRE_IDLE, _S, E = #e{idle = Idle}) ->
@@ -230,19 +271,19 @@ handle_event(info, ?WIRE_IDLE, _S, E = #e{idle = Idle}) ->
 handle_event(Type, Content, S, E = #e{idle = off}) ->
     handle_event(Type, Content, S, E#e{idle = toroco_wire:idle_arm()});
 %% The observer tap changed: keep the sinks that concern this process.
-handle_event(info, {'$toroco_tap', Subs}, _S, E = #e{name = Name}) ->
+handle_event(info, ?WIRE_TAP(Subs), _S, E = #e{name = Name}) ->
     {keep_state, E#e{tap = tap(Subs, Name)}};
 %% The event path: one input delivered by a router.
 handle_event(info, ?WIRE_IN(Input, V), S, E = #e{suspended = false}) ->
     input(Input, V, S, E);
 handle_event(info, ?WIRE_IN(Input, V, Router), S, E = #e{suspended = false}) ->
     Result = input(Input, V, S, E),
-    Router ! ?WIRE_ACK(Input),
+    toroco_wire:send(Router, ?WIRE_ACK(Input)),
     Result;
 handle_event(info, ?WIRE_IN(_Input, _V), _S, _E) ->
     keep_state_and_data;                      % suspended: inputs are dropped
 handle_event(info, ?WIRE_IN(Input, _V, Router), _S, _E) ->
-    Router ! ?WIRE_ACK(Input),
+    toroco_wire:send(Router, ?WIRE_ACK(Input)),
     keep_state_and_data;
 %% Wiring: consumers attach and detach (see toroco_wire).
 handle_event(info, ?WIRE_SUB({_, Out} = Src, Consumer), _S, E = #e{outputs = Outs}) ->
@@ -280,6 +321,11 @@ handle_event({call, From}, {'$toroco_inject', Out, Op}, _S, E = #e{outputs = Out
         #{Out := _} -> {keep_state, emit(Out, Op, E), [{reply, From, ok}]};
         #{} -> {keep_state_and_data, [{reply, From, {error, {unknown_output, {N, Out}}}}]}
     end;
+handle_event({call, From}, '$toroco_reset', _S, E = #e{kind = behavior}) ->
+    case reset(E) of
+        {next_state, S1, E1, Actions} -> {next_state, S1, E1, [{reply, From, ok} | Actions]};
+        {stop, Reason, E1} -> {stop_and_reply, Reason, [{reply, From, ok}], E1}
+    end;
 handle_event({call, From}, '$toroco_info', S, E) ->
     {keep_state_and_data, [{reply, From, describe(S, E)}]};
 handle_event({call, From}, '$toroco_suspend', _S, E = #e{name = Name, tap = Tap}) ->
@@ -307,7 +353,7 @@ handle_event(Type, Content, S, E = #e{user_events = true, module = M, user = UD}
     %% A callback module's handle_event/4 with no clause for this event
     %% falls through to the engine's default below.
     try M:handle_event(Type, Content, S, UD) of
-        R -> result(R, E)
+        R -> result(R, S, E)
     catch
         error:function_clause:Stack ->
             case Stack of
@@ -355,24 +401,38 @@ code_change(OldVsn, S, E = #e{module = M, user = UD}, Extra) ->
 input(?RESET, _V, _S, E) ->
     reset(E);
 input(Input, V, S, E = #e{module = M, user = UD}) ->
-    result(M:handle_input(Input, V, S, UD), E).
+    result(M:handle_input(Input, V, S, UD), S, E).
+
+%% A step of lockstep: a simulated timer that is still set fires; any other
+%% event ends an event timeout, as gen_statem's own would end.
+step(?WIRE_TIMER(Kind, Msg), S, E = #e{vtimers = VT}) ->
+    case VT of
+        #{Kind := _} -> handle_event(Kind, Msg, S, E#e{vtimers = maps:remove(Kind, VT)});
+        #{} -> keep_state_and_data
+    end;
+step(Msg, S, E = #e{vtimers = #{timeout := _}}) ->
+    {none, E1} = virtual({timeout, cancel}, E),
+    handle_event(info, Msg, S, E1);
+step(Msg, S, E) ->
+    handle_event(info, Msg, S, E).
 
 %% Brooks' reset: the behavior's latches and holds are cleared, then it starts
 %% again from init/1 in the same process.
 reset(E = #e{outputs = Outs, name = Name, tap = Tap}) ->
     toroco_tap:lifecycle(Tap, Name, reset),
     E1 = lists:foldl(fun(Out, Acc) -> emit(Out, unset, Acc) end, E, maps:keys(Outs)),
-    Cancel = [{state_timeout, cancel} | [{{timeout, T}, cancel} || T <- E1#e.timers]],
-    case start_user(E1#e{timers = []}) of
+    {Cancel, E1a} = actions([{state_timeout, cancel} | [{{timeout, T}, cancel} || T <- E1#e.timers]],
+                            E1),
+    case start_user(E1a#e{timers = []}) of
         {ok, S, E2} -> {next_state, S, E2, Cancel};
         {ok, S, E2, Actions} -> {next_state, S, E2, Cancel ++ Actions};
         {stop, Reason} -> {stop, Reason, E1}
     end.
 
-result(R, E) ->
+result(R, S0, E) ->
     case R of
-        {next_state, S, UD} -> {next_state, S, E#e{user = UD}};
-        {next_state, S, UD, A} -> with_actions(next_state, S, A, E#e{user = UD});
+        {next_state, S, UD} -> {next_state, S, left(S0, S, E#e{user = UD})};
+        {next_state, S, UD, A} -> with_actions(next_state, S, A, left(S0, S, E#e{user = UD}));
         {keep_state, UD} -> {keep_state, E#e{user = UD}};
         {keep_state, UD, A} -> with_actions(keep_state, A, E#e{user = UD});
         keep_state_and_data -> {keep_state, E};
@@ -387,6 +447,14 @@ result(R, E) ->
         {stop_and_reply, Reason, Replies, UD} -> {stop_and_reply, Reason, Replies, E#e{user = UD}};
         Other -> {stop, {bad_return_from_callback, Other}, E}
     end.
+
+%% Leaving a state ends its state timeout; gen_statem does it for its own,
+%% the engine for a simulated one.
+left(S, S, E) -> E;
+left(_S0, _S, E = #e{vtimers = #{state_timeout := _}}) ->
+    {none, E1} = virtual({state_timeout, cancel}, E),
+    E1;
+left(_S0, _S, E) -> E.
 
 with_actions(next_state, S, A, E) ->
     {A1, E1} = actions(A, E),
@@ -429,11 +497,21 @@ actions([A | T], E, Acc) when element(1, A) =:= send; element(1, A) =:= set;
                  ?LOG#{name => E#e.name}),
     actions(T, E, Acc);
 actions([{{timeout, Name}, _, _} = A | T], E, Acc) ->
-    actions(T, timer_named(Name, E), [clock(A) | Acc]);
+    timer_action(A, T, timer_named(Name, E), Acc);
 actions([{{timeout, Name}, _, _, _} = A | T], E, Acc) ->
-    actions(T, timer_named(Name, E), [clock(A) | Acc]);
+    timer_action(A, T, timer_named(Name, E), Acc);
 actions([A | T], E, Acc) ->
-    actions(T, E, [clock(A) | Acc]).
+    timer_action(A, T, E, Acc).
+
+timer_action(A, T, E, Acc) ->
+    case toroco_clock:lockstep_server() of
+        none -> actions(T, E, [clock(A) | Acc]);
+        _ ->
+            case virtual(A, E) of
+                {none, E1} -> actions(T, E1, Acc);
+                {A1, E1} -> actions(T, E1, [A1 | Acc])
+            end
+    end.
 
 timer_named(Name, E = #e{timers = Ts}) ->
     case lists:member(Name, Ts) of
@@ -452,6 +530,42 @@ clock({Kind, T, Msg, Opts}) when ?IS_TIMEOUT(Kind), is_integer(T), is_list(Opts)
     end;
 clock(T) when is_integer(T) -> toroco_clock:real_ms(T);
 clock(A) -> A.
+
+%% In lockstep a callback module's timeouts are set with toroco_lockstep,
+%% in simulated time, and gen_statem sees none of them (`none'); absolute
+%% ones stay gen_statem's, in real time (the servos' keepalive).
+virtual({Kind, T, Msg}, E) when ?IS_TIMEOUT(Kind), is_integer(T) ->
+    vset(Kind, T, Msg, E);
+virtual({Kind, infinity, _Msg}, E) when ?IS_TIMEOUT(Kind) ->
+    virtual({Kind, cancel}, E);
+virtual({Kind, T, Msg, Opts} = A, E) when ?IS_TIMEOUT(Kind), is_integer(T), is_list(Opts) ->
+    case proplists:get_value(abs, Opts, false) of
+        false -> vset(Kind, T, Msg, E);
+        true -> {A, E}
+    end;
+virtual({Kind, cancel}, E = #e{vtimers = VT}) when ?IS_TIMEOUT(Kind) ->
+    case VT of
+        #{Kind := _} ->
+            toroco_clock:cancel_timer(Kind),
+            {none, E#e{vtimers = maps:remove(Kind, VT)}};
+        #{} ->
+            {none, E}
+    end;
+virtual({Kind, update, Msg}, E = #e{vtimers = VT}) when ?IS_TIMEOUT(Kind) ->
+    case VT of
+        #{Kind := Deadline} -> toroco_clock:set_timer(Kind, Deadline, Msg);
+        #{} -> ok
+    end,
+    {none, E};
+virtual(T, E) when is_integer(T) ->
+    vset(timeout, T, T, E);
+virtual(A, E) ->
+    {A, E}.
+
+vset(Kind, T, Msg, E = #e{vtimers = VT}) ->
+    Deadline = toroco_clock:now_ms() + T,
+    toroco_clock:set_timer(Kind, Deadline, Msg),
+    {none, E#e{vtimers = VT#{Kind => Deadline}}}.
 
 %% A list of the map's pairs, walked without a fun: an action's map has one
 %% or two outputs, where an iterator costs more than the walk.
@@ -526,8 +640,10 @@ latch(Out, #e{latches = L}) ->
 
 describe(S, #e{kind = Kind, module = M, layer = L, latches = Latches, suspended = Susp,
                user = UD}) ->
+    {message_queue_len, Q} = erlang:process_info(self(), message_queue_len),
     Base = #{kind => Kind, module => M, layer => L, latches => Latches,
-             status => case Susp of true -> suspended; false -> running end},
+             status => case Susp of true -> suspended; false -> running end,
+             state => S, mailbox => Q},
     case Kind =:= device andalso erlang:function_exported(M, info, 2) of
         true -> Base#{device => M:info(S, UD)};
         false -> Base

@@ -13,10 +13,31 @@
 %% At speed 1 {@link now_ms/0} is the monotonic clock and {@link real_ms/1}
 %% the identity; the factor lives in a `persistent_term', read without a
 %% copy, and changing it keeps simulated time continuous.
+%%
+%% Lockstep (SPEC §14, "Lockstep"): {@link lockstep/1} makes a simulated
+%% world the node's clock. Time starts at 0 and moves only with {@link
+%% tick/2}; every timer of the runtime (holds, gate timers, behaviors'
+%% gen_statem timeouts) is kept by `toroco_lockstep' and fires at its
+%% simulated deadline, and the event path runs one step at a time, so a run
+%% depends only on its world, wiring and seed. {@link realtime/0} ends it.
+%%
+%% The rule for callback modules: a behavior or device reads time with
+%% {@link now_ms/0} and sets timers with the engine's gen_statem timeout
+%% actions (relative times), nothing else; one that reads the OS clock or
+%% calls `erlang:send_after' itself cannot run in lockstep. What stays in
+%% real time, on purpose: absolute gen_statem timeouts (`{abs, true}': the
+%% servos' keepalive, which feeds the real hardware's watchdog; a
+%% simulation in lockstep turns that watchdog off), the idle tick that
+%% hibernates quiet processes, the keep-alives between nodes, and OTP
+%% supervisors' restart intensity (counted by OTP in real seconds).
 -module(toroco_clock).
 
 -export([now_ms/0, speed/0, set_speed/1, real_ms/1, real_deadline/1]).
--export_type([speed/0]).
+-export([mode/0, lockstep/1, realtime/0, tick/2, tick/3, settle/0, timestamp_ns/0]).
+-export([lockstep_cell/1, lockstep_server/0, set_timer/3, cancel_timer/1]).
+-export_type([speed/0, stimulus/0]).
+
+-type stimulus() :: toroco_lockstep:stimulus().
 
 -type speed() :: number().
 
@@ -27,6 +48,7 @@
 now_ms() ->
     case persistent_term:get(?KEY, 1) of
         1 -> erlang:monotonic_time(millisecond);
+        {lockstep, Cell} -> atomics:get(Cell, 1);
         {Speed, RealBase, SimBase} -> SimBase + floor((real_now() - RealBase) * Speed)
     end.
 
@@ -34,20 +56,27 @@ now_ms() ->
 -spec speed() -> speed().
 speed() ->
     case persistent_term:get(?KEY, 1) of
-        1 -> 1;
-        {Speed, _, _} -> Speed
+        {Speed, _, _} -> Speed;
+        _ -> 1
     end.
 
 %% @doc Sets the real-time factor; simulated time goes on from where it is.
--spec set_speed(speed()) -> ok | {error, {bad_speed, term()}}.
-set_speed(Speed) when is_number(Speed), Speed > 0 ->
+%% Refused in lockstep, where the world moves time.
+-spec set_speed(speed()) -> ok | {error, {bad_speed, term()} | lockstep}.
+set_speed(Speed) ->
+    case mode() of
+        lockstep -> {error, lockstep};
+        realtime -> scale(Speed)
+    end.
+
+scale(Speed) when is_number(Speed), Speed > 0 ->
     Sim = now_ms(),
     Real = real_now(),
     case Speed == 1 andalso Sim =:= Real of
         true -> persistent_term:put(?KEY, 1);
         false -> persistent_term:put(?KEY, {Speed, Real, Sim})
     end;
-set_speed(Speed) ->
+scale(Speed) ->
     {error, {bad_speed, Speed}}.
 
 %% @doc A duration of simulated milliseconds as real milliseconds (rounded
@@ -56,8 +85,8 @@ set_speed(Speed) ->
 real_ms(infinity) -> infinity;
 real_ms(Ms) ->
     case persistent_term:get(?KEY, 1) of
-        1 -> Ms;
-        {Speed, _, _} -> ceil(Ms / Speed)
+        {Speed, _, _} -> ceil(Ms / Speed);
+        _ -> Ms
     end.
 
 %% @doc A simulated monotonic deadline as a real monotonic one, in ms (for
@@ -65,9 +94,86 @@ real_ms(Ms) ->
 -spec real_deadline(integer()) -> integer().
 real_deadline(SimMs) ->
     case persistent_term:get(?KEY, 1) of
-        1 -> SimMs;
-        {Speed, RealBase, SimBase} -> RealBase + ceil((SimMs - SimBase) / Speed)
+        {Speed, RealBase, SimBase} -> RealBase + ceil((SimMs - SimBase) / Speed);
+        _ -> SimMs
     end.
 
 real_now() ->
     erlang:monotonic_time(millisecond).
+
+%%====================================================================
+%% Lockstep
+%%====================================================================
+
+%% @doc `realtime' (the monotonic clock, maybe scaled by a speed) or
+%% `lockstep' (a world moves time).
+-spec mode() -> realtime | lockstep.
+mode() ->
+    case persistent_term:get(?KEY, 1) of
+        {lockstep, _} -> lockstep;
+        _ -> realtime
+    end.
+
+%% @doc Makes this node's clock virtual: simulated time is 0 and moves only
+%% with {@link tick/2}. `trace => true' keeps a line per step for {@link
+%% tick/2} to hand over. Start it before the behaviors and devices of the
+%% run, end it with {@link realtime/0}.
+-spec lockstep(#{trace => boolean()}) -> ok.
+lockstep(Opts) ->
+    toroco_lockstep:start(Opts).
+
+%% @doc Back to the monotonic clock (speed 1).
+-spec realtime() -> ok.
+realtime() ->
+    toroco_lockstep:stop().
+
+%% @doc Moves simulated time to `T' ms, firing the timers due on the way at
+%% their deadlines, then hands over the stimuli (`{Device, Msg}', each a
+%% step to that process, in order), and returns once the node is quiescent:
+%% nothing queued or in flight, no timer due at or before `T'. With the
+%% trace on, its lines since the last tick.
+-spec tick(integer(), [stimulus()]) -> {ok, [iodata()]} | {error, term()}.
+tick(T, Stimuli) ->
+    tick(T, Stimuli, 60000).
+
+-spec tick(integer(), [stimulus()], timeout()) -> {ok, [iodata()]} | {error, term()}.
+tick(T, Stimuli, Timeout) ->
+    toroco_lockstep:tick(T, Stimuli, Timeout).
+
+%% @doc Returns once the node is quiescent, time unchanged.
+-spec settle() -> ok | {error, term()}.
+settle() ->
+    toroco_lockstep:settle().
+
+%% @doc The time stamp of observed events (SPEC §10), in ns: the system
+%% clock, or in lockstep the simulated time since the run began.
+-spec timestamp_ns() -> integer().
+timestamp_ns() ->
+    case persistent_term:get(?KEY, 1) of
+        {lockstep, Cell} -> atomics:get(Cell, 1) * 1000000;
+        _ -> erlang:system_time(nanosecond)
+    end.
+
+%% @private Set by `toroco_lockstep' as lockstep starts and ends.
+-spec lockstep_cell(atomics:atomics_ref() | undefined) -> ok.
+lockstep_cell(undefined) ->
+    persistent_term:put(?KEY, 1);
+lockstep_cell(Cell) ->
+    persistent_term:put(?KEY, {lockstep, Cell}).
+
+%% @doc The lockstep process of this node, or `none' in real time.
+-spec lockstep_server() -> pid() | none.
+lockstep_server() ->
+    persistent_term:get(toroco_lockstep, none).
+
+%% @doc In lockstep: sets the calling process's timer `Kind' (a gen_statem
+%% timeout type) to fire at simulated `Deadline' with `Msg', as the step
+%% message `WIRE_TIMER(Kind, Msg)'.
+-spec set_timer(term(), integer(), term()) -> ok.
+set_timer(Kind, Deadline, Msg) ->
+    toroco_lockstep:timer(lockstep_server(), Kind, Deadline, Msg).
+
+%% @doc In lockstep: cancels the calling process's timer `Kind'.
+-spec cancel_timer(term()) -> ok.
+cancel_timer(Kind) ->
+    toroco_lockstep:cancel(lockstep_server(), Kind).

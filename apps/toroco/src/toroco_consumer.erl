@@ -145,6 +145,15 @@ init({Mod, Key, Caller}) ->
           gen_statem:event_handler_result(ready | syncing | gone).
 handle_event(internal, gone, gone, none) ->
     {stop, normal};
+%% Lockstep (toroco_lockstep): one message of the event path, or the hold
+%% timer, as a step; the step is done once the events it inserts are handled.
+handle_event(info, ?WIRE_STEP(Token, ?WIRE_TIMER(Kind, Msg)), St, C) ->
+    toroco_wire:step_done(Token, handle_event(Kind, Msg, St, C));
+handle_event(info, ?WIRE_STEP(Token, Msg), St, C) ->
+    toroco_wire:step_done(Token, handle_event(info, Msg, St, C));
+handle_event(internal, ?WIRE_STEP_DONE(Token), _, _) ->
+    toroco_lockstep:done(Token),
+    keep_state_and_data;
 %% The idle tick (toroco_wire:idle_arm/0); the first event after
 %% hibernating arms it again.
 handle_event(info, ?WIRE_IDLE, _, C = #c{idle = Idle}) ->
@@ -171,7 +180,7 @@ handle_event({timeout, stale}, check, _, C) ->
     silent(C#c{stale_at = infinity});
 handle_event({timeout, resub}, again, _, C) ->
     resubscribe(C);
-handle_event(info, '$toroco_resubscribe', _, C) ->
+handle_event(info, ?WIRE_RESUBSCRIBE, _, C) ->
     resubscribe(C#c{tries = 0});
 handle_event({timeout, hold}, expire, _, C) ->
     steps([tick], C#c{timer = infinity});

@@ -10,10 +10,12 @@
 %% optional `info/2' adds the device's own counters to `toroco:inspect(Name)'.
 %%
 %% Add one with `toroco:add_device(Name, Module, Opts)'; {@link start_link/3}
-%% is the start function the supervisor calls.
+%% is the start function the supervisor calls. A device module's API reaches
+%% its own process with {@link call/3} and {@link cast/2} (handled by its
+%% `handle_event/4'), so it needs no name of the runtime's.
 -module(toroco_device).
 
--export([start_link/3, spec/3]).
+-export([start_link/3, spec/3, call/3, cast/2]).
 
 -callback interface(Opts :: map()) -> #{inputs := [atom()], outputs := [atom()]}.
 -callback init(Name :: atom(), Opts :: map()) ->
@@ -35,6 +37,19 @@
 -spec start_link(atom(), module(), map()) -> gen_statem:start_ret().
 start_link(Name, Module, Opts) ->
     toroco_behavior:start_link(spec(Name, Module, Opts)).
+
+%% @doc A request to the process of device `Name' (its `handle_event({call,
+%% From}, Request, ...)'); exits as `gen_statem:call/3' does when it is not
+%% running or does not answer in time.
+-spec call(atom(), term(), timeout()) -> term().
+call(Name, Request, Timeout) ->
+    gen_statem:call(toroco_names:process(Name), Request, Timeout).
+
+%% @doc A message to the process of device `Name' (its `handle_event(cast,
+%% Msg, ...)'); nothing happens if it is not running.
+-spec cast(atom(), term()) -> ok.
+cast(Name, Msg) ->
+    gen_statem:cast(toroco_names:process(Name), Msg).
 
 %% @doc The engine spec of a device.
 -spec spec(atom(), module(), map()) -> toroco_behavior:spec().

@@ -84,6 +84,8 @@ node_map(Name, #{kind := Kind, module := M, layer := L, inputs := Ins, outputs :
     Latches = maps:get(latches, Engine),
     Base = #{name => Name, kind => Kind, module => M, layer => L, node => node(),
              status => maps:get(status, Engine),
+             restarts => toroco_restarts:count(Name),
+             process => maps:with([state, mailbox], Engine),
              inputs => maps:from_list([{I, input(Name, I, Wired)} || I <- Ins]),
              outputs => maps:from_list(
                           [{O, output(Name, O, maps:get(O, Inhs, []), Gates, Latches)}

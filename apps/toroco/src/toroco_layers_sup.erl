@@ -4,7 +4,7 @@
 -module(toroco_layers_sup).
 -behaviour(supervisor).
 
--export([start_link/0, start_layer/1, init/1]).
+-export([start_link/0, start_layer/1, restart/2, init/1]).
 
 -spec start_link() -> {ok, pid()} | {error, term()}.
 start_link() ->
@@ -18,6 +18,26 @@ start_layer(L) ->
                                       start => {toroco_layer_sup, start_link, [L]},
                                       restart => temporary, type => supervisor,
                                       shutdown => infinity, modules => [toroco_layer_sup]}).
+
+%% @doc Stops behavior `Name' of layer `L' and starts it again, through
+%% its layer's supervisor (not a crash: the layer's intensity is not spent).
+-spec restart(non_neg_integer(), atom()) -> ok | {error, term()}.
+restart(L, Name) ->
+    case [Pid || {{layer, L1}, Pid, _, _} <- supervisor:which_children(?MODULE),
+                 L1 =:= L, is_pid(Pid)] of
+        [Sup] ->
+            case supervisor:terminate_child(Sup, Name) of
+                ok ->
+                    case supervisor:restart_child(Sup, Name) of
+                        {ok, _} -> ok;
+                        {ok, _, _} -> ok;
+                        {error, Reason} -> {error, {restart_failed, {Name, Reason}}}
+                    end;
+                {error, not_found} -> {error, {not_running, Name}}
+            end;
+        [] ->
+            {error, {layer_removed, {Name, L}}}
+    end.
 
 -spec init([]) -> {ok, {supervisor:sup_flags(), []}}.
 init([]) ->

@@ -106,7 +106,7 @@ late(Src, Latch) -> [{sync, [{Src, Latch}]}].
           {events, [term()], #r{}} | {reply, term(), [term()], #r{}} | unknown.
 handle(info, ?WIRE_ACK(_Input), D = #r{pending = {value, V}, rx = Rx, input = I})
   when is_pid(Rx) ->
-    Rx ! ?WIRE_IN(I, V, self()),
+    toroco_wire:send(Rx, ?WIRE_IN(I, V, self())),
     delivered(D, V),
     {events, [], D#r{pending = none}};
 handle(info, ?WIRE_ACK(_Input), D) ->
@@ -115,7 +115,7 @@ handle(info, ?WIRE_RX(_Input, Pid), D) ->
     {events, [receiver_up], attach_receiver(Pid, D)};
 handle(info, {'DOWN', Ref, process, _, _}, D = #r{rx_mon = Ref}) ->
     {events, [], D#r{rx = undefined, rx_mon = undefined, inflight = false, pending = none}};
-handle(info, {'$toroco_tap', Subs}, D = #r{key = {R, _}}) ->
+handle(info, ?WIRE_TAP(Subs), D = #r{key = {R, _}}) ->
     {events, [], D#r{tap = tap(Subs, R), view = none}};
 handle(info, ?WIRE_UNSUB(_, _), D) ->
     {events, [], D};
@@ -138,13 +138,13 @@ deliver([], D) ->
 deliver(_Values, D = #r{rx = undefined}) ->
     D;                                          % receiver down: lost, as specified
 deliver(Values, D = #r{buffer = all, rx = Rx, input = I}) ->
-    _ = [begin Rx ! ?WIRE_IN(I, V), delivered(D, V) end || V <- Values],
+    _ = [begin toroco_wire:send(Rx, ?WIRE_IN(I, V)), delivered(D, V) end || V <- Values],
     D;
 deliver(Values, D = #r{buffer = latest, inflight = true}) ->
     D#r{pending = {value, lists:last(Values)}};
 deliver(Values, D = #r{buffer = latest, rx = Rx, input = I}) ->
     V = lists:last(Values),
-    Rx ! ?WIRE_IN(I, V, self()),
+    toroco_wire:send(Rx, ?WIRE_IN(I, V, self())),
     delivered(D, V),
     D#r{inflight = true}.
 

@@ -4,6 +4,7 @@
 %% toroco_sup (rest_for_one)
 %% ├── toroco_store          owns the tables (wiring, lives): they outlive their writers
 %% ├── toroco_tap            the observer tap's subscriptions (SPEC §10)
+%% ├── toroco_lockstep       the clock of a simulated world in lockstep (SPEC §14)
 %% ├── toroco_routers_sup    one router per wired input, one gate per inhibited output
 %% ├── toroco_devices_sup    sensors and actuators (layer 0)
 %% ├── toroco_layers_sup     one supervisor per layer
@@ -53,6 +54,7 @@ init([]) ->
                            shutdown => 5000, modules => [Mod]} end,
     {ok, {Flags, [Worker(toroco_store),
                   Worker(toroco_tap),
+                  Worker(toroco_lockstep),
                   Sup(toroco_routers_sup),
                   Sup(toroco_devices_sup),
                   Sup(toroco_layers_sup),

@@ -30,6 +30,8 @@
 -module(toroco_tap).
 -behaviour(gen_server).
 
+-include("toroco_wire.hrl").
+
 -export([start_link/0, subscribe/1, unsubscribe/1]).
 -export([current/0, select/3, notify/2, timestamp/0]).
 -export([lifecycle/2, lifecycle/3]).
@@ -166,10 +168,11 @@ notify([{Ref, Sub, A, Max} | Rest], Event) ->
         end,
     notify(Rest, Event).
 
-%% @doc The time stamp of events: when the runtime saw it.
+%% @doc The time stamp of events: when the runtime saw it (in lockstep, the
+%% simulated time since the run began, `toroco_clock:timestamp_ns/0').
 -spec timestamp() -> integer().
 timestamp() ->
-    erlang:system_time(nanosecond).
+    toroco_clock:timestamp_ns().
 
 %% @doc A lifecycle event about `Name', for a producer that holds no sinks
 %% of its own (the wiring server).
@@ -242,7 +245,7 @@ handle_info(_Msg, State) ->
 publish(SubsMap) ->
     Subs = maps:values(SubsMap),
     ets:insert(?TABLE, {subs, Subs}),
-    Msg = {'$toroco_tap', Subs},
+    Msg = ?WIRE_TAP(Subs),
     _ = [erlang:send(Name, Msg) || Name <- erlang:registered(), is_network(Name)],
     ok.
 

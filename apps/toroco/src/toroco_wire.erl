@@ -45,8 +45,16 @@
 %%     <td>a `latest' delivery was handled</td><td>the newest pending value, if any</td></tr>
 %% <tr><td>`WIRE_IDLE'</td><td>a process → itself</td>
 %%     <td>the idle tick (see `idle_arm/0')</td><td>none</td></tr>
-%% <tr><td>`{'$toroco_tap', Subs}'</td><td>`toroco_tap' → emitters, routers</td>
+%% <tr><td>`WIRE_TAP(Subs)'</td><td>`toroco_tap' → emitters, routers</td>
 %%     <td>observer subscriptions change</td><td>none</td></tr>
+%% <tr><td>`WIRE_RESUBSCRIBE'</td><td>wiring server → consumers</td>
+%%     <td>a node of the robot came back</td>
+%%     <td>the consumer subscribes again to its orphaned remote sources</td></tr>
+%% <tr><td>`WIRE_STEP(Token, Msg)'</td><td>`toroco_lockstep' → any of the above</td>
+%%     <td>lockstep (SPEC §14): one message of the path, a stimulus or a
+%%         timer (`WIRE_TIMER(Kind, Msg)'), in its turn</td>
+%%     <td>`toroco_lockstep:done(Token)' once it and the events it inserted
+%%         (the last one `WIRE_STEP_DONE(Token)') are handled</td></tr>
 %% </table>
 %%
 %% The wiring server reaches consumers with calls (`toroco_consumer':
@@ -59,7 +67,7 @@
 -include("toroco_wire.hrl").
 
 -export([address/1, send/2, call/4, start_opts/0, keepalive_ms/0, max_age_ms/0, remote/1]).
--export([idle_arm/0, idle_tick/1]).
+-export([idle_arm/0, idle_tick/1, step_done/2]).
 -export([new_links/0, start_sync/4, sync_answer/5, sync_down/2, sync_expire/1, sync_done/1,
          sync_fresh/3, finish_sync/2, detach_all/2, hello/4, late_state/4, down/3, carries/3,
          hold_timer/2, orphans/1, resubscribe/3]).
@@ -101,13 +109,25 @@ address(Reg) -> {Reg, node()}.
 %% gone), or a node that is not connected or whose connection is congested
 %% (a frozen peer), swallows the message, as a cut wire would: the event
 %% path never waits for another node.
+%% In lockstep (`toroco_clock:lockstep/1') a send to this node is handed to
+%% `toroco_lockstep', which delivers it as a step in its turn.
 -spec send(address() | atom(), term()) -> ok.
-send({Reg, Node}, Msg) when Node =:= node() ->
+send({Reg, Node} = To, Msg) when Node =:= node() ->
     %% the event path's common case: a plain send to a local name
-    try Reg ! Msg of
-        _ -> ok
-    catch
-        error:badarg -> ok
+    case persistent_term:get(toroco_lockstep, none) of
+        none ->
+            try Reg ! Msg of
+                _ -> ok
+            catch
+                error:badarg -> ok
+            end;
+        Lockstep ->
+            toroco_lockstep:send(Lockstep, To, Msg)
+    end;
+send(Pid, Msg) when is_pid(Pid), node(Pid) =:= node() ->
+    case persistent_term:get(toroco_lockstep, none) of
+        none -> Pid ! Msg, ok;
+        Lockstep -> toroco_lockstep:send(Lockstep, Pid, Msg)
     end;
 send(To, Msg) ->
     try erlang:send(To, Msg, [noconnect, nosuspend]) of
@@ -266,9 +286,41 @@ carries(Tag, Src, #{ups := Ups}) ->
 -spec hold_timer(infinity | integer(), infinity | integer()) ->
           {infinity | integer(), [gen_statem:action()]}.
 hold_timer(Same, Same) -> {Same, []};
-hold_timer(infinity, _) -> {infinity, [{{timeout, hold}, cancel}]};
+hold_timer(infinity, _) ->
+    case toroco_clock:lockstep_server() of
+        none -> {infinity, [{{timeout, hold}, cancel}]};
+        _ -> toroco_clock:cancel_timer({timeout, hold}), {infinity, []}
+    end;
 hold_timer(Next, _) ->
-    {Next, [{{timeout, hold}, toroco_clock:real_deadline(Next), expire, [{abs, true}]}]}.
+    case toroco_clock:lockstep_server() of
+        none -> {Next, [{{timeout, hold}, toroco_clock:real_deadline(Next), expire, [{abs, true}]}]};
+        _ -> toroco_clock:set_timer({timeout, hold}, Next, expire), {Next, []}
+    end.
+
+%% @doc A step handled (lockstep, see `toroco_lockstep'): the result of
+%% handling `WIRE_STEP(Token, Msg)' with, after its own actions, the
+%% internal event that says so, so that the events it inserts are handled
+%% first. A process that stops says so by its death.
+-spec step_done(reference(), gen_statem:event_handler_result(term())) ->
+          gen_statem:event_handler_result(term()).
+step_done(Token, R) ->
+    Done = {next_event, internal, ?WIRE_STEP_DONE(Token)},
+    case R of
+        {keep_state, D} -> {keep_state, D, [Done]};
+        {keep_state, D, A} -> {keep_state, D, then(A, Done)};
+        keep_state_and_data -> {keep_state_and_data, [Done]};
+        {keep_state_and_data, A} -> {keep_state_and_data, then(A, Done)};
+        {next_state, S, D} -> {next_state, S, D, [Done]};
+        {next_state, S, D, A} -> {next_state, S, D, then(A, Done)};
+        {repeat_state, D} -> {repeat_state, D, [Done]};
+        {repeat_state, D, A} -> {repeat_state, D, then(A, Done)};
+        repeat_state_and_data -> {repeat_state_and_data, [Done]};
+        {repeat_state_and_data, A} -> {repeat_state_and_data, then(A, Done)};
+        Stop -> Stop
+    end.
+
+then(A, Done) when is_list(A) -> A ++ [Done];
+then(A, Done) -> [A, Done].
 
 listen(Src, Pid, Links) ->
     L1 = #{pids := Pids, mons := Mons} = forget(Src, Links),

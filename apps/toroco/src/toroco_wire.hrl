@@ -29,4 +29,20 @@
 %% whose reductions grew by no more than IDLE_REDUCTIONS since (a tick of its
 %% own costs 34 to 42 here, the lightest event about 30 more) did nothing.
 -define(WIRE_IDLE, '$toroco_idle').
+%% toroco_tap -> emitters and routers: the observer tap's subscriptions
+%% changed (SPEC §10); each keeps the sinks that concern it.
+-define(WIRE_TAP(Subs), {'$toroco_tap', Subs}).
+%% the wiring server -> consumers: a node came back, subscribe again to
+%% the remote sources no incarnation answers for (SPEC §13).
+-define(WIRE_RESUBSCRIBE, '$toroco_resubscribe').
 -define(IDLE_REDUCTIONS, 50).
+%% toroco_lockstep -> a process of the event path, in lockstep (SPEC §14):
+%% one message of the path (or a stimulus) to handle; the receiver answers
+%% toroco_lockstep:done(Token) once it and the events it inserted are handled.
+-define(WIRE_STEP(Token, Msg), {'$toroco_step', Token, Msg}).
+%% a process -> itself: the step is handled (an internal event queued after
+%% the step's own, see toroco_wire:step_done/2).
+-define(WIRE_STEP_DONE(Token), {'$toroco_step_done', Token}).
+%% toroco_lockstep -> a timer's owner, inside a step: the simulated timer
+%% `Kind' (a gen_statem timeout type) fired with `Msg'.
+-define(WIRE_TIMER(Kind, Msg), {'$toroco_timer', Kind, Msg}).

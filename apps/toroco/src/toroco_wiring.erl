@@ -24,6 +24,8 @@
 -module(toroco_wiring).
 -behaviour(gen_server).
 
+-include("toroco_wire.hrl").
+
 -export([start_link/0, call/1, call/2, lookup/1, subs_of/1, known/1, stopping/0, peers/0]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 
@@ -254,7 +256,7 @@ others(#s{known = Known}) ->
 %% The consumers fed from `Node' subscribe again to what they do not hear.
 resubscribe(Node, #s{wiring = W}) ->
     #{routers := Rs, gates := Gs} = toroco_wiring_core:plan(W),
-    _ = [toroco_wire:send(toroco_wire:address(Reg), '$toroco_resubscribe')
+    _ = [toroco_wire:send(toroco_wire:address(Reg), ?WIRE_RESUBSCRIBE)
          || #{reg := Reg, upstreams := Ups} <- maps:values(Rs) ++ maps:values(Gs),
             lists:any(fun({_, {_, N}}) -> N =:= Node; (_) -> false end, maps:values(Ups))],
     ok.
@@ -389,6 +391,23 @@ node_spec(_Kind, Name, _Module, Opts) when not is_map(Opts) ->
 node_spec(device, Name, Module, Opts) ->
     {ok, toroco_device:spec(Name, Module, Opts)};
 node_spec(behavior, Name, Module, Opts) ->
+    case toroco_behavior:configured(Module) of
+        true -> configured_spec(Name, Module, Opts);
+        false -> plain_spec(Name, Module, Opts)
+    end.
+
+%% A module whose ports depend on its options (`interface/1'): it gets them
+%% all but the layer, `params' included.
+configured_spec(Name, Module, Opts) ->
+    case maps:get(layer, Opts, 0) of
+        L when is_integer(L), L >= 0 ->
+            {ok, #{kind => behavior, name => Name, module => Module, layer => L,
+                   args => maps:remove(layer, Opts)}};
+        L ->
+            {error, {bad_layer, {Name, L}}}
+    end.
+
+plain_spec(Name, Module, Opts) ->
     case {maps:keys(maps:without([layer, params], Opts)), maps:get(layer, Opts, 0),
           maps:get(params, Opts, #{})} of
         {[Bad | _], _, _} -> {error, {bad_option, {Name, Bad}}};

@@ -255,14 +255,17 @@ wiring_server_crashes_100_times_under_load(_Config) ->
     Before = toroco:inspect(),
     BeforeA = maps:without([inputs, device], toroco:inspect(a)),
     Feeder = spawn_link(fun() -> feed(1) end),
-    Kills = [begin
-                 Pid = whereis(toroco_wiring),
-                 exit(Pid, kill),
-                 ok = wait_until(fun() -> is_pid(whereis(toroco_wiring)) andalso whereis(toroco_wiring) =/= Pid end, 2000),
-                 timer:sleep(10),
-                 1
-             end || _ <- lists:seq(1, 100)],
-    100 = lists:sum(Kills),
+    Killed = [begin
+                  Pid = whereis(toroco_wiring),
+                  exit(Pid, kill),
+                  ok = wait_until(fun() -> is_pid(whereis(toroco_wiring)) andalso whereis(toroco_wiring) =/= Pid end, 2000),
+                  timer:sleep(10),
+                  Pid
+              end || _ <- lists:seq(1, 100)],
+    %% a hundred incarnations were killed, each a new one, and none is left
+    100 = length(lists:usort(Killed)),
+    false = lists:any(fun erlang:is_process_alive/1, Killed),
+    false = lists:member(whereis(toroco_wiring), Killed),
     unlink(Feeder),
     exit(Feeder, kill),
     Before = toroco:inspect(),

@@ -20,16 +20,16 @@
 
 -spec history(atom()) -> history().
 history(A) ->
-    gen_statem:call(toroco_names:process(A), history).
+    toroco_device:call(A, history, 5000).
 
 -spec clear(atom()) -> ok.
 clear(A) ->
-    gen_statem:call(toroco_names:process(A), clear).
+    toroco_device:call(A, clear, 5000).
 
 %% @doc Waits until `Pred(History)' is true; `{error, timeout}' otherwise.
 -spec await(atom(), fun((history()) -> boolean()), timeout()) -> ok | {error, timeout}.
 await(A, Pred, Timeout) ->
-    try gen_statem:call(toroco_names:process(A), {await, Pred, deadline(Timeout)}, Timeout)
+    try toroco_device:call(A, {await, Pred, deadline(Timeout)}, Timeout)
     catch exit:{timeout, _} -> {error, timeout}
     end.
 
@@ -51,7 +51,7 @@ init(_Name, Opts) ->
 
 -spec handle_input(atom(), term(), recording, map()) -> toroco_behavior:result().
 handle_input(In, V, _State, D = #{rev := Rev, n := N, max := Max, waiters := Ws}) ->
-    Rev1 = [{In, V, erlang:monotonic_time(millisecond)} | Rev],
+    Rev1 = [{In, V, toroco_clock:now_ms()} | Rev],
     {Rev2, N2} = case N + 1 > Max of
                      true -> {lists:sublist(Rev1, Max), Max};
                      false -> {Rev1, N + 1}

@@ -15,7 +15,9 @@
 %%     `toroco_pru_client'. The program reads one button, so one
 %%     `toroco_gpio_button' device serves one owner.</li>
 %% </ul>
-%% {@link sim_button/2} sets the line's physical level on the sim backend.
+%% {@link sim_button/2} sets the line's physical level on the sim backend;
+%% in lockstep (SPEC §14) {@link stimulus/2} hands a debounced edge in as a
+%% step instead.
 %%
 %% `info/2': `line', `active_low', `debounce_ms', `last', `edges', and the
 %% attachment's keys (`port_status', `reconnect_failures', ...: see
@@ -24,7 +26,7 @@
 -behaviour(toroco_device).
 -behaviour(toroco_pru_client).
 
--export([sim_button/2]).
+-export([sim_button/2, stimulus/2]).
 -export([interface/1, init/2, handle_input/4, handle_event/4, info/2, terminate/3]).
 -export([configure/1, port_event/2]).
 
@@ -37,6 +39,12 @@
 sim_button(Device, Level) ->
     toroco_pru_client:sim(Device, ?SIM_CALL,
                           fun(Port, _) -> toroco_pru_port:sim_button(Port, Level) end).
+
+%% @doc Lockstep: a debounced edge of device `Device', as a stimulus for
+%% `toroco_clock:tick/2'.
+-spec stimulus(atom(), pressed | released) -> toroco_clock:stimulus().
+stimulus(Device, Edge) ->
+    {Device, {?MODULE, edge, Edge}}.
 
 %%====================================================================
 %% toroco_device
@@ -59,6 +67,8 @@ handle_input(_Input, _Value, _State, _D) ->
           toroco_behavior:result().
 handle_event({call, From}, ?SIM_CALL, _State, D = #{button := #{line := Line}}) ->
     {keep_state_and_data, [{reply, From, toroco_pru_client:sim_reply(D, Line)}]};
+handle_event(info, {?MODULE, edge, Edge}, _State, D) when Edge =:= pressed; Edge =:= released ->
+    port_event({button, Edge, 0}, D);
 handle_event(Type, Content, State, D) when Type =:= info; Type =:= {timeout, reconnect} ->
     toroco_pru_client:handle_event(?MODULE, Type, Content, State, D).
 

@@ -82,7 +82,7 @@
 -spec owner_keys() -> [atom()].
 owner_keys() ->
     [backend, executable, sysfs_root, gpiochip, sim_script, remoteproc, firmware,
-     rpmsg_dev, max_restarts].
+     rpmsg_dev, max_restarts, hello_timeout_ms, reply_timeout_ms, restart_backoff].
 
 %% @doc A client from a device's options (only the `port' and owner keys are
 %% looked at); nothing is started yet.
@@ -235,7 +235,7 @@ describe(#{mode := Mode, pid := Pid, restarts := R, losses := L, failures := F})
 -spec sim(atom(), term(), fun((pid(), term()) -> ok | {error, term()})) ->
           ok | {error, term()}.
 sim(Device, Request, F) ->
-    try gen_statem:call(toroco_names:process(Device), Request, 5000) of
+    try toroco_device:call(Device, Request, 5000) of
         {ok, Pid, Detail} ->
             try F(Pid, Detail)
             catch exit:{Reason, _} -> {error, {port_call, Reason}}

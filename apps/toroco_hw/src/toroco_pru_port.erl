@@ -1,4 +1,4 @@
-%% @doc The owner of the `pru_port' C program: one gen_server per program.
+%% @doc The owner of the `pru_port' C program: one gen_statem per program.
 %%
 %% It spawns `priv/pru_port' as an Erlang port (`{packet, 2}', terms in the
 %% external format on both sides; the frames are in
@@ -8,8 +8,66 @@
 %% channels, servo calibrations, watchdog, button, the enable state), so
 %% when the program dies it starts a new one and applies that configuration
 %% again: the servos come back at neutral, and velocities are never
-%% replayed. On terminate it puts the servos at neutral and closes the port,
-%% which the program also takes as the signal to go neutral.
+%% replayed. On terminate it commands neutral and closes the port, which the
+%% program also takes as the signal to go neutral.
+%%
+%% This process is the one that must stop the motors, so no callback ever
+%% waits for the program: the hello, each configuration step and each reply
+%% are states and data, and the process answers every call meanwhile.
+%%
+%% States:
+%% <table>
+%% <tr><th>state</th><th>what it waits for</th><th>leaves on</th></tr>
+%% <tr><td>`connecting'</td><td>the delay before (re)starting the program
+%%   (`restart_backoff'), then the program's `{hello, 1, Backend}' (at most
+%%   `hello_timeout_ms')</td><td>hello: `configuring'; no hello in time, an
+%%   exit or an unexpected frame: the program is killed and `connecting'
+%%   again, later</td></tr>
+%% <tr><td>`configuring'</td><td>the reply to each configuration step in
+%%   turn: watchdog, servos, `neutral', enable, ADC, button (each at most
+%%   `reply_timeout_ms')</td><td>the last reply: `running'; an exit or a
+%%   step timeout: `connecting'; a refused step: stop (the first start:
+%%   `start_link/1' returns the error)</td></tr>
+%% <tr><td>`running'</td><td>requests, replies, events</td><td>an exit:
+%%   `connecting'</td></tr>
+%% </table>
+%% The first restart after a program that was `running' is immediate; each
+%% further program that does not reach `running' doubles the delay, from
+%% the first to the last of `restart_backoff' (default `{100, 5000}' ms).
+%% More than `max_restarts' `{N, WindowMs}' (default `{5, 10000}') restarts
+%% stop the process (`{port_program_failed, Why}'). `info/1' counts them.
+%%
+%% Messages (callers' calls, and what each gets while not `running'):
+%% <table>
+%% <tr><th>message</th><th>from</th><th>`running'</th><th>`connecting',
+%%   `configuring'</th></tr>
+%% <tr><td>`{request, R}', R a configuration (`configure_adc',
+%%   `configure_servos', `configure_watchdog', `configure_button')</td>
+%%   <td>devices attaching</td><td>sent; the reply when it comes; remembered
+%%   when `ok'</td><td>postponed until `running' (it changes what a
+%%   restart re-applies, so it follows the re-applied configuration)</td></tr>
+%% <tr><td>`{request, neutral}'</td><td>devices, terminate</td><td>sent</td>
+%%   <td>postponed; the program is commanded neutral anyway as the first
+%%   servo command after its servos are configured</td></tr>
+%% <tr><td>`{request, R}', any other (`set_servos', `enable_servos',
+%%   `ping', `sim_adc', `sim_button', unknown)</td><td>devices, tests</td>
+%%   <td>sent</td><td>`{error, {connecting, Phase}}' at once, Phase
+%%   `restart_backoff' | `awaiting_hello' | `configuring': a velocity is
+%%   not kept for later, and the servo device must not wait</td></tr>
+%% <tr><td>`os_pid'</td><td>tests, operators</td><td>the pid</td>
+%%   <td>postponed (the pid of a running program)</td></tr>
+%% <tr><td>`info', `{subscribe, Pid}', `{unsubscribe, Pid}'</td>
+%%   <td>anyone</td><td colspan="2">answered at once</td></tr>
+%% <tr><td>`await_start'</td><td>`start_link/1', in the caller</td>
+%%   <td>`ok'</td><td>answered when the first program is `running', or
+%%   with the error that ended the first start</td></tr>
+%% <tr><td>`{toroco_pru_port, event()}'</td><td>this process</td>
+%%   <td colspan="2">to each subscriber; `{port_restarted, Why}' once a
+%%   restarted program is `running'</td></tr>
+%% </table>
+%% `start_link/1' waits in the caller (not in this process) until the first
+%% program is configured, so a refused configuration is still its error;
+%% the first start is not retried.
 %%
 %% The device modules (`toroco_pru_sensors', `toroco_servo_motors',
 %% `toroco_gpio_button') sit on top of this process; it knows nothing of the
@@ -17,7 +75,7 @@
 %%
 %% Functions, by purpose:
 %% <ul>
-%% <li>life: `start_link/1', `stop/1', `os_pid/1'</li>
+%% <li>life: `start_link/1', `stop/1', `os_pid/1', `info/1'</li>
 %% <li>configuration (remembered, re-applied after a restart):
 %%     `configure_adc/2', `configure_servos/2', `enable_servos/2',
 %%     `configure_watchdog/2', `configure_button/2'</li>
@@ -26,18 +84,18 @@
 %% <li>events: `subscribe/1,2', `unsubscribe/1,2'</li>
 %% </ul>
 -module(toroco_pru_port).
--behaviour(gen_server).
+-behaviour(gen_statem).
 
--export([start_link/1, stop/1, os_pid/1,
+-export([start_link/1, stop/1, os_pid/1, info/1,
          configure_adc/2, configure_servos/2, enable_servos/2,
          configure_watchdog/2, configure_button/2,
          set_servos/2, neutral/1, ping/1, call/2, call/3,
          sim_adc/3, sim_button/2,
          subscribe/1, subscribe/2, unsubscribe/1, unsubscribe/2]).
--export([init/1, handle_call/3, handle_cast/2, handle_info/2, terminate/2]).
+-export([callback_mode/0, init/1, handle_event/4, terminate/3]).
 
 -export_type([server/0, opts/0, adc_channel/0, servo_id/0, servo/0, button/0,
-              event/0, request/0]).
+              event/0, request/0, phase/0]).
 
 -type server() :: pid() | atom() | {global, term()} | {via, module(), term()}.
 -type adc_channel() ::
@@ -73,7 +131,10 @@
                   servos => #{servo_id() => servo()},
                   enabled => boolean(),
                   button => button(),
-                  max_restarts => {non_neg_integer(), pos_integer()}}.
+                  max_restarts => {non_neg_integer(), pos_integer()},
+                  hello_timeout_ms => pos_integer(),
+                  reply_timeout_ms => pos_integer(),
+                  restart_backoff => {non_neg_integer(), non_neg_integer()}}.
 %% What subscribers receive, as {toroco_pru_port, event()}. Times are the
 %% port program's monotonic clock in ms.
 -type event() :: {adc, 0..7, non_neg_integer(), integer()}
@@ -83,25 +144,47 @@
                | {port_restarted, term()}.
 %% A request in the protocol's own terms (see PROTOCOL.md), for call/2.
 -type request() :: ping | neutral | tuple().
+%% Where a program that is not running yet is: what `{error, {connecting,
+%% Phase}}' says.
+-type phase() :: restart_backoff | awaiting_hello | configuring | start_failed.
+-type state() :: connecting | configuring | running.
 
 -define(DEFAULT_PERIOD_NS, 20000000).
 -define(DEFAULT_NEUTRAL_NS, 1500000).
 -define(DEFAULT_SPAN_NS, 500000).
--define(START_TIMEOUT, 10000).
+-define(HELLO_TIMEOUT, 10000).
+-define(REPLY_TIMEOUT, 10000).
+-define(BACKOFF, {100, 5000}).
+-define(LOG, #{domain => [toroco, hw, pru_port]}).
 
--record(state, {
+-record(data, {
           opts :: opts(),
-          port :: port() | undefined,
-          os_pid :: integer() | undefined,
-          next_ref = 1 :: pos_integer(),
-          %% Ref => {From, Request}; Request decides what is remembered on ok
-          pending = #{} :: #{pos_integer() => {gen_server:from(), request()}},
-          subscribers = #{} :: #{pid() => reference()},
           %% the configuration as applied, in wire form
           config :: #{atom() => term()},
-          restarts = [] :: [integer()]
+          port :: port() | undefined,
+          os_pid :: integer() | undefined,
+          %% connecting: what the program said before it exited
+          fatal :: term() | undefined,
+          next_ref = 1 :: pos_integer(),
+          %% running: Ref => {From, Request}; Request decides what is
+          %% remembered on ok
+          pending = #{} :: #{pos_integer() => {gen_statem:from(), request()}},
+          %% configuring: the step in flight and those after it
+          step :: {pos_integer(), atom()} | undefined,
+          steps = [] :: [{atom(), request()}],
+          subscribers = #{} :: #{pid() => reference()},
+          %% the first start: who waits for it, or why it failed
+          start = {awaiting, []} :: {awaiting, [gen_statem:from()]} | {failed, term()} | done,
+          %% why the last running program ended (the port_restarted event)
+          down_why :: term(),
+          %% when restarts were scheduled, for max_restarts
+          restart_times = [] :: [integer()],
+          %% programs in a row that did not reach running
+          failures = 0 :: non_neg_integer(),
+          counters = #{restarts => 0, hello_timeouts => 0, failed_starts => 0,
+                       backoff_ms => 0} :: #{atom() => non_neg_integer()}
          }).
--type state() :: #state{}.
+-type data() :: #data{}.
 
 %%% ---------------------------------------------------------------------
 %%% API
@@ -110,23 +193,56 @@
 %% @doc Starts the program and applies the configuration in `Opts'. Fails
 %% with `{error, {Section, Reason}}' (Section = adc | servos | ...) when the
 %% program refuses a part of it, `{error, {port_program, Reason}}' when the
-%% program cannot start.
+%% program cannot start (`start_timeout' when it sends no hello within
+%% `hello_timeout_ms'). The caller waits for that outcome; the owner itself
+%% answers calls meanwhile. A refused start ends the owner with reason
+%% `normal'.
 -spec start_link(opts()) -> {ok, pid()} | {error, term()}.
 start_link(Opts) when is_map(Opts) ->
-    case maps:get(name, Opts, undefined) of
-        undefined -> gen_server:start_link(?MODULE, Opts, []);
-        Name when is_atom(Name) -> gen_server:start_link({local, Name}, ?MODULE, Opts, []);
-        Name -> gen_server:start_link(Name, ?MODULE, Opts, [])
+    Started = case maps:get(name, Opts, undefined) of
+                  undefined -> gen_statem:start_link(?MODULE, Opts, []);
+                  Name when is_atom(Name) -> gen_statem:start_link({local, Name}, ?MODULE, Opts, []);
+                  Name -> gen_statem:start_link(Name, ?MODULE, Opts, [])
+              end,
+    case Started of
+        {ok, Pid} -> await_start(Pid);
+        Other -> Other
+    end.
+
+%% The first program configured, or the reason it was not; a refused owner
+%% is gone (its name free again) when this returns.
+-spec await_start(pid()) -> {ok, pid()} | {error, term()}.
+await_start(Pid) ->
+    MRef = monitor(process, Pid),
+    Result = try gen_statem:call(Pid, await_start, infinity)
+             catch exit:{Reason, _} -> {error, {port_owner, Reason}}
+             end,
+    case Result of
+        ok ->
+            demonitor(MRef, [flush]),
+            {ok, Pid};
+        {error, _} = Error ->
+            receive {'DOWN', MRef, process, Pid, _} -> ok after 5000 -> ok end,
+            Error
     end.
 
 -spec stop(server()) -> ok.
 stop(Server) ->
-    gen_server:stop(Server).
+    gen_statem:stop(Server).
 
-%% @doc The OS pid of the running program.
+%% @doc The OS pid of the running program (waits while a program starts).
 -spec os_pid(server()) -> integer().
 os_pid(Server) ->
-    gen_server:call(Server, os_pid).
+    gen_statem:call(Server, os_pid).
+
+%% @doc The state, the current program's OS pid (or `undefined') and the
+%% counters: `restarts' (programs started after the first),
+%% `hello_timeouts', `failed_starts' (programs that never reached running),
+%% `backoff_ms' (the delay before the last restart), `failures' (in a row
+%% now), `pending' (requests in flight), `subscribers'.
+-spec info(server()) -> #{state := state(), atom() => term()}.
+info(Server) ->
+    gen_statem:call(Server, info).
 
 %% @doc Replaces the ADC channel set; remembered when accepted.
 -spec configure_adc(server(), [adc_channel()]) -> ok | {error, term()}.
@@ -144,7 +260,8 @@ configure_servos(Server, Servos) ->
         Error -> Error
     end.
 
-%% @doc Velocities in -100..100 by servo; a servo command (kicks the watchdog).
+%% @doc Velocities in -100..100 by servo; a servo command (kicks the
+%% watchdog). While no program runs: `{error, {connecting, Phase}}' at once.
 -spec set_servos(server(), #{servo_id() => -100..100}) -> ok | {error, term()}.
 set_servos(Server, Velocities) when is_map(Velocities) ->
     call(Server, {set_servos, maps:to_list(Velocities)}).
@@ -154,7 +271,8 @@ set_servos(Server, Velocities) when is_map(Velocities) ->
 enable_servos(Server, Enable) when is_boolean(Enable) ->
     call(Server, {enable_servos, Enable}).
 
-%% @doc Every servo to its neutral pulse.
+%% @doc Every servo to its neutral pulse (answered once a program has done
+%% it, when one is starting).
 -spec neutral(server()) -> ok | {error, term()}.
 neutral(Server) ->
     call(Server, neutral).
@@ -189,11 +307,11 @@ ping(Server) ->
 %% (5 s timeout).
 -spec call(server(), request()) -> term().
 call(Server, Request) ->
-    gen_server:call(Server, {request, Request}, 5000).
+    gen_statem:call(Server, {request, Request}, 5000).
 
 -spec call(server(), request(), timeout()) -> term().
 call(Server, Request, Timeout) ->
-    gen_server:call(Server, {request, Request}, Timeout).
+    gen_statem:call(Server, {request, Request}, Timeout).
 
 %% @doc Sends `{toroco_pru_port, event()}' to the caller (or Pid) from now on.
 -spec subscribe(server()) -> ok.
@@ -202,7 +320,7 @@ subscribe(Server) ->
 
 -spec subscribe(server(), pid()) -> ok.
 subscribe(Server, Pid) ->
-    gen_server:call(Server, {subscribe, Pid}).
+    gen_statem:call(Server, {subscribe, Pid}).
 
 -spec unsubscribe(server()) -> ok.
 unsubscribe(Server) ->
@@ -210,176 +328,349 @@ unsubscribe(Server) ->
 
 -spec unsubscribe(server(), pid()) -> ok.
 unsubscribe(Server, Pid) ->
-    gen_server:call(Server, {unsubscribe, Pid}).
+    gen_statem:call(Server, {unsubscribe, Pid}).
 
 %%% ---------------------------------------------------------------------
-%%% gen_server
+%%% gen_statem
 %%% ---------------------------------------------------------------------
 
--spec init(opts()) -> {ok, state()} | {stop, term()}.
+-spec callback_mode() -> gen_statem:callback_mode_result().
+callback_mode() ->
+    handle_event_function.
+
+-spec init(opts()) -> gen_statem:init_result(state()).
 init(Opts) ->
-    %% so that terminate/2 runs on shutdown and leaves the servos at neutral
+    %% so that terminate/3 runs on shutdown and leaves the servos at neutral
     process_flag(trap_exit, true),
     case initial_config(Opts) of
         {ok, Config} ->
-            State0 = #state{opts = Opts, config = Config},
-            case start_program(State0) of
-                {ok, State} -> {ok, State};
-                {error, Reason, _} -> {stop, Reason}
-            end;
+            {ok, connecting, #data{opts = Opts, config = Config},
+             [{next_event, internal, start_program}]};
         {error, Reason} ->
             {stop, Reason}
     end.
 
--spec handle_call(term(), gen_server:from(), state()) ->
-          {reply, term(), state()} | {noreply, state()}.
-handle_call({request, Request}, From, #state{port = Port, next_ref = Ref} = State) ->
-    case send_frame(Port, {Ref, Request}) of
-        ok ->
-            Pending = maps:put(Ref, {From, Request}, State#state.pending),
-            {noreply, State#state{next_ref = Ref + 1, pending = Pending}};
-        closed ->
-            %% the program just died; its exit_status, queued, restarts it
-            {reply, {error, {port_exit, closed}}, State}
-    end;
-handle_call(os_pid, _From, State) ->
-    {reply, State#state.os_pid, State};
-handle_call({subscribe, Pid}, _From, #state{subscribers = Subs} = State) ->
+-spec handle_event(gen_statem:event_type(), term(), state(), data()) ->
+          gen_statem:event_handler_result(state()).
+%% --- calls answered the same in every state
+handle_event({call, From}, {subscribe, Pid}, _State, #data{subscribers = Subs} = D) ->
     case maps:is_key(Pid, Subs) of
-        true -> {reply, ok, State};
-        false -> {reply, ok, State#state{subscribers = Subs#{Pid => monitor(process, Pid)}}}
+        true -> {keep_state_and_data, [{reply, From, ok}]};
+        false -> {keep_state, D#data{subscribers = Subs#{Pid => monitor(process, Pid)}},
+                  [{reply, From, ok}]}
     end;
-handle_call({unsubscribe, Pid}, _From, #state{subscribers = Subs} = State) ->
+handle_event({call, From}, {unsubscribe, Pid}, _State, #data{subscribers = Subs} = D) ->
     case maps:take(Pid, Subs) of
         {MRef, Rest} ->
             demonitor(MRef, [flush]),
-            {reply, ok, State#state{subscribers = Rest}};
+            {keep_state, D#data{subscribers = Rest}, [{reply, From, ok}]};
         error ->
-            {reply, ok, State}
+            {keep_state_and_data, [{reply, From, ok}]}
     end;
-handle_call(Other, _From, State) ->
-    {reply, {error, {unknown_call, Other}}, State}.
-
--spec handle_cast(term(), state()) -> {noreply, state()}.
-handle_cast(_Msg, State) ->
-    {noreply, State}.
-
--spec handle_info(term(), state()) -> {noreply, state()} | {stop, term(), state()}.
-handle_info({Port, {data, Bin}}, #state{port = Port} = State) ->
-    {noreply, from_program(binary_to_term(Bin), State)};
-handle_info({Port, {exit_status, Status}}, #state{port = Port} = State) ->
-    restart({exit_status, Status}, State);
-handle_info({'EXIT', Port, Reason}, #state{port = Port} = State) ->
+handle_event({call, From}, info, State, D) ->
+    {keep_state_and_data, [{reply, From, describe(State, D)}]};
+handle_event({call, From}, await_start, _State, #data{start = Start} = D) ->
+    case Start of
+        done -> {keep_state_and_data, [{reply, From, ok}]};
+        {awaiting, Froms} -> {keep_state, D#data{start = {awaiting, [From | Froms]}}};
+        {failed, Reason} -> {stop_and_reply, normal, [{reply, From, {error, Reason}}]}
+    end;
+%% --- requests
+handle_event({call, From}, {request, Request}, running,
+             #data{port = Port, next_ref = Ref, pending = Pending} = D) ->
+    case send_frame(Port, {Ref, Request}) of
+        ok ->
+            {keep_state, D#data{next_ref = Ref + 1,
+                                pending = Pending#{Ref => {From, Request}}}};
+        closed ->
+            %% the program just died; its exit_status, queued, restarts it
+            {keep_state_and_data, [{reply, From, {error, {port_exit, closed}}}]}
+    end;
+handle_event({call, From}, {request, Request}, State, D) ->
+    case waits_for_program(Request) of
+        true -> {keep_state_and_data, [postpone]};
+        false -> {keep_state_and_data,
+                  [{reply, From, {error, {connecting, phase(State, D)}}}]}
+    end;
+handle_event({call, From}, os_pid, running, #data{os_pid = OsPid}) ->
+    {keep_state_and_data, [{reply, From, OsPid}]};
+handle_event({call, _From}, os_pid, _State, _D) ->
+    {keep_state_and_data, [postpone]};
+handle_event({call, From}, Other, _State, _D) ->
+    {keep_state_and_data, [{reply, From, {error, {unknown_call, Other}}}]};
+%% --- starting a program
+handle_event(Type, start_program, connecting, D)
+  when Type =:= internal; Type =:= state_timeout ->
+    case open_program(D#data.opts) of
+        {ok, Port, OsPid} ->
+            {keep_state, D#data{port = Port, os_pid = OsPid, fatal = undefined},
+             [{state_timeout, maps:get(hello_timeout_ms, D#data.opts, ?HELLO_TIMEOUT),
+               hello_timeout}]};
+        {error, Reason} ->
+            program_failed(Reason, connecting, D)
+    end;
+handle_event(state_timeout, hello_timeout, connecting, #data{counters = C} = D) ->
+    logger:warning("pru_port program ~p sent no hello in time; killing it",
+                   [D#data.os_pid], ?LOG),
+    program_failed(start_timeout, connecting,
+                   D#data{counters = C#{hello_timeouts := maps:get(hello_timeouts, C) + 1}});
+handle_event(state_timeout, give_up, connecting, _D) ->
+    %% a failed first start nobody asked about (start_link's caller is gone)
+    {stop, normal};
+handle_event({timeout, step}, Section, configuring, D) ->
+    logger:warning("pru_port program ~p did not answer its ~p configuration in time",
+                   [D#data.os_pid, Section], ?LOG),
+    program_failed({Section, timeout}, configuring, D);
+%% --- what the program sends
+handle_event(info, {Port, {data, Bin}}, State, #data{port = Port} = D) ->
+    from_program(binary_to_term(Bin), State, D);
+handle_event(info, {Port, {exit_status, Status}}, State, #data{port = Port} = D) ->
+    program_ended({exit_status, Status}, State, D);
+handle_event(info, {'EXIT', Port, Reason}, State, #data{port = Port} = D) ->
     %% the port closed without an exit status (e.g. its pipe broke)
-    restart({port_exit, Reason}, State);
-handle_info({'EXIT', _OldPort, _}, State) ->
-    {noreply, State};
-handle_info({'DOWN', MRef, process, Pid, _}, #state{subscribers = Subs} = State) ->
+    program_ended({port_exit, Reason}, State, D);
+handle_event(info, {'DOWN', MRef, process, Pid, _}, _State, #data{subscribers = Subs} = D) ->
     case maps:get(Pid, Subs, undefined) of
-        MRef -> {noreply, State#state{subscribers = maps:remove(Pid, Subs)}};
-        _ -> {noreply, State}
+        MRef -> {keep_state, D#data{subscribers = maps:remove(Pid, Subs)}};
+        _ -> keep_state_and_data
     end;
-handle_info(_Other, State) ->
-    {noreply, State}.
+handle_event(info, _Other, _State, _D) ->
+    %% frames and exits of programs already given up, the kill helper's exit
+    keep_state_and_data;
+handle_event({timeout, step}, _Section, _State, _D) ->
+    %% a step timeout that fired as its program was given up
+    keep_state_and_data;
+handle_event(cast, _Msg, _State, _D) ->
+    keep_state_and_data.
 
--spec terminate(term(), state()) -> ok.
-terminate(_Reason, #state{port = undefined}) ->
+-spec terminate(term(), state(), data()) -> ok.
+terminate(_Reason, _State, #data{port = undefined}) ->
     ok;
-terminate(_Reason, #state{port = Port} = State) ->
-    %% Neutral first, explicitly; closing the port (stdin EOF) makes the
-    %% program do it again on its way out, should this reply never come.
-    _ = sync_request(neutral, 1000, State),
+terminate(_Reason, _State, #data{port = Port, next_ref = Ref}) ->
+    %% Neutral first, whatever the state: a program that has not said hello
+    %% yet reads it once it does. Closing the port (stdin EOF) makes the
+    %% program go neutral again on its way out; no reply is waited for.
+    _ = send_frame(Port, {Ref, neutral}),
     catch port_close(Port),
     ok.
+
+%%% ---------------------------------------------------------------------
+%%% Requests while no program runs
+%%% ---------------------------------------------------------------------
+
+%% Configuration follows the re-applied configuration, so it waits; a
+%% neutral waits for a program that can take it. Anything else is answered
+%% at once: a velocity is not kept for later.
+-spec waits_for_program(request()) -> boolean().
+waits_for_program(neutral) -> true;
+waits_for_program({configure_adc, _}) -> true;
+waits_for_program({configure_servos, _}) -> true;
+waits_for_program({configure_watchdog, _}) -> true;
+waits_for_program({configure_button, _}) -> true;
+waits_for_program({configure_button, _, _, _}) -> true;
+waits_for_program(_) -> false.
+
+-spec phase(state(), data()) -> phase().
+phase(configuring, _D) -> configuring;
+phase(_, #data{start = {failed, _}}) -> start_failed;
+phase(_, #data{port = undefined}) -> restart_backoff;
+phase(_, _D) -> awaiting_hello.
+
+-spec describe(state(), data()) -> #{state := state(), atom() => term()}.
+describe(State, #data{os_pid = OsPid, counters = C, failures = F, pending = P,
+                      subscribers = S}) ->
+    C#{state => State, os_pid => OsPid, failures => F, pending => map_size(P),
+       subscribers => map_size(S)}.
 
 %%% ---------------------------------------------------------------------
 %%% The program: start, configure, restart
 %%% ---------------------------------------------------------------------
 
--spec start_program(state()) -> {ok, state()} | {error, term(), state()}.
-start_program(#state{opts = Opts} = State) ->
+-spec open_program(opts()) -> {ok, port(), integer()} | {error, term()}.
+open_program(Opts) ->
     case executable(Opts) of
         {ok, Exe} ->
-            Port = open_port({spawn_executable, Exe},
-                             [{packet, 2}, binary, exit_status, use_stdio,
-                              {args, program_args(Opts)}]),
-            {os_pid, OsPid} = erlang:port_info(Port, os_pid),
-            State1 = State#state{port = Port, os_pid = OsPid},
-            case await_hello(Port) of
-                ok -> apply_config(State1);
-                {error, Reason} -> {error, {port_program, Reason}, State1#state{port = undefined}}
+            try open_port({spawn_executable, Exe},
+                          [{packet, 2}, binary, exit_status, use_stdio,
+                           {args, program_args(Opts)}]) of
+                Port ->
+                    {os_pid, OsPid} = erlang:port_info(Port, os_pid),
+                    {ok, Port, OsPid}
+            catch
+                error:Reason -> {error, {Reason, Exe}}
             end;
+        {error, _} = Error ->
+            Error
+    end.
+
+%% What the program sends, by state. In connecting only the hello (or why
+%% it cannot start) is expected.
+-spec from_program(term(), state(), data()) -> gen_statem:event_handler_result(state()).
+from_program({hello, 1, _Backend}, connecting, D) ->
+    configure(D#data{steps = config_steps(D#data.config)});
+from_program({fatal, Reason}, connecting, D) ->
+    %% the exit follows; it is reported with this reason
+    {keep_state, D#data{fatal = Reason}};
+from_program(Other, connecting, D) ->
+    program_failed({unexpected, Other}, connecting, D);
+from_program({reply, Ref, Result}, configuring, #data{step = {Ref, Section}} = D) ->
+    case Result of
+        ok ->
+            configure(D#data{step = undefined});
         {error, Reason} ->
-            {error, Reason, State}
-    end.
-
--spec await_hello(port()) -> ok | {error, term()}.
-await_hello(Port) ->
-    receive
-        {Port, {data, Bin}} ->
-            case binary_to_term(Bin) of
-                {hello, 1, _Backend} -> ok;
-                {fatal, Reason} -> await_exit(Port, Reason);
-                Other -> {error, {unexpected, Other}}
-            end;
-        {Port, {exit_status, Status}} ->
-            {error, {exit_status, Status}}
-    after ?START_TIMEOUT ->
-            catch port_close(Port),
-            {error, start_timeout}
-    end.
-
--spec await_exit(port(), term()) -> {error, term()}.
-await_exit(Port, Reason) ->
-    receive
-        {Port, {exit_status, _}} -> {error, Reason}
-    after 1000 ->
-            catch port_close(Port),
-            {error, Reason}
-    end.
+            config_refused({Section, Reason}, D);
+        Other ->
+            config_refused({Section, Other}, D)
+    end;
+from_program({reply, Ref, Result}, _State, #data{pending = Pending} = D) ->
+    case maps:take(Ref, Pending) of
+        {{From, Request}, Rest} ->
+            {keep_state, remember(Request, Result, D#data{pending = Rest}),
+             [{reply, From, Result}]};
+        error ->
+            keep_state_and_data
+    end;
+from_program(Event, _State, D) ->
+    event(Event, D),
+    keep_state_and_data.
 
 %% Each section in a fixed order: the watchdog and servos first so that
-%% outputs are safe before any input starts reporting.
--spec apply_config(state()) -> {ok, state()} | {error, term(), state()}.
-apply_config(#state{config = Config} = State) ->
+%% outputs are safe before any input starts reporting, and neutral as the
+%% first servo command of every program.
+-spec config_steps(#{atom() => term()}) -> [{atom(), request()}].
+config_steps(Config) ->
     Steps = [{watchdog, {configure_watchdog, maps:get(watchdog, Config)}},
              {servos, {configure_servos, maps:get(servos, Config)}},
+             {neutral, neutral},
              {enabled, {enable_servos, maps:get(enabled, Config)}},
              {adc, {configure_adc, maps:get(adc, Config)}},
              {button, maps:get(button, Config)}],
-    apply_steps(Steps, State).
+    %% servos start disabled, and a button unconfigured: saying so again
+    %% would only arm the watchdog
+    [S || S <- Steps, S =/= {enabled, {enable_servos, false}},
+          S =/= {button, {configure_button, none}}].
 
--spec apply_steps([{atom(), request()}], state()) -> {ok, state()} | {error, term(), state()}.
-apply_steps([], State) ->
-    {ok, State};
-apply_steps([{enabled, {enable_servos, false}} | Rest], State) ->
-    %% servos start disabled; saying so again would only arm the watchdog
-    apply_steps(Rest, State);
-apply_steps([{button, {configure_button, none}} | Rest], State) ->
-    apply_steps(Rest, State);
-apply_steps([{Section, Request} | Rest], State) ->
-    case sync_request(Request, ?START_TIMEOUT, State) of
-        {ok, State1} -> apply_steps(Rest, State1);
-        {{error, Reason}, State1} -> {error, {Section, Reason}, State1};
-        {Other, State1} -> {error, {Section, Other}, State1}
+%% Sends the next configuration step, or enters running after the last.
+-spec configure(data()) -> gen_statem:event_handler_result(state()).
+configure(#data{steps = [{Section, Request} | Rest], port = Port, next_ref = Ref} = D) ->
+    %% a closed port is followed by its exit_status, which ends the step
+    _ = send_frame(Port, {Ref, Request}),
+    {next_state, configuring, D#data{step = {Ref, Section}, steps = Rest, next_ref = Ref + 1},
+     [{{timeout, step}, maps:get(reply_timeout_ms, D#data.opts, ?REPLY_TIMEOUT), Section}]};
+configure(#data{steps = [], start = Start} = D) ->
+    Cancel = {{timeout, step}, cancel},
+    D1 = D#data{failures = 0},
+    case Start of
+        {awaiting, Froms} ->
+            {next_state, running, D1#data{start = done},
+             [Cancel | [{reply, From, ok} || From <- Froms]]};
+        done ->
+            logger:notice("pru_port program ~p running again (the last one: ~0p)",
+                          [D#data.os_pid, D#data.down_why], ?LOG),
+            event({port_restarted, D#data.down_why}, D1),
+            {next_state, running, D1, [Cancel]}
     end.
 
-%% A request answered before anything else is handled; events that arrive
-%% meanwhile are dispatched as usual.
--spec sync_request(request(), timeout(), state()) -> {term(), state()}.
-sync_request(Request, Timeout, #state{port = Port, next_ref = Ref} = State0) ->
-    State = State0#state{next_ref = Ref + 1},
-    case send_frame(Port, {Ref, Request}) of
-        ok ->
-            Deadline = erlang:monotonic_time(millisecond) + Timeout,
-            await_reply(Ref, Deadline, State);
-        closed ->
-            {{error, {port_exit, closed}}, State}
+%% The program refused a part of the configuration it was given: a first
+%% start fails with it; after a restart nothing better can be done than
+%% stopping (a supervisor may start it with its static options).
+-spec config_refused({atom(), term()}, data()) -> gen_statem:event_handler_result(state()).
+config_refused(Reason, #data{start = {awaiting, _}} = D) ->
+    start_failed(Reason, D);
+config_refused(Reason, D) ->
+    logger:error("pru_port program refused its configuration again: ~0p", [Reason], ?LOG),
+    {stop, {port_restart_failed, Reason}, D}.
+
+%% The program exited (or its port broke).
+-spec program_ended(term(), state(), data()) -> gen_statem:event_handler_result(state()).
+program_ended(_Why, connecting, #data{fatal = Fatal} = D) when Fatal =/= undefined ->
+    program_failed(Fatal, connecting, D#data{port = undefined});
+program_ended(Why, configuring, #data{step = {_, Section}} = D) ->
+    program_failed({Section, Why}, configuring, D#data{port = undefined});
+program_ended(Why, State, D) ->
+    program_failed(Why, State, D#data{port = undefined}).
+
+%% The program is gone or given up on: a first start fails; otherwise the
+%% program is started again, at once after one that ran, later after each
+%% one that did not.
+-spec program_failed(term(), state(), data()) -> gen_statem:event_handler_result(state()).
+program_failed(Why, State, #data{start = {awaiting, _}} = D) ->
+    start_failed(case State of
+                     connecting -> {port_program, Why};
+                     _ -> Why
+                 end, D);
+program_failed(Why, State, #data{opts = Opts, pending = Pending, counters = C} = D0) ->
+    logger:warning("pru_port program ended (~0p) while ~p; restarting it", [Why, State], ?LOG),
+    D1 = give_up_program(kill, D0),
+    Replies = [{reply, From, {error, {port_exit, Why}}} || {From, _} <- maps:values(Pending)],
+    {MaxR, WindowMs} = maps:get(max_restarts, Opts, {5, 10000}),
+    Now = erlang:monotonic_time(millisecond),
+    Recent = [T || T <- D1#data.restart_times, Now - T < WindowMs],
+    {Failures, DownWhy} = case State of
+                              running -> {0, Why};
+                              _ -> {D1#data.failures + 1, D1#data.down_why}
+                          end,
+    Delay = backoff(Failures, maps:get(restart_backoff, Opts, ?BACKOFF)),
+    D = D1#data{pending = #{}, step = undefined, steps = [], restart_times = [Now | Recent],
+                failures = Failures, down_why = DownWhy,
+                counters = C#{restarts := maps:get(restarts, C) + 1,
+                              failed_starts := maps:get(failed_starts, C) + min(Failures, 1),
+                              backoff_ms := Delay}},
+    case length(Recent) >= MaxR of
+        true ->
+            logger:error("pru_port program failed ~b times within ~b ms; giving up",
+                         [length(Recent) + 1, WindowMs], ?LOG),
+            {stop_and_reply, {port_program_failed, Why}, Replies, D};
+        false ->
+            {next_state, connecting, D,
+             [{state_timeout, Delay, start_program}, {{timeout, step}, cancel} | Replies]}
     end.
+
+%% The first start failed: start_link's caller gets the reason and this
+%% process ends; if that caller has not asked yet, the reason waits for it.
+-spec start_failed(term(), data()) -> gen_statem:event_handler_result(state()).
+start_failed(Reason, #data{start = {awaiting, Froms}} = D0) ->
+    %% a program that refused its configuration ends on its own once closed
+    D = give_up_program(case Reason of
+                            {port_program, _} -> kill;
+                            {_, timeout} -> kill;
+                            _ -> close
+                        end, D0),
+    case Froms of
+        [] ->
+            {next_state, connecting, D#data{start = {failed, Reason}},
+             [{state_timeout, 5000, give_up}, {{timeout, step}, cancel}]};
+        _ ->
+            {stop_and_reply, normal, [{reply, From, {error, Reason}} || From <- Froms],
+             D#data{start = {failed, Reason}}}
+    end.
+
+%% Closes the port of a program that may still run (stdin EOF: it goes
+%% neutral and exits) and, with `kill', kills it too: one that sent no
+%% hello or does not answer is wedged, and the next one puts the servos at
+%% neutral. The kill runs in a process of its own, not in this one.
+-spec give_up_program(kill | close, data()) -> data().
+give_up_program(_How, #data{port = undefined} = D) ->
+    D#data{os_pid = undefined};
+give_up_program(How, #data{port = Port, os_pid = OsPid} = D) ->
+    catch port_close(Port),
+    _ = case How of
+            kill -> spawn(fun() -> os:cmd("kill -KILL " ++ integer_to_list(OsPid) ++ " 2>/dev/null") end);
+            close -> ok
+        end,
+    D#data{port = undefined, os_pid = undefined}.
+
+%% The delay before the next program: none after one that ran, then the
+%% first delay doubled for each failure in a row, at most the last.
+-spec backoff(non_neg_integer(), {non_neg_integer(), non_neg_integer()}) -> non_neg_integer().
+backoff(0, _) -> 0;
+backoff(Failures, {First, Max}) -> min(Max, First bsl min(Failures - 1, 20)).
 
 %% A port whose program has died is closed before its exit_status is
 %% handled: writing to it then is not an error of this process.
--spec send_frame(port(), {pos_integer(), request()}) -> ok | closed.
+-spec send_frame(port() | undefined, {pos_integer(), request()}) -> ok | closed.
+send_frame(undefined, _Frame) ->
+    closed;
 send_frame(Port, Frame) ->
     try port_command(Port, term_to_binary(Frame)) of
         true -> ok
@@ -387,106 +678,47 @@ send_frame(Port, Frame) ->
         error:badarg -> closed
     end.
 
--spec await_reply(pos_integer(), integer(), state()) -> {term(), state()}.
-await_reply(Ref, Deadline, #state{port = Port} = State) ->
-    Left = max(0, Deadline - erlang:monotonic_time(millisecond)),
-    receive
-        {Port, {data, Bin}} ->
-            case binary_to_term(Bin) of
-                {reply, Ref, Result} -> {Result, State};
-                Other -> await_reply(Ref, Deadline, from_program(Other, State))
-            end;
-        {Port, {exit_status, Status}} ->
-            %% put back for handle_info, which owns restarting
-            self() ! {Port, {exit_status, Status}},
-            {{error, {exit_status, Status}}, State}
-    after Left ->
-            {{error, timeout}, State}
-    end.
-
--spec restart(term(), state()) -> {noreply, state()} | {stop, term(), state()}.
-restart(Why, #state{opts = Opts, pending = Pending, restarts = Restarts} = State0) ->
-    logger:warning("pru_port program ended (~0p); restarting it", [Why],
-                   #{domain => [toroco, hw, pru_port]}),
-    maps:foreach(fun(_Ref, {From, _}) -> gen_server:reply(From, {error, {port_exit, Why}}) end,
-                 Pending),
-    catch port_close(State0#state.port),
-    {MaxR, WindowMs} = maps:get(max_restarts, Opts, {5, 10000}),
-    Now = erlang:monotonic_time(millisecond),
-    Recent = [T || T <- Restarts, Now - T < WindowMs],
-    State = State0#state{port = undefined, os_pid = undefined, pending = #{},
-                         restarts = [Now | Recent]},
-    case length(Recent) >= MaxR of
-        true ->
-            logger:error("pru_port program failed ~b times within ~b ms; giving up",
-                         [length(Recent) + 1, WindowMs], #{domain => [toroco, hw, pru_port]}),
-            {stop, {port_program_failed, Why}, State};
-        false ->
-            case start_program(State) of
-                {ok, State1} ->
-                    notify({port_restarted, Why}, State1),
-                    {noreply, State1};
-                {error, Reason, State1} ->
-                    {stop, {port_restart_failed, Reason}, State1}
-            end
-    end.
-
 %%% ---------------------------------------------------------------------
-%%% What the program sends
+%%% Events
 %%% ---------------------------------------------------------------------
 
--spec from_program(term(), state()) -> state().
-from_program({reply, Ref, Result}, #state{pending = Pending} = State) ->
-    case maps:take(Ref, Pending) of
-        {{From, Request}, Rest} ->
-            gen_server:reply(From, Result),
-            remember(Request, Result, State#state{pending = Rest});
-        error ->
-            State
-    end;
-from_program({adc, _, _, _} = Event, State) ->
-    notify(Event, State),
-    State;
-from_program({button, _, _} = Event, State) ->
-    notify(Event, State),
-    State;
-from_program({watchdog, _} = Event, State) ->
-    logger:notice("pru_port watchdog: no servo command in time, servos at neutral", [],
-                  #{domain => [toroco, hw, pru_port]}),
-    notify(Event, State),
-    State;
-from_program({fault, Reason} = Event, State) ->
-    logger:warning("pru_port fault: ~0p", [Reason], #{domain => [toroco, hw, pru_port]}),
-    notify(Event, State),
-    State;
-from_program({error, {bad_frame, Why}}, State) ->
-    logger:error("pru_port refused a frame from this process (~0p)", [Why],
-                 #{domain => [toroco, hw, pru_port]}),
-    State;
-from_program(Other, State) ->
-    logger:warning("pru_port sent an unexpected term: ~0p", [Other],
-                   #{domain => [toroco, hw, pru_port]}),
-    State.
+-spec event(term(), data()) -> ok.
+event({adc, _, _, _} = Event, D) ->
+    notify(Event, D);
+event({button, _, _} = Event, D) ->
+    notify(Event, D);
+event({watchdog, _} = Event, D) ->
+    logger:notice("pru_port watchdog: no servo command in time, servos at neutral", [], ?LOG),
+    notify(Event, D);
+event({fault, Reason} = Event, D) ->
+    logger:warning("pru_port fault: ~0p", [Reason], ?LOG),
+    notify(Event, D);
+event({port_restarted, _} = Event, D) ->
+    notify(Event, D);
+event({error, {bad_frame, Why}}, _D) ->
+    logger:error("pru_port refused a frame from this process (~0p)", [Why], ?LOG);
+event(Other, _D) ->
+    logger:warning("pru_port sent an unexpected term: ~0p", [Other], ?LOG).
 
--spec notify(event(), state()) -> ok.
-notify(Event, #state{subscribers = Subs}) ->
+-spec notify(event(), data()) -> ok.
+notify(Event, #data{subscribers = Subs}) ->
     maps:foreach(fun(Pid, _) -> Pid ! {toroco_pru_port, Event} end, Subs).
 
 %% Accepted configuration requests become the configuration re-applied
 %% after a restart.
--spec remember(request(), term(), state()) -> state().
-remember(Request, ok, #state{config = Config} = State) ->
+-spec remember(request(), term(), data()) -> data().
+remember(Request, ok, #data{config = Config} = D) ->
     case Request of
-        {configure_adc, Wire} -> State#state{config = Config#{adc := Wire}};
-        {configure_servos, Wire} -> State#state{config = Config#{servos := Wire}};
-        {enable_servos, On} -> State#state{config = Config#{enabled := On}};
-        {configure_watchdog, Ms} -> State#state{config = Config#{watchdog := Ms}};
-        {configure_button, _} = B -> State#state{config = Config#{button := B}};
-        {configure_button, _, _, _} = B -> State#state{config = Config#{button := B}};
-        _ -> State
+        {configure_adc, Wire} -> D#data{config = Config#{adc := Wire}};
+        {configure_servos, Wire} -> D#data{config = Config#{servos := Wire}};
+        {enable_servos, On} -> D#data{config = Config#{enabled := On}};
+        {configure_watchdog, Ms} -> D#data{config = Config#{watchdog := Ms}};
+        {configure_button, _} = B -> D#data{config = Config#{button := B}};
+        {configure_button, _, _, _} = B -> D#data{config = Config#{button := B}};
+        _ -> D
     end;
-remember(_Request, _Result, State) ->
-    State.
+remember(_Request, _Result, D) ->
+    D.
 
 %%% ---------------------------------------------------------------------
 %%% Options to command line and wire terms

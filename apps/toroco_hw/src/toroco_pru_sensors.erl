@@ -22,7 +22,11 @@
 %% the PRU firmware runs). A value equal to the sensor's last emitted one is
 %% not emitted again (after a program restart the first sample is reported
 %% anew). {@link sim_adc/3} feeds a raw sample to a sensor's channel through
-%% the sim backend: the simulator's way in.
+%% the sim backend: the simulator's way in. In lockstep (SPEC §14) the
+%% simulator hands samples in as steps instead ({@link stimulus/3}): the
+%% device runs the program's threshold and hysteresis itself (the same
+%% rule as `adc_hysteresis' in `c_src/pru_port/src/adc_filter.c'), so no
+%% sample waits on a port's timing.
 %%
 %% `info/2' (under `device' in `toroco:inspect(Name)'): `sensors' (channel,
 %% mode, last value), `emitted', `foreign_events' (reports of channels that
@@ -32,7 +36,7 @@
 -behaviour(toroco_device).
 -behaviour(toroco_pru_client).
 
--export([sim_adc/3]).
+-export([sim_adc/3, stimulus/3]).
 -export([interface/1, init/2, handle_input/4, handle_event/4, info/2, terminate/3]).
 -export([configure/1, port_event/2]).
 
@@ -50,6 +54,12 @@
 sim_adc(Device, Sensor, Raw) ->
     toroco_pru_client:sim(Device, {?SIM_CALL, Sensor},
                           fun(Port, Channel) -> toroco_pru_port:sim_adc(Port, Channel, Raw) end).
+
+%% @doc Lockstep: one raw ADC sample of `Sensor' for device `Device', as a
+%% stimulus for `toroco_clock:tick/2'.
+-spec stimulus(atom(), atom(), 0..4095) -> toroco_clock:stimulus().
+stimulus(Device, Sensor, Raw) ->
+    {Device, {?MODULE, sample, Sensor, Raw}}.
 
 %%====================================================================
 %% toroco_device
@@ -81,6 +91,15 @@ handle_event({call, From}, {?SIM_CALL, Sensor}, _State, D = #{name := Name,
                 {_, #{channel := Ch}} -> toroco_pru_client:sim_reply(D, Ch)
             end,
     {keep_state_and_data, [{reply, From, Reply}]};
+handle_event(info, {?MODULE, sample, Sensor, Raw}, _State, D = #{sensors := Sensors}) ->
+    case lists:keyfind(Sensor, 1, Sensors) of
+        {_, #{channel := Ch} = Cfg} when is_integer(Raw), Raw >= 0, Raw =< 4095 ->
+            port_event({adc, Ch, filter(Raw, Cfg, maps:get(Sensor, maps:get(last, D), -1)), 0}, D);
+        _ ->
+            logger:warning("~p: sample ~0p for sensor ~0p refused", [maps:get(name, D), Raw, Sensor],
+                           #{domain => [toroco, hw]}),
+            keep_state_and_data
+    end;
 handle_event(Type, Content, State, D) when Type =:= info; Type =:= {timeout, reconnect} ->
     toroco_pru_client:handle_event(?MODULE, Type, Content, State, D).
 
@@ -126,6 +145,15 @@ port_event({adc, Ch, V, _T}, D = #{by_channel := ByCh, last := Last, emitted := 
 %%====================================================================
 %% Internals
 %%====================================================================
+
+%% The program's filter (adc_filter.c): raw for `analog'; for
+%% `analog_threshold' 1 from `threshold_high' up, 0 from `threshold_low'
+%% down, the previous value in between (0 before any).
+filter(Raw, #{mode := analog}, _Prev) -> Raw;
+filter(Raw, #{threshold_high := High}, _Prev) when Raw >= High -> 1;
+filter(Raw, #{threshold_low := Low}, _Prev) when Raw =< Low -> 0;
+filter(_Raw, _Cfg, Prev) when Prev < 0 -> 0;
+filter(_Raw, _Cfg, Prev) -> Prev.
 
 options(Opts) ->
     Allowed = [port, sensors | toroco_pru_client:owner_keys()],

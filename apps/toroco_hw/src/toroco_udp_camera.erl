@@ -25,7 +25,15 @@
 -module(toroco_udp_camera).
 -behaviour(toroco_device).
 
+-export([stimulus/2]).
 -export([interface/1, init/2, handle_input/4, handle_event/4, info/2, terminate/3]).
+
+%% @doc Lockstep (SPEC §14): a datagram for camera device `Device', as a
+%% stimulus for `toroco_clock:tick/2', checked and decoded exactly as one
+%% that came over UDP from the loopback address.
+-spec stimulus(atom(), binary()) -> toroco_clock:stimulus().
+stimulus(Device, Datagram) ->
+    {Device, {?MODULE, datagram, Datagram}}.
 
 -define(COORD_MAX, 1048576).
 -define(INT_MAX, 9223372036854775807).
@@ -67,6 +75,8 @@ handle_input(_Input, _Value, _State, _D) ->
 
 -spec handle_event(gen_statem:event_type(), term(), receiving, map()) ->
           toroco_behavior:result().
+handle_event(info, {?MODULE, datagram, Data}, State, D = #{socket := S}) ->
+    handle_event(info, {udp, S, {127, 0, 0, 1}, 0, Data}, State, D);
 handle_event(info, {udp, S, Ip, _Port, Data}, _State,
              D = #{socket := S, allow := Allow, max_datagram := Max}) ->
     Result = case toroco_net:udp_check(Ip, Data, Allow, Max) of

@@ -13,7 +13,7 @@
          shared_port_lost_and_back/1,
          servo_duty/1, clamping_and_bad_values/1, enable_disable/1,
          neutral_on_port_death/1, latched_command_back_after_port_restart/1, neutral_on_watchdog/1, keepalive_and_stall/1,
-         neutral_on_remove/1,
+         neutral_on_remove/1, servo_device_while_port_connecting/1,
          button_edges/1,
          camera_datagrams/1, camera_allow_list/1,
          poll_on_change/1, poll_crashes/1, fun_actuator_calls/1,
@@ -35,7 +35,7 @@ groups() ->
                         shared_port_lost_and_back]},
      {servo_motors, [], [servo_duty, clamping_and_bad_values, enable_disable,
                          neutral_on_port_death, latched_command_back_after_port_restart, neutral_on_watchdog, keepalive_and_stall,
-                         neutral_on_remove]},
+                         neutral_on_remove, servo_device_while_port_connecting]},
      {button, [], [button_edges]},
      {camera, [], [camera_datagrams, camera_allow_list]},
      {adapters, [], [poll_on_change, poll_crashes, fun_actuator_calls]},
@@ -314,6 +314,50 @@ neutral_on_remove(Config) ->
     await_input(world, applied, [{60, 60}, {0, 0}, {-10, 0}, {0, 0}]),
     ?assertNot(filelib:is_dir(Tmp)).
 
+servo_device_while_port_connecting(doc) ->
+    ["While its restarted program withholds its hello, the servo device answers within 100 ms "
+     "and a setvel is refused at once as connecting (counted), not queued; the program back, "
+     "the latched command drives again"];
+servo_device_while_port_connecting(Config) ->
+    Root = ?config(root, Config),
+    Flag = filename:join(Root, "no_hello"),
+    Exe = filename:join(Root, "withhold.sh"),
+    ok = file:write_file(Exe, ["#!/bin/sh\n",
+                               "if [ -e '", Flag, "' ]; then exec sleep 30; fi\n",
+                               "exec '", filename:join(code:priv_dir(toroco_hw), "pru_port"),
+                               "' \"$@\"\n"]),
+    ok = file:change_mode(Exe, 8#755),
+    ok = toroco:add_device(motors, toroco_servo_motors,
+                           #{sysfs_root => Root, executable => Exe, hello_timeout_ms => 60000}),
+    motor_rig(),
+    ok = toroco:inject({cmd, setvel}, {30, 30}, #{latch => true}),
+    await_input(world, applied, [{30, 30}]),
+    #{port := Owner} = dev(motors),
+    Old = toroco_pru_port:os_pid(Owner),
+    ok = file:write_file(Flag, ""),
+    "" = os:cmd("kill -9 " ++ integer_to_list(Old)),
+    ok = wait_until(fun() ->
+                            case toroco_pru_port:info(Owner) of
+                                #{state := connecting, os_pid := P} -> is_integer(P) andalso P =/= Old;
+                                _ -> false
+                            end
+                    end, ?WAIT),
+    #{port_errors := E0} = dev(motors),
+    ok = toroco:inject({cmd, setvel}, {60, 60}, #{latch => true}),
+    T0 = erlang:monotonic_time(microsecond),
+    ok = wait_until(fun() -> maps:get(port_errors, dev(motors)) > E0 end, ?WAIT),
+    Us = erlang:monotonic_time(microsecond) - T0,
+    ct:pal("servo device: setvel refused as connecting, seen in its info after ~b us", [Us]),
+    ?assert(Us < 100000),
+    ?assertEqual({error, {connecting, awaiting_hello}}, toroco_pru_port:set_servos(Owner, #{left => 60})),
+    #{commanded := {60, 60}, applied := {30, 30}} = dev(motors),
+    #{os_pid := Sleeper} = toroco_pru_port:info(Owner),
+    ok = file:delete(Flag),
+    "" = os:cmd("kill -9 " ++ integer_to_list(Sleeper)),
+    %% back: neutral first, then the wiring's latched command again
+    await_input(world, applied, [{30, 30}, {0, 0}, {60, 60}]),
+    ?assertEqual("1800000", pwm(Root, 0, "duty_cycle")).
+
 %%% ---------------------------------------------------------------------
 %%% Button
 %%% ---------------------------------------------------------------------
@@ -474,6 +518,8 @@ bad_options(Config) ->
          {toroco_udp_link, #{inputs => ["cmd"]}, {bad_option, {inputs, ["cmd"]}}},
          {toroco_tcp_link, #{max_line => 0}, {bad_option, {max_line, 0}}},
          {toroco_tcp_link, #{allow => [nowhere]}, {bad_option, {allow, [nowhere]}}},
+         {toroco_tcp_link, #{line_timeout => 0}, {bad_option, {line_timeout, 0}}},
+         {toroco_tcp_link, #{min_age => -1}, {bad_option, {min_age, -1}}},
          {toroco_pru_sensors, #{}, {bad_option, {sensors, missing}}},
          {toroco_pru_sensors, #{sensors => [{a, #{channel => 9}}]},
           {bad_option, {sensors, {a, {channel, 9}}}}},

@@ -9,7 +9,8 @@
 -export([event_codec/1,
          udp_round_trip/1, udp_latch_hold_unset/1, udp_allow_list/1, udp_bad_datagrams/1,
          tcp_round_trip/1, tcp_allow_list_and_max_clients/1, tcp_garbage_and_partial_lines/1,
-         tcp_connect_cycles/1]).
+         tcp_connect_cycles/1, tcp_silent_clients_shed/1, tcp_line_and_idle_timeouts/1,
+         tcp_per_peer_limit/1]).
 
 -define(WAIT, 5000).
 
@@ -22,7 +23,8 @@ all() ->
 groups() ->
     [{udp, [], [udp_round_trip, udp_latch_hold_unset, udp_allow_list, udp_bad_datagrams]},
      {tcp, [], [tcp_round_trip, tcp_allow_list_and_max_clients, tcp_garbage_and_partial_lines,
-                tcp_connect_cycles]}].
+                tcp_connect_cycles, tcp_silent_clients_shed, tcp_line_and_idle_timeouts,
+                tcp_per_peer_limit]}].
 
 init_per_testcase(_Case, Config) ->
     {ok, _} = application:ensure_all_started(toroco_hw),
@@ -188,7 +190,8 @@ tcp_round_trip(_Config) ->
 tcp_allow_list_and_max_clients(doc) ->
     ["Connections from outside the allow-list, or beyond max_clients, are closed and counted"];
 tcp_allow_list_and_max_clients(_Config) ->
-    {Port, _} = tcp_rig(#{allow => [{127, 0, 0, 2}], max_clients => 2}),
+    %% min_age: the third is refused, not admitted in place of an older one
+    {Port, _} = tcp_rig(#{allow => [{127, 0, 0, 2}], max_clients => 2, min_age => 60000}),
     Refused = connect(Port),
     ?assertEqual({error, closed}, gen_tcp:recv(Refused, 0, ?WAIT)),
     C1 = connect(Port, {127, 0, 0, 2}),
@@ -239,7 +242,9 @@ tcp_garbage_and_partial_lines(_Config) ->
 tcp_connect_cycles(doc) ->
     ["100 connect/disconnect cycles (half mid-line) leave no client, port or memory behind"];
 tcp_connect_cycles(_Config) ->
-    {Port, Pid} = tcp_rig(#{}),
+    %% This case is about leftovers: the bounds on strangers (line timeout,
+    %% shedding of the longest idle, per-address share) are kept out of it.
+    {Port, Pid} = tcp_rig(#{line_timeout => 60000, min_age => 60000, max_per_peer => 8}),
     Good = connect(Port),
     ok = wait_until(fun() -> maps:get(clients, dev(t)) =:= 1 end),
     Ports0 = length(erlang:ports()),
@@ -274,6 +279,73 @@ tcp_connect_cycles(_Config) ->
     ok = toroco:inject({src, status}, 1),
     ?assertEqual(#{<<"input">> => <<"status">>, <<"value">> => 1}, recv_event(Good)),
     gen_tcp:close(Good).
+
+tcp_silent_clients_shed(doc) ->
+    ["8 silent clients hold every slot: a 9th client's line is delivered within 2 s of "
+     "its connect, the longest-idle silent one closed for it and counted"];
+tcp_silent_clients_shed(_Config) ->
+    MinAge = 200,
+    {Port, _} = tcp_rig(#{max_clients => 8, max_per_peer => 8, min_age => MinAge,
+                          line_timeout => 60000}),
+    Silent = [connect(Port) || _ <- lists:seq(1, 8)],
+    ok = wait_until(fun() -> maps:get(clients, dev(t)) =:= 8 end),
+    %% the silent ones must be min_age old to be shed: a known wait
+    receive after MinAge -> ok end,
+    T0 = erlang:monotonic_time(millisecond),
+    Ninth = connect(Port, {127, 0, 0, 2}),
+    ok = gen_tcp:send(Ninth, <<"{\"output\":\"cmd\",\"value\":9}\n">>),
+    ok = toroco_fake_actuator:await(rec, fun(H) -> [V || {cmd, V, _} <- H] =:= [9] end, 2000),
+    Took = erlang:monotonic_time(millisecond) - T0,
+    ct:pal("the 9th client's line delivered ~b ms after its connect", [Took]),
+    ?assert(Took < 2000),
+    %% the first silent client was the longest idle: it is the one closed
+    [First | Others] = Silent,
+    ?assertEqual({error, closed}, gen_tcp:recv(First, 0, ?WAIT)),
+    #{clients := 8, closed_by := #{shed := 1}, refused := 0} = dev(t),
+    [?assertEqual({error, timeout}, gen_tcp:recv(S, 0, 0)) || S <- Others],
+    [gen_tcp:close(S) || S <- [Ninth | Silent]],
+    ok.
+
+tcp_line_and_idle_timeouts(doc) ->
+    ["A client silent since its connect, or with a line begun and not ended, is closed "
+     "after line_timeout; one quiet since its last line after idle_timeout; each counted"];
+tcp_line_and_idle_timeouts(_Config) ->
+    {LineT, IdleT} = {300, 900},
+    {Port, _} = tcp_rig(#{line_timeout => LineT, idle_timeout => IdleT}),
+    T0 = erlang:monotonic_time(millisecond),
+    Silent = connect(Port),
+    Half = connect(Port),
+    Quiet = connect(Port),
+    ok = gen_tcp:send(Half, <<"{\"output\":\"cmd\",\"value\":1}\n{\"output\":">>),
+    ok = gen_tcp:send(Quiet, <<"{\"output\":\"cmd\",\"value\":2}\n">>),
+    await_connections(rec, cmd, [[1], [2]]),
+    Closed = fun(S) -> {gen_tcp:recv(S, 0, ?WAIT), erlang:monotonic_time(millisecond) - T0} end,
+    {{error, closed}, TSilent} = Closed(Silent),
+    {{error, closed}, THalf} = Closed(Half),
+    {{error, closed}, TQuiet} = Closed(Quiet),
+    ct:pal("closed after ~b ms (silent), ~b ms (half a line), ~b ms (quiet); "
+           "line_timeout ~b, idle_timeout ~b", [TSilent, THalf, TQuiet, LineT, IdleT]),
+    ?assert(TSilent >= LineT andalso THalf >= LineT andalso TQuiet >= IdleT),
+    ?assert(TQuiet > THalf),
+    ?assertMatch(#{clients := 0, closed_by := #{line_timeout := 2, idle_timeout := 1},
+                   rejected_by := #{partial_line := 1}}, dev(t)),
+    [gen_tcp:close(S) || S <- [Silent, Half, Quiet]],
+    ok.
+
+tcp_per_peer_limit(doc) ->
+    ["One address holds at most max_per_peer connections; another address still gets in"];
+tcp_per_peer_limit(_Config) ->
+    {Port, _} = tcp_rig(#{max_per_peer => 2, min_age => 60000}),
+    [A1, A2] = [connect(Port) || _ <- [1, 2]],
+    ok = wait_until(fun() -> maps:get(clients, dev(t)) =:= 2 end),
+    A3 = connect(Port),
+    ?assertEqual({error, closed}, gen_tcp:recv(A3, 0, ?WAIT)),
+    B = connect(Port, {127, 0, 0, 2}),
+    ok = gen_tcp:send(B, <<"{\"output\":\"cmd\",\"value\":\"b\"}\n">>),
+    await_input(rec, cmd, [<<"b">>]),
+    #{clients := 3, refused_by := #{too_many_from_peer := 1}} = dev(t),
+    [gen_tcp:close(S) || S <- [A1, A2, A3, B]],
+    ok.
 
 %%% ---------------------------------------------------------------------
 %%% Helpers

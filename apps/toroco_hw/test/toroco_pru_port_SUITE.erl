@@ -12,7 +12,9 @@
          servo_duty/1, enable_disable/1, servo_errors/1,
          neutral_on_kill/1, neutral_on_watchdog/1, neutral_on_stdin_eof/1,
          neutral_on_owner_stop/1, bad_frames_raw/1, bad_requests_owner/1,
-         round_trip/1]).
+         round_trip/1,
+         servo_command_while_connecting/1, neutral_first_after_kill_in_configuring/1,
+         hello_backoff/1, first_start_without_hello/1]).
 
 -define(NEUTRAL, "1500000").
 -define(WAIT, 5000).
@@ -21,7 +23,8 @@ suite() ->
     [{timetrap, {seconds, 60}}].
 
 all() ->
-    [{group, adc}, {group, button}, {group, servos}, {group, safety}, {group, performance}].
+    [{group, adc}, {group, button}, {group, servos}, {group, safety}, {group, connecting},
+     {group, performance}].
 
 groups() ->
     [{adc, [], [threshold_crossings, analog_changes, sim_script, adc_errors]},
@@ -29,6 +32,8 @@ groups() ->
      {servos, [], [servo_duty, enable_disable, servo_errors]},
      {safety, [], [neutral_on_kill, neutral_on_watchdog, neutral_on_stdin_eof,
                    neutral_on_owner_stop, bad_frames_raw, bad_requests_owner]},
+     {connecting, [], [servo_command_while_connecting, neutral_first_after_kill_in_configuring,
+                       hello_backoff, first_start_without_hello]},
      {performance, [], [round_trip]}].
 
 init_per_suite(Config) ->
@@ -307,6 +312,151 @@ bad_requests_owner(Config) ->
     ?assertEqual(Pid, toroco_pru_port:os_pid(S)).
 
 %%% ---------------------------------------------------------------------
+%%% Connecting: the owner answers while a program starts
+%%% ---------------------------------------------------------------------
+
+servo_command_while_connecting(doc) ->
+    ["While a restarted program withholds its hello (30 s), a servo command answers within "
+     "100 ms with {error, {connecting, awaiting_hello}}; a neutral waits for the next program"];
+servo_command_while_connecting(Config) ->
+    Root = ?config(root, Config),
+    S = start(Config, #{executable => withhold_exe(Config), servos => servos(),
+                        hello_timeout_ms => 60000}),
+    ok = toroco_pru_port:subscribe(S),
+    ok = toroco_pru_port:set_servos(S, #{left => 50}),
+    Old = toroco_pru_port:os_pid(S),
+    ok = file:write_file(flag(Config), ""),
+    kill(Old),
+    ok = wait_until(fun() -> awaiting_hello(S, Old) end, ?WAIT),
+    #{os_pid := Sleeper} = toroco_pru_port:info(S),
+    Self = self(),
+    _ = spawn_link(fun() -> Self ! {neutral, toroco_pru_port:call(S, neutral, 60000)} end),
+    Calls = [begin
+                 T0 = erlang:monotonic_time(microsecond),
+                 R = toroco_pru_port:set_servos(S, #{left => 10}),
+                 {erlang:monotonic_time(microsecond) - T0, R}
+             end || _ <- lists:seq(1, 50)],
+    Us = lists:sort([T || {T, _} <- Calls]),
+    ct:pal("set_servos while the program withholds its hello, 50 calls: "
+           "first ~b us, median ~b us, max ~b us",
+           [element(1, hd(Calls)), lists:nth(25, Us), lists:last(Us)]),
+    ?assertEqual([{error, {connecting, awaiting_hello}}], lists:usort([R || {_, R} <- Calls])),
+    ?assert(lists:last(Us) < 100000),
+    ?assertEqual({error, {connecting, awaiting_hello}}, toroco_pru_port:ping(S)),
+    ?assertMatch(#{state := connecting, os_pid := Sleeper}, toroco_pru_port:info(S)),
+    receive {neutral, Early} -> ct:fail({neutral_answered_without_program, Early})
+    after 0 -> ok
+    end,
+    %% the test ends the withholding: the next program says hello, goes
+    %% neutral, and the waiting neutral is answered
+    ok = file:delete(flag(Config)),
+    kill(Sleeper),
+    receive
+        {toroco_pru_port, {port_restarted, Why}} -> ?assertEqual({exit_status, 137}, Why)
+    after ?WAIT -> ct:fail(no_restart)
+    end,
+    receive {neutral, Neutral} -> ?assertEqual(ok, Neutral)
+    after ?WAIT -> ct:fail(neutral_not_answered)
+    end,
+    ?assertEqual(?NEUTRAL, pwm(Root, 0, "duty_cycle")),
+    ok = toroco_pru_port:set_servos(S, #{left => 10}),
+    ok = toroco_pru_port:stop(S).
+
+neutral_first_after_kill_in_configuring(doc) ->
+    ["A program killed while it is being configured: meanwhile a servo command is refused "
+     "as connecting, and the next program's first servo command is neutral (its frames, "
+     "logged by a fake program)"];
+neutral_first_after_kill_in_configuring(Config) ->
+    Root = ?config(root, Config),
+    Exe = filename:join(Root, "fake_pru_port"),
+    {ok, _} = file:copy(filename:join(?config(data_dir, Config), "fake_pru_port.escript"), Exe),
+    ok = file:change_mode(Exe, 8#755),
+    Conf = filename:join(Root, "fake.conf"),
+    S = start(Config, #{executable => Exe, servos => servos(), enabled => true,
+                        watchdog_ms => 500}),
+    ok = toroco_pru_port:subscribe(S),
+    ok = toroco_pru_port:set_servos(S, #{left => 100, right => 100}),
+    First = toroco_pru_port:os_pid(S),
+    %% the second program leaves its servo configuration unanswered
+    ok = file:write_file(Conf, "{stall, configure_servos}.\n"),
+    kill(First),
+    ok = wait_until(fun() -> requests(Root, other_than(First), configure_servos) =/= [] end,
+                    4 * ?WAIT),
+    #{state := configuring, os_pid := Second} = toroco_pru_port:info(S),
+    ?assertEqual({error, {connecting, configuring}},
+                 toroco_pru_port:set_servos(S, #{left => 100, right => 100})),
+    ok = file:delete(Conf),
+    kill(Second),
+    receive
+        {toroco_pru_port, {port_restarted, Why}} -> ?assertEqual({exit_status, 137}, Why)
+    after 4 * ?WAIT -> ct:fail(no_restart)
+    end,
+    Third = toroco_pru_port:os_pid(S),
+    ok = toroco_pru_port:set_servos(S, #{left => 20}),
+    Tags = fun(Pid) -> [tag(R) || R <- requests(Root, fun(P) -> P =:= Pid end, any)] end,
+    ct:pal("frames by program: ~p", [[{P, Tags(P)} || P <- [First, Second, Third]]]),
+    ?assertEqual([configure_watchdog, configure_servos], Tags(Second)),
+    ?assertEqual([neutral, enable_servos, set_servos],
+                 [T || T <- Tags(Third), lists:member(T, [neutral, enable_servos, set_servos])]),
+    ?assertEqual([configure_watchdog, configure_servos, neutral, enable_servos, configure_adc,
+                  set_servos], Tags(Third)),
+    ok = toroco_pru_port:stop(S).
+
+hello_backoff(doc) ->
+    ["Programs that never say hello are killed and retried after 50, 100, 200, 400, 400 ms "
+     "(doubling, bounded), counted by info/1; the next one that says hello runs"];
+hello_backoff(Config) ->
+    S = start(Config, #{executable => withhold_exe(Config), servos => servos(),
+                        hello_timeout_ms => 200, restart_backoff => {50, 400},
+                        max_restarts => {1000, 60000}}),
+    ok = toroco_pru_port:subscribe(S),
+    ok = file:write_file(flag(Config), ""),
+    T0 = erlang:monotonic_time(millisecond),
+    kill(toroco_pru_port:os_pid(S)),
+    {Delays, Info} = watch_backoff(S, 6, [], T0 + 30000),
+    Elapsed = erlang:monotonic_time(millisecond) - T0,
+    ct:pal("six hellos that never came: delays ~p ms, ~b ms in all, ~p", [Delays, Elapsed, Info]),
+    %% 0: a program that ran is restarted at once
+    ?assertEqual([0, 50, 100, 200, 400], Delays),
+    ?assertMatch(#{state := connecting, hello_timeouts := 6, failed_starts := 6,
+                   restarts := 7, backoff_ms := 400, failures := 6}, Info),
+    %% six hello timeouts and the delays between them were waited
+    ?assert(Elapsed >= 6 * 200 + 50 + 100 + 200 + 400 + 400),
+    ok = file:delete(flag(Config)),
+    receive
+        {toroco_pru_port, {port_restarted, Why}} -> ?assertEqual({exit_status, 137}, Why)
+    after 4 * ?WAIT -> ct:fail(no_restart)
+    end,
+    ?assertMatch(#{state := running, failures := 0}, toroco_pru_port:info(S)),
+    ok = toroco_pru_port:set_servos(S, #{left => 10}),
+    ok = toroco_pru_port:stop(S).
+
+first_start_without_hello(doc) ->
+    ["A first program that never says hello: start_link's caller waits, the owner answers "
+     "meanwhile, and start_link returns {error, {port_program, start_timeout}} with the program "
+     "killed and the name free"];
+first_start_without_hello(Config) ->
+    ok = file:write_file(flag(Config), ""),
+    Self = self(),
+    Opts = #{name => hello_less, backend => sim, executable => withhold_exe(Config),
+             sysfs_root => ?config(root, Config), servos => servos(), hello_timeout_ms => 1000},
+    Starter = spawn(fun() -> Self ! {started, toroco_pru_port:start_link(Opts)} end),
+    ok = wait_until(fun() -> is_pid(whereis(hello_less)) end, ?WAIT),
+    #{state := connecting, os_pid := Sleeper} = toroco_pru_port:info(hello_less),
+    T0 = erlang:monotonic_time(microsecond),
+    ?assertEqual({error, {connecting, awaiting_hello}},
+                 toroco_pru_port:set_servos(hello_less, #{left => 10})),
+    ?assert(erlang:monotonic_time(microsecond) - T0 < 100000),
+    receive
+        {started, Result} ->
+            ?assertEqual({error, {port_program, start_timeout}}, Result)
+    after ?WAIT -> ct:fail(start_link_did_not_return)
+    end,
+    ?assertNot(is_process_alive(Starter)),
+    ?assertEqual(undefined, whereis(hello_less)),
+    ok = wait_until(fun() -> not filelib:is_dir("/proc/" ++ integer_to_list(Sleeper)) end, ?WAIT).
+
+%%% ---------------------------------------------------------------------
 %%% Performance
 %%% ---------------------------------------------------------------------
 
@@ -433,3 +583,58 @@ wait_until(Cond, Left) ->
             timer:sleep(10),
             wait_until(Cond, Left - 10)
     end.
+
+%% A program that withholds its hello (sleeps 30 s, until killed) while
+%% the case's flag file exists, and is the real program otherwise.
+withhold_exe(Config) ->
+    Exe = filename:join(?config(root, Config), "withhold.sh"),
+    ok = file:write_file(Exe, ["#!/bin/sh\n",
+                               "if [ -e '", flag(Config), "' ]; then exec sleep 30; fi\n",
+                               "exec '", ?config(exe, Config), "' \"$@\"\n"]),
+    ok = file:change_mode(Exe, 8#755),
+    Exe.
+
+flag(Config) ->
+    filename:join(?config(root, Config), "no_hello").
+
+kill(OsPid) ->
+    "" = os:cmd("kill -9 " ++ integer_to_list(OsPid)),
+    ok.
+
+awaiting_hello(S, Old) ->
+    case toroco_pru_port:info(S) of
+        #{state := connecting, os_pid := P} -> is_integer(P) andalso P =/= Old;
+        _ -> false
+    end.
+
+%% The distinct restart delays info/1 reports, in order, until N hello
+%% timeouts are counted.
+watch_backoff(S, N, Seen, Deadline) ->
+    Info = #{backoff_ms := Ms, hello_timeouts := H} = toroco_pru_port:info(S),
+    Seen1 = case Seen of
+                [Ms | _] -> Seen;
+                _ -> [Ms | Seen]
+            end,
+    case H >= N of
+        true -> {lists:reverse(Seen1), Info};
+        false ->
+            case erlang:monotonic_time(millisecond) > Deadline of
+                true -> ct:fail({hello_timeouts, H, lists:reverse(Seen1)});
+                false -> timer:sleep(5), watch_backoff(S, N, Seen1, Deadline)
+            end
+    end.
+
+%% The requests the fake program logged in Dir, of the programs Which
+%% accepts, with tag Tag (or any).
+requests(Dir, Which, Tag) ->
+    Log = case file:consult(filename:join(Dir, "frames.log")) of
+              {ok, Terms} -> Terms;
+              {error, _} -> []
+          end,
+    [R || {P, {_Ref, R}} <- Log, Which(P), Tag =:= any orelse tag(R) =:= Tag].
+
+other_than(Pid) ->
+    fun(P) -> P =/= Pid end.
+
+tag(T) when is_tuple(T) -> element(1, T);
+tag(A) -> A.

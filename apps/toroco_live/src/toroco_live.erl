@@ -18,7 +18,12 @@
 %% `off'), `token' (a binary, or `auto', the default: a random one). Two
 %% more keys of this implementation: `max_clients' (WebSocket clients at
 %% once, default 64) and `max_body' (bytes of a control request or frame,
-%% default 16384).
+%% default 16384). The bounds on strangers, for each of the two ports
+%% (`toroco_live_listener'): `request_timeout' (default 5000 ms to complete
+%% a request or WebSocket handshake), `idle_timeout' (default 30000 ms
+%% between requests), `max_connections' (default 128), `max_per_peer'
+%% (default 32 per client address) and `min_age' (default 2000 ms: the
+%% youngest a longest-idle connection may be to be shed for a newcomer).
 -module(toroco_live).
 
 -export([start/1, stop/0, info/0, url/0]).
@@ -31,7 +36,12 @@
                   foxglove => inet:port_number() | off,
                   token => binary() | auto,
                   max_clients => pos_integer(),
-                  max_body => pos_integer()}.
+                  max_body => pos_integer(),
+                  request_timeout => pos_integer(),
+                  idle_timeout => pos_integer(),
+                  max_connections => pos_integer(),
+                  max_per_peer => pos_integer(),
+                  min_age => non_neg_integer()}.
 -type info() :: #{http := inet:port_number(), foxglove := inet:port_number() | off,
                   token := binary()}.
 
@@ -44,12 +54,14 @@
 %% `off') and returns the ports it listens on and the token controls need.
 %% `{error, already_started}' when it runs already; `{error, {bad_option,
 %% {Key, Value}}}' for an option it cannot use; `{error, {http, Reason}}'
-%% when the port cannot be opened.
+%% when the port cannot be opened; `{error, not_started}' before the
+%% application `toroco_live' runs (`application:ensure_all_started/1').
 -spec start(opts()) -> {ok, info()} | {error, term()}.
 start(Opts) when is_map(Opts) ->
-    case options(maps:merge(?DEFAULTS, Opts)) of
-        {ok, Config} -> start_dashboard(Config);
-        {error, _} = Error -> Error
+    case {whereis(toroco_live_sup), options(maps:merge(?DEFAULTS, Opts))} of
+        {undefined, _} -> {error, not_started};
+        {_, {ok, Config}} -> start_dashboard(Config);
+        {_, {error, _} = Error} -> Error
     end;
 start(Other) ->
     {error, {bad_option, Other}}.
@@ -203,6 +215,9 @@ option(token, T) -> is_binary(T) andalso byte_size(T) >= 8 andalso byte_size(T) 
                         andalso url_safe(T);
 option(max_clients, N) -> is_integer(N) andalso N > 0;
 option(max_body, N) -> is_integer(N) andalso N >= 256;
+option(K, N) when K =:= request_timeout; K =:= idle_timeout; K =:= max_connections;
+                  K =:= max_per_peer -> is_integer(N) andalso N > 0;
+option(min_age, N) -> is_integer(N) andalso N >= 0;
 option(enabled, B) -> is_boolean(B);
 option(flight_seconds, _) -> true;
 option(_, _) -> false.

@@ -12,7 +12,9 @@ start(_Type, _Args) ->
             Env = maps:from_list(application:get_all_env(toroco_live)),
             case maps:get(enabled, Env, true) of
                 true -> start_dashboard(maps:with([ip, http, foxglove, token, max_clients,
-                                                   max_body], Env));
+                                                   max_body, request_timeout, idle_timeout,
+                                                   max_connections, max_per_peer, min_age],
+                                                  Env));
                 false -> ok
             end,
             {ok, Sup};

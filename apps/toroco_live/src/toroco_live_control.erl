@@ -22,7 +22,6 @@
 -export([run/3, decode/2, too_large/2]).
 
 %% The event path's messages, as the runtime defines them.
--include_lib("toroco/src/toroco_wire.hrl").
 
 -export_type([result/0]).
 
@@ -126,20 +125,13 @@ known(Other, What) ->
 printable(B) when is_binary(B) -> [$", B, $"];
 printable(T) -> toroco_live_json:term_text(T).
 
-%% Brooks' reset (SPEC §4) is what a reset source's event does: a router
-%% delivers it to the behavior as its `'$reset'' input. The dashboard hands
-%% the behavior that same delivery (the runtime has no call for it).
+%% Brooks' reset (SPEC §4) and a restart through the layer's supervisor,
+%% wherever the behavior runs.
 reset(B) ->
-    case whereis(toroco_names:process(B)) of
-        undefined -> {error, {not_running, B}};
-        Pid -> toroco_wire:send(Pid, ?WIRE_IN('$reset', reset))
-    end.
+    toroco:reset_behavior(B).
 
 restart(B) ->
-    case whereis(toroco_names:process(B)) of
-        undefined -> {error, {not_running, B}};
-        Pid -> exit(Pid, kill), ok
-    end.
+    toroco:restart_behavior(B).
 
 done(ok) ->
     {ok, #{<<"ok">> => true}};

@@ -3,7 +3,8 @@
 %% ```
 %% toroco_live_dashboard_sup (rest_for_one)
 %%   toroco_live_hub     the tap's subscriber; builds and pushes the pages' state
-%%   toroco_live_http    mochiweb's listener; one process per connection
+%%   toroco_live_http    the port's guard (toroco_live_listener) over mochiweb's
+%%                       listener; one process per connection, each bounded
 %% '''
 %%
 %% rest_for_one: every WebSocket connection has joined the hub, so a hub

@@ -3,7 +3,9 @@
 %% per channel), so Foxglove and Lichtblick show the running robot.
 %%
 %% This process is the bridge's hub, a child of `toroco_live_sup'. It owns
-%% the mochiweb listener, the channel table (ids never reused for another
+%% the listener (`toroco_live_listener', registered as
+%% `toroco_live_foxglove_listener': the same bounds as the dashboard's
+%% port, its closes in `/metrics'), the channel table (ids never reused for another
 %% topic), the observer tap subscription (SPEC §10; taken only while a
 %% client is connected, so a bridge nobody watches costs the robot nothing)
 %% and who subscribed to what. Each client is its own process
@@ -42,6 +44,7 @@
 
 -define(SUBPROTOCOL, <<"foxglove.websocket.v1">>).
 -define(REFRESH_MS, 2000).
+-define(LISTENER, toroco_live_foxglove_listener).
 -define(CONN_QUEUE, 2000).
 %% A live view needs no long backlog: past this many pending events the
 %% tap drops (and counts) rather than let clients, joins among them, wait.
@@ -132,10 +135,12 @@ init(Opts) ->
     Loop = fun(Req) -> toroco_live_foxglove_conn:serve(Req, ?SUBPROTOCOL,
                                                         #{client_publish => Publish,
                                                           session => Session}) end,
-    case mochiweb_http:start_link([{name, undefined}, {ip, Ip}, {port, maps:get(foxglove, Opts)},
-                                   {loop, Loop}, {max, 64}]) of
+    Bounds = maps:with([request_timeout, idle_timeout, max_connections, max_per_peer, min_age],
+                       Opts),
+    case toroco_live_listener:start_link(?LISTENER, Bounds#{ip => Ip, port => maps:get(foxglove, Opts),
+                                                            loop => Loop}) of
         {ok, Listener} ->
-            Port = mochiweb_socket_server:get(Listener, port),
+            Port = toroco_live_listener:port(Listener),
             %% The wiring is read again every ?REFRESH_MS while clients
             %% are connected (refresh/1 does nothing without them).
             erlang:send_after(?REFRESH_MS, self(), refresh),
@@ -197,7 +202,7 @@ handle_info(_, H) ->
 -spec terminate(term(), #hub{}) -> ok.
 terminate(_, #hub{listener = L, tap = Tap}) ->
     Tap =:= none orelse toroco:unsubscribe_events(Tap),
-    mochiweb_http:stop(L).
+    toroco_live_listener:stop(L).
 
 %%====================================================================
 %% Inside

@@ -1,5 +1,8 @@
-%% @doc The dashboard's HTTP side: mochiweb's listener and the routes. Each
-%% connection is a mochiweb process that calls {@link loop/1} per request.
+%% @doc The dashboard's HTTP side: the listener and the routes. Each
+%% connection is a mochiweb process that calls {@link loop/1} per request;
+%% the listener (`toroco_live_listener', registered as this module) bounds
+%% them: request and idle timeouts, a share per client address, the
+%% longest-idle shed when full, closes counted in `/metrics'.
 %%
 %% <table>
 %% <tr><th>route</th><th>answers</th></tr>
@@ -21,18 +24,19 @@
 
 -define(NAME, ?MODULE).
 
-%% @doc Starts mochiweb's listener on the configured address and port.
+%% @doc Starts the bounded listener on the configured address and port,
+%% with the bounds of `Config' (`toroco_live_listener''s options).
 -spec start_link(map()) -> {ok, pid()} | {error, term()}.
 start_link(#{ip := Ip, http := Port} = Config) ->
-    %% Connections beyond the WebSocket clients: page loads, API calls.
-    Max = maps:get(max_clients, Config, 64) + 64,
-    mochiweb_http:start_link([{name, {local, ?NAME}}, {ip, Ip}, {port, Port},
-                              {max, Max}, {loop, fun ?MODULE:loop/1}]).
+    Bounds = maps:with([request_timeout, idle_timeout, max_connections, max_per_peer, min_age],
+                       Config),
+    toroco_live_listener:start_link(?NAME, Bounds#{ip => Ip, port => Port,
+                                                   loop => fun ?MODULE:loop/1}).
 
 %% @doc The port the listener got (the one asked for, or the free one for 0).
 -spec port() -> inet:port_number().
 port() ->
-    mochiweb_socket_server:get(?NAME, port).
+    toroco_live_listener:port(?NAME).
 
 %% @doc Handles one request.
 -spec loop(term()) -> term().

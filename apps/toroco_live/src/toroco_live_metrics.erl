@@ -13,6 +13,9 @@
 %% <tr><td>`toroco_live_clients'</td><td>gauge</td><td>dashboard WebSocket clients</td></tr>
 %% <tr><td>`toroco_live_skipped_total'</td><td>counter</td><td>states a slow client did not get (coalesced)</td></tr>
 %% <tr><td>`toroco_live_tap_dropped_total'</td><td>counter</td><td>tap events the dashboard fell behind on</td></tr>
+%% <tr><td>`toroco_live_connections'</td><td>gauge</td><td>`listener' (`dashboard', `foxglove'): TCP connections holding a slot (`toroco_live_listener')</td></tr>
+%% <tr><td>`toroco_live_connections_accepted_total'</td><td>counter</td><td>`listener': connections given a slot</td></tr>
+%% <tr><td>`toroco_live_connections_closed_total'</td><td>counter</td><td>`listener', `reason': `request_timeout', `idle_timeout', `shed' (for a newcomer), `too_many_from_peer', `too_many_clients' (refused), `ended'</td></tr>
 %% </table>
 -module(toroco_live_metrics).
 
@@ -47,7 +50,31 @@ text() ->
      family(toroco_live_skipped_total, counter, "States coalesced away for slow clients.",
             [{[], maps:get(skipped, Stats, 0)}]),
      family(toroco_live_tap_dropped_total, counter, "Tap events the dashboard fell behind on.",
-            [{[], maps:get(tap_dropped, Stats, 0)}])].
+            [{[], maps:get(tap_dropped, Stats, 0)}])
+     | listeners()].
+
+%% The bounded ports (`toroco_live_listener'), those that run.
+listeners() ->
+    Ports = [{L, S} || {L, Name} <- [{dashboard, toroco_live_http},
+                                     {foxglove, toroco_live_foxglove_listener}],
+                       S <- listener_stats(Name)],
+    [family(toroco_live_connections, gauge, "TCP connections holding a slot, per port.",
+            [{[{listener, L}], N} || {L, #{connections := N}} <- Ports]),
+     family(toroco_live_connections_accepted_total, counter, "Connections given a slot.",
+            [{[{listener, L}], N} || {L, #{accepted := N}} <- Ports]),
+     family(toroco_live_connections_closed_total, counter,
+            "Connections closed or refused, by reason.",
+            [{[{listener, L}, {reason, R}], N} || {L, #{closed_by := By}} <- Ports,
+                                                  {R, N} <- lists:sort(maps:to_list(By))])].
+
+listener_stats(Name) ->
+    case whereis(Name) of
+        undefined -> [];
+        _ ->
+            try [toroco_live_listener:stats(Name)]
+            catch exit:_ -> []
+            end
+    end.
 
 up(running) -> 1;
 up(suspended) -> 0.5;

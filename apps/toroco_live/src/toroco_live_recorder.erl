@@ -36,7 +36,10 @@
               kinds :: [atom()],
               names :: all | [atom()],
               log :: log(),
-              since :: integer(),
+              %% when it started, on the runtime's clock then (events
+              %% stamped before are not in it; SPEC §14: in lockstep the
+              %% stamps are simulated time)
+              since :: {realtime | lockstep, integer()},
               dropped = 0 :: non_neg_integer()}).
 -opaque recording() :: #rec{} | {failed, file:filename_all(), term()}.
 
@@ -69,7 +72,7 @@ open(Path, Kinds, Names) ->
             {Head, Log} = log_new(),
             case file:write(Fd, Head) of
                 ok -> {ok, #rec{path = Path, fd = Fd, kinds = Kinds, names = Names, log = Log,
-                                since = erlang:system_time(nanosecond)}};
+                                since = {toroco_clock:mode(), toroco_clock:timestamp_ns()}}};
                 {error, Why} ->
                     _ = file:close(Fd),
                     {error, {cannot_write, Path, Why}}
@@ -82,7 +85,7 @@ open(Path, Kinds, Names) ->
 %% happened after the recording started.
 -spec event(tuple(), recording()) -> recording().
 event(Event, R = #rec{kinds = Kinds, names = Names, since = Since}) ->
-    Wanted = toroco_live_channels:event_time(Event) >= Since andalso
+    Wanted = after_start(toroco_live_channels:event_time(Event), Since) andalso
         lists:member(element(1, Event), Kinds) andalso
         (Names =:= all orelse
          lists:any(fun(N) -> lists:member(N, Names) end, toroco_live_channels:event_names(Event))),
@@ -92,6 +95,11 @@ event(Event, R = #rec{kinds = Kinds, names = Names, since = Since}) ->
     end;
 event(_, Failed) ->
     Failed.
+
+%% A recording that outlives a change of the clock (the flight recorder
+%% across a lockstep run) takes every event of the other clock.
+after_start(T, {Mode, Since}) ->
+    T >= Since orelse toroco_clock:mode() =/= Mode.
 
 %% @doc A message made elsewhere (the world's channels).
 -spec message(toroco_live_channels:key(), integer(), binary(), recording()) -> recording().

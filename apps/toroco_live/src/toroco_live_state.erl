@@ -21,8 +21,6 @@
 -type rates() :: #{emits := #{{atom(), atom()} => number()},
                    delivers := #{{atom(), atom()} => number()}}.
 
-%% How long a busy process may take to tell its state before it shows as busy.
--define(STATE_TIMEOUT, 100).
 %% Longest term text shown for a state.
 -define(STATE_TEXT, 300).
 
@@ -48,24 +46,14 @@ reading(Name) ->
                #{} = I -> I;
                {error, _} -> #{name => Name, status => down}
            end,
-    Pid = whereis(toroco_names:process(Name)),
-    #{name => Name, info => Info, restarts => toroco_restarts:count(Name),
-      mailbox => mailbox(Pid), state => user_state(Pid)}.
-
-mailbox(undefined) -> null;
-mailbox(Pid) ->
-    case erlang:process_info(Pid, message_queue_len) of
-        {message_queue_len, Q} -> Q;
-        undefined -> null
-    end.
-
-user_state(undefined) -> down;
-user_state(Pid) ->
-    try sys:get_state(Pid, ?STATE_TIMEOUT) of
-        {S, _Data} -> {value, S};
-        _ -> unknown
-    catch exit:_ -> busy
-    end.
+    %% what the behavior's own process told inspect/1, on whatever node
+    Process = maps:get(process, Info, #{}),
+    #{name => Name, info => maps:without([process], Info), restarts => maps:get(restarts, Info, 0),
+      mailbox => maps:get(mailbox, Process, null),
+      state => case Process of
+                   #{state := S} -> {value, S};
+                   #{} -> down
+               end}.
 
 %% @doc The page's state frame.
 -spec page(rates()) -> jiffy:json_value().
@@ -97,7 +85,7 @@ node_json(#{name := N, info := Info, restarts := R, mailbox := Q, state := S}, R
                                || {O, Out} <- lists:sort(maps:to_list(maps:get(outputs, Info, #{})))],
              <<"reset">> => [src(Src) || Src <- maps:get(reset, Info, [])]},
     case Info of
-        #{device := Counters} -> Base#{<<"device">> => toroco_live_json:value(Counters)};
+        #{device := Counters} -> Base#{<<"device">> => toroco_live_json:value(texts(Counters))};
         #{} -> Base
     end.
 
@@ -139,3 +127,13 @@ output_json(N, O, Out, #{emits := Emits}) ->
 
 src(none) -> null;
 src({E, O}) -> [toroco_live_json:value(E), toroco_live_json:value(O)].
+
+%% A device's counters name paths and addresses as strings (the motors'
+%% `sysfs_root'): the page shows them as text, not as lists of codes.
+texts(M) when is_map(M) -> maps:map(fun(_, V) -> texts(V) end, M);
+texts(L) when is_list(L), L =/= [] ->
+    case io_lib:printable_unicode_list(L) of
+        true -> unicode:characters_to_binary(L);
+        false -> L
+    end;
+texts(V) -> V.

@@ -13,7 +13,8 @@ all() -> [{group, routes}, {group, refusals}, {group, clients}].
 groups() ->
     [{routes, [], [page_and_assets, api_state, metrics, api_world, control_suspend_resume,
                    control_inject, control_reset_restart, control_load_wiring,
-                   token_on_the_url, ws_pushes_state, ws_control_with_token, start_options]},
+                   token_on_the_url, ws_pushes_state, ws_device_counters_as_text, ws_control_with_token,
+                   start_options]},
      {refusals, [], [unknown_route, wrong_method, no_token, wrong_token, bad_json,
                      not_an_object, unknown_action, unknown_behavior, not_a_literal,
                      oversized_body, runtime_refusal, missing_fields, not_a_websocket,
@@ -31,7 +32,10 @@ init_per_suite(Config) ->
     {ok, _} = application:ensure_all_started(toroco_live),
     {ok, _} = application:ensure_all_started(inets),
     {ok, #{http := Port, token := Token, foxglove := off}} =
-        toroco_live:start(#{http => 0, foxglove => off, max_clients => 60, max_body => 4096}),
+        %% many clients from one address (loopback): a share per address
+        %% above the clients the cases open
+        toroco_live:start(#{http => 0, foxglove => off, max_clients => 60, max_body => 4096,
+                            max_per_peer => 128}),
     [{port, Port}, {token, Token} | Config].
 
 end_per_suite(_Config) ->
@@ -49,7 +53,7 @@ init_per_testcase(_Case, Config) ->
 
 end_per_testcase(_Case, _Config) ->
     _ = [toroco:remove_behavior(B) || B <- [relay, relay2, relay3]],
-    _ = [toroco:remove_device(D) || D <- [s, a]],
+    _ = [toroco:remove_device(D) || D <- [s, a, motors]],
     ok.
 
 auth(Config) -> [{"authorization", "Bearer " ++ binary_to_list(?config(token, Config))}].
@@ -208,6 +212,23 @@ ws_pushes_state(Config) ->
       <<"outputs">> := [#{<<"output">> := <<"out">>, <<"latch">> := #{<<"value">> := 78}}]} = Relay,
     %% Counted since the node started: a relay of an earlier case was restarted.
     true = is_integer(Restarts),
+    toroco_live_test_client:ws_close(C).
+
+ws_device_counters_as_text() ->
+    [{doc, "A device's counters that are text (the servos' sysfs_root) reach the page as "
+      "strings, not as lists of character codes"}].
+ws_device_counters_as_text(Config) ->
+    ok = toroco:add_device(motors, toroco_servo_motors, #{backend => sim}),
+    #{device := #{sysfs_root := Root}} = toroco:inspect(motors),
+    true = io_lib:printable_unicode_list(Root),
+    C = toroco_live_test_client:ws(?config(port, Config), ""),
+    Want = unicode:characters_to_binary(Root),
+    {ok, _} = toroco_live_test_client:ws_next(
+                C, fun(#{<<"type">> := <<"state">>, <<"nodes">> := Nodes}) ->
+                           [Want] =:= [R || #{<<"name">> := <<"motors">>,
+                                              <<"device">> := #{<<"sysfs_root">> := R}} <- Nodes];
+                      (_) -> false
+                   end, 3000),
     toroco_live_test_client:ws_close(C).
 
 %% The term of the last value delivered to input I of node N in a state frame.

@@ -11,7 +11,8 @@ all() ->
      flight_recorder_on_layer_removed,
      flight_recorder_after_restart,
      foreign_files_refused,
-     simulated_run_replays].
+     simulated_run_replays,
+     recording_in_lockstep_has_simulated_time].
 
 suite() -> [{timetrap, {seconds, 90}}].
 
@@ -30,6 +31,7 @@ init_per_testcase(_Case, Config) ->
 
 end_per_testcase(_Case, _Config) ->
     _ = toroco_live:stop_recording(),
+    _ = toroco_clock:realtime(),
     #{behaviors := Bs, devices := Ds} = toroco:inspect(),
     [toroco:remove_behavior(B) || B <- Bs],
     [toroco:remove_device(D) || D <- Ds],
@@ -38,6 +40,21 @@ end_per_testcase(_Case, _Config) ->
 %%====================================================================
 %% Cases
 %%====================================================================
+
+recording_in_lockstep_has_simulated_time() ->
+    [{doc, "A recording made while a world is the clock (lockstep, SPEC §14) stamps its "
+      "messages with simulated time: an emission at 1.5 s is logged at 1.5e9 ns."}].
+recording_in_lockstep_has_simulated_time(Config) ->
+    ok = toroco_clock:lockstep(#{}),
+    Path = path(Config, "lockstep.mcap"),
+    ok = toroco_live:record(Path, #{kinds => [emit], names => [s]}),
+    {ok, _} = toroco_clock:tick(1500, []),
+    ok = toroco:inject({s, dist}, far),
+    ok = toroco_clock:settle(),
+    {ok, #{messages := 1}} = toroco_live:stop_recording(),
+    {ok, Bin} = file:read_file(Path),
+    {ok, #{messages := [#{log_time := T}]}} = toroco_live_mcap:read(Bin),
+    1500000000 = T.
 
 recording_reads_back() ->
     [{doc, "A recording validates with @mcap/core's indexed reader: the channels and schemas "

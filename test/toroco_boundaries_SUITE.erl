@@ -1,0 +1,53 @@
+%% The applications' boundaries (STYLE, "Between apps"): the device, robot,
+%% library and dashboard applications use the runtime through its API only:
+%% `toroco', `toroco_clock', the behaviours a callback implements
+%% (`toroco_behavior', `toroco_device') and `toroco_slots' (the bounds of
+%% every listener, STYLE "Listeners and clients"). An xref query over the compiled
+%% applications finds every call from them into another module of `toroco',
+%% and a scan of their sources every include of the runtime's private
+%% headers; both must be empty.
+-module(toroco_boundaries_SUITE).
+
+-include_lib("common_test/include/ct.hrl").
+-include_lib("stdlib/include/assert.hrl").
+
+-compile([export_all, nowarn_export_all]).
+
+-define(API, [toroco, toroco_clock, toroco_behavior, toroco_device, toroco_slots]).
+-define(OTHERS, [toroco_hw, torobot, toroco_lib, toroco_live]).
+
+all() ->
+    [no_call_into_the_runtimes_insides, no_include_of_the_runtimes_headers].
+
+no_call_into_the_runtimes_insides() ->
+    [{doc, "No call from toroco_hw, torobot, toroco_lib or toroco_live reaches a module of "
+      "toroco outside its API (toroco, toroco_clock, toroco_behavior, toroco_device, "
+      "toroco_slots)."}].
+no_call_into_the_runtimes_insides(_Config) ->
+    {ok, X} = xref:start([{xref_mode, functions}]),
+    try
+        ok = xref:set_default(X, [{warnings, false}, {verbose, false}]),
+        [{ok, App} = xref:add_application(X, code:lib_dir(App), [{name, App}])
+         || App <- [toroco | ?OTHERS]],
+        Query = lists:flatten(
+                  io_lib:format("(E | ~w : App) || (toroco : App - ~w : Mod)", [?OTHERS, ?API])),
+        {ok, Calls} = xref:q(X, Query),
+        ct:log("~s~n~p", [Query, Calls]),
+        ?assertEqual([], Calls)
+    after
+        xref:stop(X)
+    end.
+
+no_include_of_the_runtimes_headers() ->
+    [{doc, "No source of the other applications includes a header from apps/toroco/src."}].
+no_include_of_the_runtimes_headers(_Config) ->
+    Offending = [{File, Line}
+                 || App <- ?OTHERS,
+                    File <- filelib:wildcard(filename:join([code:lib_dir(App), "src", "*.[eh]rl"])),
+                    Line <- lines(File),
+                    re:run(Line, "-include(_lib)?\\(\"toroco/src/|toroco_wire\\.hrl") =/= nomatch],
+    ?assertEqual([], Offending).
+
+lines(File) ->
+    {ok, Bin} = file:read_file(File),
+    binary:split(Bin, <<"\n">>, [global]).
