@@ -18,16 +18,20 @@
 %% every Lua behavior of the node ends with `{lua_port_down, Why}' and is
 %% restarted the same way, while Erlang behaviors go on.
 %%
-%% <b>Adding</b>: {@link add_behavior/2}; {@link interface/1} (the inputs and
-%% outputs a file uses). <b>Looking</b>: {@link waits/1}, {@link memory/1}.
+%% <b>Adding</b>: `toroco:add_behavior(Name, toroco_lua, #{file => Path,
+%% params => P, layer => L})' as SPEC §16 writes it (this module declares its
+%% ports from its options: {@link interface/1}, the inputs and outputs the
+%% file uses); {@link add_behavior/2} is the same with the name passed on for
+%% the log; {@link load_main/2} for a whole program. <b>Looking</b>: {@link
+%% waits/1}, {@link memory/1}.
 %% <b>Changing</b>: {@link reload/1}.
 -module(toroco_lua).
 -behaviour(toroco_behavior).
 
 -include("toroco_lua_port.hrl").
 
--export([add_behavior/2, load_main/2, interface/1, waits/1, memory/1, reload/1]).
--export([interface/0, init/1, handle_input/4, handle_event/4]).
+-export([add_behavior/2, load_main/2, waits/1, memory/1, reload/1]).
+-export([interface/1, init/1, handle_input/4, handle_event/4]).
 -export_type([opts/0, main_opts/0]).
 
 %% `file' (required) the behavior's Lua file; `root' the program's folder,
@@ -37,7 +41,7 @@
 %% `layer'; `budget' VM instructions per activation and `memory' bytes per
 %% state (defaults: the application's env); `inputs'/`outputs' ports added
 %% to those found in the file (for names built at run time).
--type opts() :: #{file := file:filename_all(), root => file:filename_all(),
+-type opts() :: #{file := file:filename_all(), root => file:filename_all(), name => atom(),
                   params => map(), layer => non_neg_integer(),
                   budget => pos_integer(), memory => pos_integer(),
                   inputs => [atom()], outputs => [atom()]}.
@@ -55,28 +59,12 @@
 %% API
 %%====================================================================
 
-%% @doc Starts Lua behavior `Name' running `file'. The runtime's
-%% `toroco:add_behavior/3' takes a module whose interface is fixed, so each
-%% Lua behavior gets a small callback module of its own, `toroco_lua@Name',
-%% whose `interface/0' is the file's and whose callbacks are this module's.
+%% @doc Starts Lua behavior `Name' running `file': `toroco:add_behavior(Name,
+%% toroco_lua, Opts)' with the name among the options, so that the log and
+%% `print' name the behavior.
 -spec add_behavior(toroco:name(), opts()) -> ok | {error, term()}.
 add_behavior(Name, Opts = #{file := _}) when is_atom(Name) ->
-    Args = maps:with([file, root, params, budget, memory, inputs, outputs], Opts),
-    case whereis(toroco_names:process(Name)) =:= undefined andalso interface(Args) of
-        false ->
-            %% the name is taken: its callback module is running, leave it be
-            %% and let the runtime say why
-            toroco:add_behavior(Name, toroco_lua, #{layer => maps:get(layer, Opts, 0)});
-        {ok, Interface} ->
-            case callback_module(Name, Interface) of
-                {ok, Module} ->
-                    toroco:add_behavior(Name, Module,
-                                        #{layer => maps:get(layer, Opts, 0),
-                                          params => Args#{name => Name}});
-                {error, _} = Error -> Error
-            end;
-        {error, _} = Error -> Error
-    end;
+    toroco:add_behavior(Name, ?MODULE, Opts#{name => Name});
 add_behavior(Name, Opts) ->
     {error, {bad_options, {Name, Opts}}}.
 
@@ -159,12 +147,22 @@ lua_file(Dir, File) ->
         false -> P ++ ".lua"
     end.
 
-%% @doc The inputs and outputs a Lua file uses: every `input.NAME' (or
-%% `input["NAME"]'), every key of a `send_output{...}'/`set_output{...}'
-%% table and every `output.NAME', plus the `inputs'/`outputs' given.
--spec interface(#{file := file:filename_all(), _ => _}) ->
-          {ok, #{inputs := [atom()], outputs := [atom()]}} | {error, term()}.
-interface(Args = #{file := File}) ->
+%% @doc The ports of a Lua behavior (the `toroco_behavior' callback, given
+%% the options of `add_behavior' but the layer): every `input.NAME' (or
+%% `input["NAME"]') its file uses, every key of its `send_output{...}' /
+%% `set_output{...}' tables and every `output.NAME', plus the options
+%% `inputs' / `outputs'. Raises `{lua_file, {File, Why}}' for a file it
+%% cannot read.
+-spec interface(map()) -> #{inputs := [atom()], outputs := [atom()]}.
+interface(#{file := _} = Args) ->
+    case ports(Args) of
+        {ok, Ports} -> Ports;
+        {error, Why} -> error(Why)
+    end;
+interface(Args) ->
+    error({no_file, Args}).
+
+ports(Args = #{file := File}) ->
     case file:read_file(File) of
         {ok, Src} ->
             Code = strip_comments(Src),
@@ -198,7 +196,7 @@ reload(Name) ->
     behavior_call(Name, reload).
 
 behavior_call(Name, Req) ->
-    try gen_statem:call(toroco_names:process(Name), {?MODULE, Req}, 10000)
+    try toroco_device:call(Name, {?MODULE, Req}, 10000)
     catch exit:{noproc, _} -> {error, {not_running, Name}};
           exit:{timeout, _} -> {error, {timeout, Name}}
     end.
@@ -207,14 +205,9 @@ behavior_call(Name, Req) ->
 %% toroco_behavior
 %%====================================================================
 
-%% @doc The interface of `toroco_lua' itself is empty: a Lua behavior's
-%% ports come from its file ({@link interface/1}, {@link add_behavior/2}).
--spec interface() -> #{inputs := [], outputs := []}.
-interface() -> #{inputs => [], outputs => []}.
-
 -spec init(map()) -> {ok, running, map(), [toroco_behavior:action()]} | {error, term()}.
 init(Args = #{file := File}) ->
-    Name = maps:get(name, Args, undefined),
+    Name = maps:get(name, Args, registered_name()),
     case whereis(toroco_lua_port) of
         undefined ->
             {error, {lua_port_not_running, Name}};
@@ -227,6 +220,13 @@ init(Args = #{file := File}) ->
                 {ok, Id, Actions} -> {ok, running, D#{id := Id}, actions(Actions, D#{id := Id})};
                 {error, _} = Error -> Error
             end
+    end.
+
+%% The name the log gives a behavior added without `name' in its options.
+registered_name() ->
+    case process_info(self(), registered_name) of
+        {registered_name, R} -> R;
+        _ -> self()
     end.
 
 -spec handle_input(atom(), term(), running, map()) -> toroco_behavior:result().
@@ -445,45 +445,3 @@ keys(Code, Pos, Depth, Acc) ->
             end;
         _ -> keys(Code, Pos + 1, Depth, Acc)
     end.
-
-%%====================================================================
-%% Each behavior's callback module
-%%====================================================================
-
-%% `toroco_lua@Name': interface/0 returns the file's ports; init/1,
-%% handle_input/4 and handle_event/4 are this module's.
-callback_module(Name, Interface) ->
-    Module = list_to_atom("toroco_lua@" ++ atom_to_list(Name)),
-    Src = io_lib:format(
-            "-module(~w).~n"
-            "-export([interface/0, init/1, handle_input/4, handle_event/4]).~n"
-            "interface() -> ~w.~n"
-            "init(A) -> toroco_lua:init(A).~n"
-            "handle_input(I, V, S, D) -> toroco_lua:handle_input(I, V, S, D).~n"
-            "handle_event(T, C, S, D) -> toroco_lua:handle_event(T, C, S, D).~n",
-            [Module, Interface]),
-    case forms(lists:flatten(Src)) of
-        {ok, Forms} ->
-            case compile:forms(Forms, [binary, return_errors]) of
-                {ok, Module, Bin} ->
-                    _ = code:purge(Module),
-                    case code:load_binary(Module, "toroco_lua", Bin) of
-                        {module, Module} -> {ok, Module};
-                        {error, Why} -> {error, {callback_module, {Name, Why}}}
-                    end;
-                Error -> {error, {callback_module, {Name, Error}}}
-            end;
-        Error -> {error, {callback_module, {Name, Error}}}
-    end.
-
-forms(Src) ->
-    {ok, Tokens, _} = erl_scan:string(Src),
-    parse(Tokens, [], []).
-
-parse([], [], Forms) -> {ok, lists:reverse(Forms)};
-parse([{dot, _} = Dot | T], Acc, Forms) ->
-    case erl_parse:parse_form(lists:reverse([Dot | Acc])) of
-        {ok, F} -> parse(T, [], [F | Forms]);
-        Error -> Error
-    end;
-parse([Tok | T], Acc, Forms) -> parse(T, [Tok | Acc], Forms).

@@ -73,15 +73,22 @@ text({F, A}) -> iolist_to_binary(io_lib:format(F, A)).
 %%% ---------------------------------------------------------------------
 
 interface_from_the_file(doc) ->
-    ["A Lua behavior's inputs and outputs are those its file uses"];
+    ["A Lua behavior's inputs and outputs are those its file uses, and "
+     "toroco:add_behavior(Name, toroco_lua, #{file => ...}) takes it as SPEC §16 writes"];
 interface_from_the_file(Config) ->
-    ?assertEqual({ok, #{inputs => [value], outputs => [count, echo, made]}},
+    ?assertEqual(#{inputs => [value], outputs => [count, echo, made]},
                  toroco_lua:interface(#{file => data(Config, "echo.lua")})),
-    ?assertEqual({ok, #{inputs => [go, more], outputs => [got, more, timeout]}},
+    ?assertEqual(#{inputs => [go, more], outputs => [got, more, timeout]},
                  toroco_lua:interface(#{file => data(Config, "waiter.lua")})),
-    ?assertEqual({ok, #{inputs => [extra, update], outputs => [motors_setvel]}},
+    ?assertEqual(#{inputs => [extra, update], outputs => [motors_setvel]},
                  toroco_lua:interface(#{file => data(Config, "latch.lua"), inputs => [extra]})),
-    ?assertMatch({error, {lua_file, {_, enoent}}}, toroco_lua:interface(#{file => "nope.lua"})).
+    ?assertError({lua_file, {_, enoent}}, toroco_lua:interface(#{file => "nope.lua"})),
+    %% as SPEC §16 writes it, straight through the runtime's API
+    ok = toroco:add_behavior(lb, toroco_lua, #{file => data(Config, "echo.lua"), layer => 2,
+                                               params => #{}}),
+    #{module := toroco_lua, layer := 2, inputs := #{value := _},
+      outputs := #{count := _, echo := _, made := _}} = toroco:inspect(lb),
+    ?assertMatch({error, _}, toroco:add_behavior(nf, toroco_lua, #{file => "nope.lua"})).
 
 values_cross_both_ways(doc) ->
     ["Values cross as SPEC §16 says: one value is the value, several a tuple, none {}; "
