@@ -3,7 +3,7 @@
 #                make run LOCKSTEP=1 runs it in lockstep (as fast as the CPU allows);
 #                make run ROBOT=wall_follower runs a library robot of config/robots/
 #   make test  - every test suite: C port, detector, Common Test, PropEr, Dialyzer
-.PHONY: run test deps compile port port-test detector detector-test ct dialyzer bench release board-check board-bench clean eval
+.PHONY: run test deps compile port port-test lua-port lua-port-test detector detector-test ct dialyzer bench release board-check board-bench clean eval
 
 WORLD ?= config/worlds/default.world
 SPEED ?= 1
@@ -14,7 +14,7 @@ WIRING ?= config/torobot.wiring
 deps:
 	@scripts/deps
 
-compile: deps port
+compile: deps port lua-port
 	rebar3 compile
 
 port:
@@ -22,6 +22,13 @@ port:
 
 port-test: deps
 	@if [ -f c_src/pru_port/Makefile ]; then $(MAKE) -C c_src/pru_port test; fi
+
+# The Lua behaviors' port program (SPEC §16, c_src/lua_port/README.md).
+lua-port:
+	@if [ -f c_src/lua_port/Makefile ]; then $(MAKE) -s -C c_src/lua_port; fi
+
+lua-port-test: deps
+	@if [ -f c_src/lua_port/Makefile ]; then $(MAKE) -C c_src/lua_port test; fi
 
 detector: deps
 	@if [ -f detector/CMakeLists.txt ]; then \
@@ -69,3 +76,4 @@ board-bench: compile
 clean:
 	rm -rf _build
 	@if [ -f c_src/pru_port/Makefile ]; then $(MAKE) -C c_src/pru_port clean; fi
+	@if [ -f c_src/lua_port/Makefile ]; then $(MAKE) -C c_src/lua_port clean; fi

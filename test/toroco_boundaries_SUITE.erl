@@ -14,13 +14,13 @@
 -compile([export_all, nowarn_export_all]).
 
 -define(API, [toroco, toroco_clock, toroco_behavior, toroco_device, toroco_slots]).
--define(OTHERS, [toroco_hw, torobot, toroco_lib, toroco_live]).
+-define(OTHERS, [toroco_hw, torobot, toroco_lib, toroco_live, toroco_lua]).
 
 all() ->
     [no_call_into_the_runtimes_insides, no_include_of_the_runtimes_headers].
 
 no_call_into_the_runtimes_insides() ->
-    [{doc, "No call from toroco_hw, torobot, toroco_lib or toroco_live reaches a module of "
+    [{doc, "No call from toroco_hw, torobot, toroco_lib, toroco_live or toroco_lua reaches a module of "
       "toroco outside its API (toroco, toroco_clock, toroco_behavior, toroco_device, "
       "toroco_slots)."}].
 no_call_into_the_runtimes_insides(_Config) ->

@@ -1,0 +1,447 @@
+%% @doc Behaviors written in Lua 5.1 against the original Torocó API (SPEC
+%% §16): a `toroco_behavior' callback module whose code is a Lua file, run in
+%% a state of the `lua_port' program ({@link toroco_lua_port}).
+%%
+%% A Lua behavior is a behavior like any other: a gen_statem in its layer,
+%% with suppression, inhibition, latches, holds, suspend/resume/reset/remove,
+%% the tap and recordings. Each input it gets is one activation of its Lua
+%% state, run to completion inside `handle_input/4' through a bounded call
+%% to the port's owner, and what the Lua code emitted comes back as the
+%% callback's actions: `set_output{motors_setvel = {20, 20}}' becomes
+%% `{set, #{motors_setvel => {20, 20}}}'. Time is the runtime's: the state
+%% reads `toroco_clock:now_ms()' and its timers (`wait_for_input' timeouts,
+%% `sched.sleep') are this process's gen_statem timeouts, so Lua behaviors
+%% run in lockstep too.
+%%
+%% The behavior ends with `{lua_error, File, Line, Message}' or `{lua_limit,
+%% File, budget | memory}' and its layer restarts it; if the program dies,
+%% every Lua behavior of the node ends with `{lua_port_down, Why}' and is
+%% restarted the same way, while Erlang behaviors go on.
+%%
+%% <b>Adding</b>: `toroco:add_behavior(Name, toroco_lua, #{file => Path,
+%% params => P, layer => L})' as SPEC §16 writes it (this module declares its
+%% ports from its options: {@link interface/1}, the inputs and outputs the
+%% file uses); {@link add_behavior/2} is the same with the name passed on for
+%% the log; {@link load_main/2} for a whole program. <b>Looking</b>: {@link
+%% waits/1}, {@link memory/1}.
+%% <b>Changing</b>: {@link reload/1}.
+-module(toroco_lua).
+-behaviour(toroco_behavior).
+
+-include("toroco_lua_port.hrl").
+
+-export([add_behavior/2, load_main/2, waits/1, memory/1, reload/1]).
+-export([interface/1, init/1, handle_input/4, handle_event/4]).
+-export_type([opts/0, main_opts/0]).
+
+%% `file' (required) the behavior's Lua file; `root' the program's folder,
+%% where its `require' and `load_behavior' paths start (default: the file's
+%% folder; `load_main/2' gives the main file's, as the original ran from
+%% there); `params' its `toroco.params';
+%% `layer'; `budget' VM instructions per activation and `memory' bytes per
+%% state (defaults: the application's env); `inputs'/`outputs' ports added
+%% to those found in the file (for names built at run time).
+-type opts() :: #{file := file:filename_all(), root => file:filename_all(), name => atom(),
+                  params => map(), layer => non_neg_integer(),
+                  budget => pos_integer(), memory => pos_integer(),
+                  inputs => [atom()], outputs => [atom()]}.
+
+%% `layers' the layer of each behavior main.lua loads (default 0: the
+%% original has no layers, only priorities); `params' the main file's
+%% `toroco.params'; `budget' and `memory' for the
+%% main file's own state and every behavior it loads.
+-type main_opts() :: #{layers => #{atom() => non_neg_integer()}, params => map(),
+                       budget => pos_integer(), memory => pos_integer()}.
+
+-define(LOG, #{domain => [toroco, lua]}).
+
+%%====================================================================
+%% API
+%%====================================================================
+
+%% @doc Starts Lua behavior `Name' running `file': `toroco:add_behavior(Name,
+%% toroco_lua, Opts)' with the name among the options, so that the log and
+%% `print' name the behavior.
+-spec add_behavior(toroco:name(), opts()) -> ok | {error, term()}.
+add_behavior(Name, Opts = #{file := _}) when is_atom(Name) ->
+    toroco:add_behavior(Name, ?MODULE, Opts#{name => Name});
+add_behavior(Name, Opts) ->
+    {error, {bad_options, {Name, Opts}}}.
+
+%% @doc Runs a `main.lua' of the original and turns its `load_behavior',
+%% `set_inputs', `set_inhibitors' (and `suspend_behavior',
+%% `resume_behavior', `remove_behavior') calls into the node's behaviors and
+%% wiring, in the order it made them; `run()' is where it ends. Behavior
+%% paths are relative to the main file, `.lua' optional. Devices it names
+%% must be on the node already (`device.mouse.left' is the source `{mouse,
+%% left}'). Its source lists are the original's, lowest priority first;
+%% the runtime's are highest first, so each is turned round. The first
+%% call refused stops there, with the main file's line.
+-spec load_main(file:filename_all(), main_opts()) ->
+          {ok, #{behaviors := [atom()]}} | {error, {file:filename_all(), non_neg_integer(), term()}}.
+load_main(Path, Opts) ->
+    Abs = filename:absname(Path),
+    Limits = #{budget => maps:get(budget, Opts, env(budget)),
+               memory => maps:get(memory, Opts, env(memory))},
+    D = #{name => main, file => Path, args => #{}, id => none},
+    case toroco_lua_port:open(filename:basename(Abs), filename:dirname(Abs),
+                              maps:get(params, Opts, #{}), Limits, toroco_clock:now_ms()) of
+        {ok, Id, Actions} ->
+            _ = toroco_lua_port:close(Id),
+            _ = [print(Text, D) || {print, Text} <- Actions],
+            Ctx = #{root => filename:dirname(Path), opts => Opts},
+            apply_main([{Op, Line, Args} || {main, Op, Line, Args} <- Actions], Path, Ctx, []);
+        {stopped, {lua_error, _, Line, Msg} = R, _} ->
+            {error, {path(element(2, R), D), Line, Msg}};
+        {stopped, {lua_limit, Src, What}, _} ->
+            {error, {path(Src, D), 0, {lua_limit, What}}};
+        {error, Why} ->
+            {error, {Path, 0, Why}}
+    end.
+
+apply_main([], _Path, _Ctx, Loaded) ->
+    {ok, #{behaviors => lists:reverse(Loaded)}};
+apply_main([{Op, Line, Args} | Rest], Path, Ctx, Loaded) ->
+    case main_call(Op, Args, Ctx) of
+        ok -> apply_main(Rest, Path, Ctx, Loaded);
+        {loaded, Name} -> apply_main(Rest, Path, Ctx, [Name | Loaded]);
+        {error, Why} -> {error, {Path, Line, Why}}
+    end.
+
+%% One wiring call of Lua code (main.lua, or a behavior changing the
+%% network); paths start at the program's folder `root'.
+main_call(<<"load_behavior">>, [Name, File, Params], #{root := Root, opts := Opts}) ->
+    B = binary_to_atom(Name),
+    Layer = maps:get(B, maps:get(layers, Opts, #{}), 0),
+    Limits = maps:with([budget, memory], Opts),
+    case toroco_lua:add_behavior(B, Limits#{file => lua_file(Root, File), root => Root,
+                                            layer => Layer, params => table(Params)}) of
+        ok -> {loaded, B};
+        Error -> Error
+    end;
+main_call(<<"set_inputs">>, [R, Inputs], _Ctx) ->
+    toroco:set_inputs(binary_to_atom(R),
+                      maps:from_list([{binary_to_atom(I), lists:reverse(sources(Ss))}
+                                      || {I, Ss} <- maps:to_list(table(Inputs))]));
+main_call(<<"set_inhibitors">>, [E, Outputs], _Ctx) ->
+    toroco:set_inhibitors(binary_to_atom(E),
+                          maps:from_list([{binary_to_atom(O), sources(Ss)}
+                                          || {O, Ss} <- maps:to_list(table(Outputs))]));
+main_call(<<"suspend_behavior">>, [B], _Ctx) -> toroco:suspend_behavior(binary_to_atom(B));
+main_call(<<"resume_behavior">>, [B], _Ctx) -> toroco:resume_behavior(binary_to_atom(B));
+main_call(<<"remove_behavior">>, [B], _Ctx) -> toroco:remove_behavior(binary_to_atom(B));
+main_call(<<"run">>, _, _Ctx) -> ok;
+main_call(Op, Args, _Ctx) -> {error, {bad_main_call, {Op, Args}}}.
+
+sources(Ss) -> [{binary_to_atom(E), binary_to_atom(O)} || [E, O] <- Ss].
+
+%% An empty Lua table crosses as [] (SPEC §16); as a set of keys it is #{}.
+table([]) -> #{};
+table(M) when is_map(M) -> M.
+
+%% `path' or `path.lua', relative to `Dir'.
+lua_file(Dir, File) ->
+    P = filename:join(Dir, unicode:characters_to_list(File)),
+    case filename:extension(P) =:= ".lua" orelse filelib:is_regular(P) of
+        true -> P;
+        false -> P ++ ".lua"
+    end.
+
+%% @doc The ports of a Lua behavior (the `toroco_behavior' callback, given
+%% the options of `add_behavior' but the layer): every `input.NAME' (or
+%% `input["NAME"]') its file uses, every key of its `send_output{...}' /
+%% `set_output{...}' tables and every `output.NAME', plus the options
+%% `inputs' / `outputs'. Raises `{lua_file, {File, Why}}' for a file it
+%% cannot read.
+-spec interface(map()) -> #{inputs := [atom()], outputs := [atom()]}.
+interface(#{file := _} = Args) ->
+    case ports(Args) of
+        {ok, Ports} -> Ports;
+        {error, Why} -> error(Why)
+    end;
+interface(Args) ->
+    error({no_file, Args}).
+
+ports(Args = #{file := File}) ->
+    case file:read_file(File) of
+        {ok, Src} ->
+            Code = strip_comments(Src),
+            Ins = names(Code, "\\binput\\s*\\.\\s*([A-Za-z_][A-Za-z0-9_]*)")
+                ++ names(Code, "\\binput\\s*\\[\\s*['\"]([^'\"]+)['\"]\\s*\\]"),
+            Outs = output_keys(Code) ++ names(Code, "\\boutput\\s*\\.\\s*([A-Za-z_][A-Za-z0-9_]*)"),
+            {ok, #{inputs => lists:usort([binary_to_atom(I) || I <- Ins] ++ maps:get(inputs, Args, [])),
+                   outputs => lists:usort([binary_to_atom(O) || O <- Outs] ++ maps:get(outputs, Args, []))}};
+        {error, Why} ->
+            {error, {lua_file, {File, Why}}}
+    end.
+
+%% @doc What the tasks of Lua behavior `Name' wait for: `[#{task => T, kind =>
+%% file | coroutine | trigger, input => I | none, timer => boolean()}]'.
+-spec waits(toroco:name()) -> {ok, [map()]} | {error, term()}.
+waits(Name) ->
+    behavior_call(Name, waits).
+
+%% @doc The bytes of Lua behavior `Name''s state.
+-spec memory(toroco:name()) -> {ok, non_neg_integer()} | {error, term()}.
+memory(Name) ->
+    behavior_call(Name, memory).
+
+%% @doc Re-reads the file of Lua behavior `Name' into a new state, all or
+%% nothing: a file that fails to load leaves the old state running and the
+%% reason is returned. The new state starts from scratch (its coroutines
+%% and triggers start again); the behavior's latches and holds stay. The
+%% interface is the one the behavior was added with.
+-spec reload(toroco:name()) -> ok | {error, term()}.
+reload(Name) ->
+    behavior_call(Name, reload).
+
+behavior_call(Name, Req) ->
+    try toroco_device:call(Name, {?MODULE, Req}, 10000)
+    catch exit:{noproc, _} -> {error, {not_running, Name}};
+          exit:{timeout, _} -> {error, {timeout, Name}}
+    end.
+
+%%====================================================================
+%% toroco_behavior
+%%====================================================================
+
+-spec init(map()) -> {ok, running, map(), [toroco_behavior:action()]} | {error, term()}.
+init(Args = #{file := File}) ->
+    Name = maps:get(name, Args, registered_name()),
+    case whereis(toroco_lua_port) of
+        undefined ->
+            {error, {lua_port_not_running, Name}};
+        Owner ->
+            %% a reset runs init/1 again in this process: its last state goes
+            ok = toroco_lua_port:close_all(),
+            D = #{name => Name, file => File, args => Args,
+                  owner => erlang:monitor(process, Owner), id => none},
+            case open(D) of
+                {ok, Id, Actions} -> {ok, running, D#{id := Id}, actions(Actions, D#{id := Id})};
+                {error, _} = Error -> Error
+            end
+    end.
+
+%% The name the log gives a behavior added without `name' in its options.
+registered_name() ->
+    case process_info(self(), registered_name) of
+        {registered_name, R} -> R;
+        _ -> self()
+    end.
+
+-spec handle_input(atom(), term(), running, map()) -> toroco_behavior:result().
+handle_input(Input, Value, _S, D = #{id := Id}) ->
+    activation(toroco_lua_port:input(Id, Input, Value, toroco_clock:now_ms()), D).
+
+-spec handle_event(gen_statem:event_type(), term(), running, map()) -> toroco_behavior:result().
+handle_event({timeout, {lua, Task}}, {lua_timer, Id, Task, Seq}, _S, D = #{id := Id}) ->
+    activation(toroco_lua_port:timer(Id, Task, Seq, toroco_clock:now_ms()), D);
+handle_event({timeout, {lua, _}}, {lua_timer, _OldId, _, _}, _S, _D) ->
+    keep_state_and_data;                      % a timer of the state before a reload
+handle_event(info, {'DOWN', MRef, process, _, Why}, _S, #{owner := MRef}) ->
+    {stop, {lua_port_down, Why}};
+handle_event(info, ?LUA_PORT_DOWN(Why), _S, _D) ->
+    {stop, {lua_port_down, Why}};
+handle_event({call, From}, {?MODULE, waits}, _S, #{id := Id}) ->
+    Reply = case toroco_lua_port:waits(Id) of
+                {ok, Ws} -> {ok, [#{task => T, kind => binary_to_atom(K), input => waited(I),
+                                    timer => Timer}
+                                  || [T, K, I, Timer] <- Ws]};
+                Error -> Error
+            end,
+    {keep_state_and_data, [{reply, From, Reply}]};
+handle_event({call, From}, {?MODULE, memory}, _S, #{id := Id}) ->
+    {keep_state_and_data, [{reply, From, toroco_lua_port:memory(Id)}]};
+handle_event({call, From}, {?MODULE, reload}, _S, D = #{id := Old, name := Name}) ->
+    case open(D) of
+        {ok, Id, Actions} ->
+            _ = toroco_lua_port:close(Old),
+            logger:notice("toroco_lua: ~p reloaded ~ts", [Name, maps:get(file, D)],
+                          ?LOG#{name => Name}),
+            D1 = D#{id := Id},
+            {keep_state, D1, [{reply, From, ok} | actions(Actions, D1)]};
+        {error, _} = Error ->
+            {keep_state_and_data, [{reply, From, Error}]}
+    end;
+%% The engine's default for what nobody handles: this module's handle_event
+%% is called through each behavior's own callback module, so it cannot fall
+%% through to the engine by a function_clause.
+handle_event({call, From}, Request, _S, #{name := Name}) ->
+    {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
+handle_event(Type, Content, _S, #{name := Name}) ->
+    logger:warning("toroco_lua: ~p ignored ~p event ~p", [Name, Type, Content],
+                   ?LOG#{name => Name}),
+    keep_state_and_data.
+
+%%====================================================================
+%% Activations
+%%====================================================================
+
+open(D = #{file := File, args := Args}) ->
+    {Root, Rel} = root(File, Args),
+    Limits = #{budget => maps:get(budget, Args, env(budget)),
+               memory => maps:get(memory, Args, env(memory))},
+    case toroco_lua_port:open(Rel, Root, maps:get(params, Args, #{}), Limits,
+                              toroco_clock:now_ms()) of
+        {ok, Id, Actions} -> {ok, Id, Actions};
+        {stopped, Reason, Actions} ->
+            _ = actions(Actions, D),
+            {error, reason(Reason, D)};
+        {error, _} = Error -> Error
+    end.
+
+env(Key) ->
+    {ok, V} = application:get_env(toroco_lua, Key),
+    V.
+
+activation({ok, Actions}, D) ->
+    {keep_state_and_data, actions(Actions, D)};
+activation({stopped, Reason, Actions}, D = #{name := Name}) ->
+    _ = actions(Actions, D),                  % its prints; emissions die with it
+    Why = reason(Reason, D),
+    logger:error("toroco_lua: ~p stopped: ~p", [Name, Why], ?LOG#{name => Name}),
+    {stop, Why};
+activation({error, {Bad, Why}}, #{name := Name}) when Bad =:= bad_frame; Bad =:= bad_value ->
+    %% a value the port cannot take (a pid, a fun, too many values): this
+    %% event only
+    logger:warning("toroco_lua: ~p got a value that cannot cross to Lua (~p); dropped",
+                   [Name, {Bad, Why}], ?LOG#{name => Name}),
+    keep_state_and_data;
+activation({error, {lua_port_down, Why}}, _D) ->
+    {stop, {lua_port_down, Why}};
+activation({error, Why}, _D) ->
+    {stop, {lua_port, Why}}.
+
+%% {lua_error, File, Line, Message}: File as the user named it for the
+%% behavior's own file, else the module's path in the program's folder.
+reason({lua_error, Src, Line, Msg}, D) -> {lua_error, path(Src, D), Line, Msg};
+reason({lua_limit, Src, What}, D) -> {lua_limit, path(Src, D), What}.
+
+path(Src, #{file := File, args := Args}) ->
+    {Root, Rel} = root(File, Args),
+    case unicode:characters_to_list(Src) of
+        Rel -> File;
+        Other -> filename:join(Root, Other)
+    end.
+
+%% The program's folder and the file's path inside it; a file outside the
+%% folder given is its own folder's.
+root(File, Args) ->
+    Abs = unicode:characters_to_list(filename:absname(File)),
+    Root = unicode:characters_to_list(filename:absname(maps:get(root, Args, filename:dirname(Abs)))),
+    case string:prefix(Abs, Root ++ "/") of
+        nomatch -> {filename:dirname(Abs), filename:basename(Abs)};
+        Rel ->
+            case filelib:safe_relative_path(Rel, Root) of
+                unsafe -> {filename:dirname(Abs), filename:basename(Abs)};
+                Safe -> {Root, Safe}
+            end
+    end.
+
+waited(false) -> none;
+waited(I) -> binary_to_atom(I).
+
+%% The port's actions as the engine's: emissions and timers.
+actions(Actions, D) ->
+    lists:filtermap(fun(A) -> action(A, D) end, Actions).
+
+action({send, Out, V, Hold}, D) ->
+    with_output(Out, D, fun(O) -> case Hold of
+                                      default -> {send, #{O => V}};
+                                      _ -> {send, #{O => V}, #{hold => Hold}}
+                                  end
+                        end);
+action({set, Out, V}, D) ->
+    with_output(Out, D, fun(O) -> {set, #{O => V}} end);
+action({unset, all}, _D) ->
+    {true, unset};
+action({unset, Out}, D) ->
+    with_output(Out, D, fun(O) -> {unset, [O]} end);
+action({timer, Task, Seq, Ms}, #{id := Id}) ->
+    {true, {{timeout, {lua, Task}}, Ms, {lua_timer, Id, Task, Seq}}};
+action({cancel, Task}, _D) ->
+    {true, {{timeout, {lua, Task}}, cancel}};
+action({print, Text}, D) ->
+    print(Text, D),
+    false;
+action({main, Op, _Line, Args}, #{name := Name, file := File, args := Args0}) ->
+    %% a behavior changing the network (the thesis' suspender, add/remove)
+    Ctx = #{root => element(1, root(File, Args0)), opts => maps:with([budget, memory], Args0)},
+    Self = atom_to_binary(Name),
+    case Op =/= <<"load_behavior">> andalso Args =:= [Self] of
+        true ->
+            %% from its own callback it would wait on itself
+            logger:warning("toroco_lua: ~p cannot ~ts itself; ignored", [Name, Op],
+                           ?LOG#{name => Name});
+        false -> main_call_logged(Op, Args, Ctx, Name)
+    end,
+    false.
+
+main_call_logged(Op, Args, Ctx, Name) ->
+    case main_call(Op, Args, Ctx) of
+        {error, Why} ->
+            logger:warning("toroco_lua: ~p: ~ts refused: ~p", [Name, Op, Why], ?LOG#{name => Name});
+        _ -> ok
+    end.
+
+print(Text, #{name := Name}) ->
+    logger:notice("~p: ~ts", [Name, Text], ?LOG#{name => Name}).
+
+%% Output names are atoms the interface made when the behavior was added;
+%% a name made at run time that no atom has is dropped here, as the engine
+%% drops an undeclared output.
+with_output(Out, #{name := Name}, Fun) ->
+    try binary_to_existing_atom(Out) of
+        O -> {true, Fun(O)}
+    catch error:badarg ->
+            logger:warning("toroco_lua: ~p emitted on undeclared output ~ts; dropped",
+                           [Name, Out], ?LOG#{name => Name}),
+            false
+    end.
+
+%%====================================================================
+%% The file's interface
+%%====================================================================
+
+strip_comments(Src) ->
+    NoBlocks = re:replace(Src, "--\\[(=*)\\[.*?\\]\\1\\]", "", [global, dotall, {return, binary}]),
+    re:replace(NoBlocks, "--[^\\n]*", "", [global, {return, binary}]).
+
+names(Code, Re) ->
+    case re:run(Code, Re, [global, {capture, all_but_first, binary}]) of
+        {match, Ms} -> [N || [N] <- Ms];
+        nomatch -> []
+    end.
+
+%% The top-level keys of each send_output{...} / set_output{...} table.
+output_keys(Code) ->
+    case re:run(Code, "\\b(?:send|set)_output\\s*\\(?\\s*\\{", [global, {capture, first, index}]) of
+        {match, Ms} ->
+            lists:append([keys(Code, Start + Len) || [{Start, Len}] <- Ms]);
+        nomatch -> []
+    end.
+
+%% Walks the table after its opening brace: keys at depth 1 only.
+keys(Code, Pos) ->
+    keys(Code, Pos, 1, []).
+
+keys(Code, Pos, _Depth, Acc) when Pos >= byte_size(Code) -> Acc;
+keys(_Code, _Pos, 0, Acc) -> Acc;
+keys(Code, Pos, Depth, Acc) ->
+    case binary:at(Code, Pos) of
+        ${ -> keys(Code, Pos + 1, Depth + 1, Acc);
+        $} -> keys(Code, Pos + 1, Depth - 1, Acc);
+        _ when Depth =:= 1 ->
+            Rest = binary:part(Code, Pos, byte_size(Code) - Pos),
+            case re:run(Rest, "^(?:([A-Za-z_][A-Za-z0-9_]*)|\\[\\s*['\"]([^'\"]+)['\"]\\s*\\])\\s*=(?!=)",
+                        [{capture, all_but_first, binary}]) of
+                {match, [K]} -> keys(Code, Pos + byte_size(K), Depth, [K | Acc]);
+                {match, [<<>>, K]} -> keys(Code, Pos + byte_size(K), Depth, [K | Acc]);
+                nomatch ->
+                    case re:run(Rest, "^[A-Za-z0-9_]+", [{capture, first, index}]) of
+                        {match, [{0, L}]} -> keys(Code, Pos + L, Depth, Acc);
+                        nomatch -> keys(Code, Pos + 1, Depth, Acc)
+                    end
+            end;
+        _ -> keys(Code, Pos + 1, Depth, Acc)
+    end.

@@ -1,0 +1,527 @@
+%% Lua behaviors (SPEC §16) in the running network: values crossing both
+%% ways, wait_for_input with and without a timeout, triggers, latches reaching
+%% a fake actuator, sched.sleep on the runtime's clock, errors and limits
+%% naming file and line with the behavior restarting, the port program killed
+%% and every Lua behavior back, bad frames, and reload.
+-module(toroco_lua_SUITE).
+
+-include_lib("common_test/include/ct.hrl").
+-include_lib("stdlib/include/assert.hrl").
+
+-export([all/0, groups/0, suite/0, init_per_testcase/2, end_per_testcase/2]).
+-export([log/2]).
+-export([interface_from_the_file/1, values_cross_both_ways/1,
+         wait_for_input_with_and_without_timeout/1, sleep_on_the_runtime_clock/1,
+         latches_reach_the_actuator/1, print_goes_to_the_logger/1,
+         lua_error_names_file_and_line/1, endless_loop_hits_the_budget/1,
+         endless_allocation_hits_the_memory_cap/1, hung_port_is_killed/1,
+         lua_faults_leave_erlang_layers_flowing/1, reset_starts_a_fresh_state/1,
+         port_killed_every_lua_behavior_back/1, bad_frames_are_answered/1,
+         reload_all_or_nothing/1, reload_under_1khz_input/1,
+         load_main_errors_name_the_line/1, load_main_from_the_program_folder/1, lockstep_timers_at_simulated_deadlines/1]).
+
+-define(WAIT, 3000).
+
+suite() ->
+    [{timetrap, {seconds, 60}}].
+
+all() ->
+    [{group, api}, {group, faults}, {group, reload}, {group, lockstep}].
+
+groups() ->
+    [{api, [], [interface_from_the_file, values_cross_both_ways,
+                wait_for_input_with_and_without_timeout, sleep_on_the_runtime_clock,
+                latches_reach_the_actuator, print_goes_to_the_logger, reset_starts_a_fresh_state,
+                load_main_errors_name_the_line, load_main_from_the_program_folder]},
+     {faults, [], [lua_error_names_file_and_line, endless_loop_hits_the_budget,
+                   endless_allocation_hits_the_memory_cap, hung_port_is_killed,
+                   lua_faults_leave_erlang_layers_flowing,
+                   port_killed_every_lua_behavior_back, bad_frames_are_answered]},
+     {reload, [], [reload_all_or_nothing, reload_under_1khz_input]},
+     {lockstep, [], [lockstep_timers_at_simulated_deadlines]}].
+
+init_per_testcase(_Case, Config) ->
+    {ok, _} = application:ensure_all_started(toroco_hw),
+    {ok, _} = application:ensure_all_started(toroco_lua),
+    ok = logger:add_handler(lua_suite, ?MODULE, #{config => #{pid => self()}, level => notice}),
+    #{level := Level} = logger:get_primary_config(),
+    ok = logger:set_primary_config(level, notice),     % print() is a notice
+    [{primary_level, Level} | Config].
+
+end_per_testcase(Case, Config) ->
+    _ = Case =:= lockstep_timers_at_simulated_deadlines andalso toroco_clock:realtime(),
+    _ = logger:remove_handler(lua_suite),
+    ok = logger:set_primary_config(level, ?config(primary_level, Config)),
+    %% the behaviors first, so none sees its port go
+    _ = application:stop(toroco_hw),
+    _ = application:stop(toroco),
+    _ = application:stop(toroco_lua),
+    ok.
+
+%% logger handler: the Lua domain's events to the test process
+log(#{meta := Meta = #{domain := [toroco, lua]}, msg := Msg}, #{config := #{pid := Pid}}) ->
+    Pid ! {lua_log, maps:get(name, Meta, undefined), text(Msg)};
+log(_, _) ->
+    ok.
+
+text({string, S}) -> unicode:characters_to_binary(S);
+text({report, R}) -> iolist_to_binary(io_lib:format("~p", [R]));
+text({F, A}) -> iolist_to_binary(io_lib:format(F, A)).
+
+%%% ---------------------------------------------------------------------
+%%% The API
+%%% ---------------------------------------------------------------------
+
+interface_from_the_file(doc) ->
+    ["A Lua behavior's inputs and outputs are those its file uses, and "
+     "toroco:add_behavior(Name, toroco_lua, #{file => ...}) takes it as SPEC §16 writes"];
+interface_from_the_file(Config) ->
+    ?assertEqual(#{inputs => [value], outputs => [count, echo, made]},
+                 toroco_lua:interface(#{file => data(Config, "echo.lua")})),
+    ?assertEqual(#{inputs => [go, more], outputs => [got, more, timeout]},
+                 toroco_lua:interface(#{file => data(Config, "waiter.lua")})),
+    ?assertEqual(#{inputs => [extra, update], outputs => [motors_setvel]},
+                 toroco_lua:interface(#{file => data(Config, "latch.lua"), inputs => [extra]})),
+    ?assertError({lua_file, {_, enoent}}, toroco_lua:interface(#{file => "nope.lua"})),
+    %% as SPEC §16 writes it, straight through the runtime's API
+    ok = toroco:add_behavior(lb, toroco_lua, #{file => data(Config, "echo.lua"), layer => 2,
+                                               params => #{}}),
+    #{module := toroco_lua, layer := 2, inputs := #{value := _},
+      outputs := #{count := _, echo := _, made := _}} = toroco:inspect(lb),
+    ?assertMatch({error, _}, toroco:add_behavior(nf, toroco_lua, #{file => "nope.lua"})).
+
+values_cross_both_ways(doc) ->
+    ["Values cross as SPEC §16 says: one value is the value, several a tuple, none {}; "
+     "integral numbers integers, strings binaries, tables lists or maps; the reverse in"];
+values_cross_both_ways(Config) ->
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [value]}),
+    actuator(a, [echo, count, made]),
+    ok = toroco_lua:add_behavior(lb, #{file => data(Config, "echo.lua")}),
+    ok = toroco:set_inputs(lb, #{value => [{s, value}]}),
+    ok = toroco:set_inputs(a, #{echo => [{lb, echo}], count => [{lb, count}], made => [{lb, made}]}),
+    In = [{20, 20}, 42, 2.5, 3.0, <<"bin">>, [1, 2, 3], #{a => 1}, {}, true, other, {1, {2, 3}}],
+    Out = [{20, 20}, 42, 2.5, 3, <<"bin">>, [1, 2, 3], #{<<"a">> => 1}, {}, true, <<"other">>,
+           {1, [2, 3]}],
+    [ok = toroco:inject({s, value}, V) || V <- In],
+    await(a, echo, Out),
+    await(a, count, [2, 1, 1, 1, 1, 1, 1, 0, 1, 1, 2]),
+    [Made | _] = values(a, made),
+    ?assertEqual({1, 2.5, <<"text">>, true, [1, 2], #{<<"k">> => <<"v">>}}, Made).
+
+wait_for_input_with_and_without_timeout(doc) ->
+    ["wait_for_input pauses the coroutine until its input; with a timeout it gives nil "
+     "after it, and an input in time cancels the timer"];
+wait_for_input_with_and_without_timeout(Config) ->
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [go, more]}),
+    actuator(a, [got, more, timeout]),
+    ok = toroco_lua:add_behavior(w, #{file => data(Config, "waiter.lua")}),
+    ok = toroco:set_inputs(w, #{go => [{s, go}], more => [{s, more}]}),
+    ok = toroco:set_inputs(a, #{got => [{w, got}], more => [{w, more}], timeout => [{w, timeout}]}),
+    ?assertMatch({ok, [#{kind := coroutine, input := go, timer := false}]}, toroco_lua:waits(w)),
+    ok = toroco:inject({s, go}, 1),
+    await(a, timeout, [1]),
+    H = toroco_fake_actuator:history(a),
+    [TGot] = [T || {got, 1, T} <- H],
+    [TOut] = [T || {timeout, 1, T} <- H],
+    ?assert(TOut - TGot >= 190),              % 0.2 s, on a generous bound
+    ?assert(TOut - TGot < 2000),
+    ok = toroco:inject({s, go}, 2),
+    await(a, got, [1, 2]),
+    ?assertMatch({ok, [#{input := more, timer := true}]}, toroco_lua:waits(w)),
+    ok = toroco:inject({s, more}, 3),
+    await(a, more, [3]),
+    ?assertMatch({ok, [#{input := go, timer := false}]}, toroco_lua:waits(w)),
+    ?assertEqual([1], values(a, timeout)).
+
+sleep_on_the_runtime_clock(doc) ->
+    ["lumen's sched.sleep is a gen_statem timeout of the behavior: ticks come about "
+     "every 0.05 s"];
+sleep_on_the_runtime_clock(Config) ->
+    actuator(a, [tick]),
+    ok = toroco_lua:add_behavior(t, #{file => data(Config, "sleeper.lua")}),
+    ok = toroco:set_inputs(a, #{tick => [{t, tick}]}),
+    ok = toroco_fake_actuator:await(a, fun(H) -> length(H) >= 4 end, ?WAIT),
+    H = [{V, T} || {tick, V, T} <- toroco_fake_actuator:history(a)],
+    [{V0, T0} | _] = H,
+    {V3, T3} = lists:nth(4, H),
+    ?assertEqual(V0 + 3, V3),
+    ?assert(T3 - T0 >= 140).
+
+latches_reach_the_actuator(doc) ->
+    ["The thesis' avoid in Lua: set_output latches the motors over a lower source, "
+     "unset_output lets the lower source's latch through again"];
+latches_reach_the_actuator(Config) ->
+    ok = toroco:add_device(ir, toroco_fake_sensor, #{outputs => [update]}),
+    ok = toroco:add_device(low, toroco_fake_sensor, #{outputs => [motors]}),
+    actuator(motors, [setvel]),
+    ok = toroco_lua:add_behavior(avoid, #{file => data(Config, "latch.lua"), layer => 1,
+                                          params => #{motors_vel => [20, -20]}}),
+    ok = toroco:set_inputs(avoid, #{update => [{ir, update}]}),
+    ok = toroco:set_inputs(motors, #{setvel => [{avoid, motors_setvel}, {low, motors}]}),
+    ok = toroco:inject({low, motors}, {10, 10}),
+    await(motors, setvel, [{10, 10}]),
+    ok = toroco:inject({ir, update}, 1),
+    await(motors, setvel, [{10, 10}, {20, -20}]),
+    #{outputs := #{motors_setvel := #{latch := {value, {20, -20}}}}} = toroco:inspect(avoid),
+    ok = toroco:inject({low, motors}, {11, 11}, #{latch => true}),   % suppressed
+    ok = toroco:inject({ir, update}, 0),
+    await(motors, setvel, [{10, 10}, {20, -20}, {11, 11}]),
+    #{outputs := #{motors_setvel := #{latch := none}}} = toroco:inspect(avoid).
+
+reset_starts_a_fresh_state(doc) ->
+    ["Brooks' reset runs a Lua behavior's file again in a fresh state, and the old "
+     "state is closed: resets leave one state, not one each"];
+reset_starts_a_fresh_state(Config) ->
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [value, reset]}),
+    actuator(a, [booted, echo]),
+    ok = toroco_lua:add_behavior(lb, #{file => data(Config, "boot.lua")}),
+    ok = toroco:set_inputs(lb, #{value => [{s, value}]}),
+    ok = toroco:set_inputs(a, #{booted => [{lb, booted}], echo => [{lb, echo}]}),
+    ok = toroco:set_reset(lb, [{s, reset}]),
+    ?assertEqual(1, toroco_lua_port:states()),
+    [begin
+         ok = toroco:inject({s, reset}, K),
+         await(a, booted, lists:duplicate(K, {}))
+     end || K <- lists:seq(1, 5)],
+    ok = toroco:inject({s, value}, 7),
+    await(a, echo, [7]),
+    ?assertEqual(1, toroco_lua_port:states()).
+
+print_goes_to_the_logger(doc) ->
+    ["print() reaches the logger with the behavior's name"];
+print_goes_to_the_logger(Config) ->
+    ok = toroco:add_device(ir, toroco_fake_sensor, #{outputs => [update]}),
+    ok = toroco_lua:add_behavior(avoid, #{file => data(Config, "latch.lua"),
+                                          params => #{motors_vel => [1, 1]}}),
+    ok = toroco:set_inputs(avoid, #{update => [{ir, update}]}),
+    ok = toroco:inject({ir, update}, 5),
+    receive {lua_log, avoid, Text} -> ?assertMatch({_, _}, binary:match(Text, <<"Avoiding!">>))
+    after ?WAIT -> ct:fail(no_print)
+    end.
+
+load_main_from_the_program_folder(doc) ->
+    ["A program runs from its main file's folder, as the original did: a behavior "
+     "under behaviors/ requires a module of the program's lib/"];
+load_main_from_the_program_folder(Config) ->
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [value]}),
+    actuator(a, [twice]),
+    ?assertEqual({ok, #{behaviors => [user]}},
+                 toroco_lua:load_main(data(Config, "prog/main.lua"), #{})),
+    ok = toroco:inject({s, value}, 21),
+    await(a, twice, [42]).
+
+load_main_errors_name_the_line(doc) ->
+    ["load_main/2 stops at the first refused call with the main file's line, and "
+     "at a main file that does not compile"];
+load_main_errors_name_the_line(Config) ->
+    Main = data(Config, "bad_main/main.lua"),
+    ?assertMatch({error, {Main, 6, {unknown_name, nowhere}}}, toroco_lua:load_main(Main, #{})),
+    %% what came before the refused call stays: the behavior is there
+    ?assertMatch(#{kind := behavior}, toroco:inspect(e)),
+    Syntax = data(Config, "bad_main/syntax.lua"),
+    ?assertMatch({error, {Syntax, 3, <<"unexpected symbol near '<eof>'">>}},
+                 toroco_lua:load_main(Syntax, #{})).
+
+%%% ---------------------------------------------------------------------
+%%% Faults
+%%% ---------------------------------------------------------------------
+
+lua_error_names_file_and_line(doc) ->
+    ["A Lua error ends the behavior with {lua_error, File, Line, Message} and its "
+     "layer restarts it; a sensor's path to an actuator beside it goes on"];
+lua_error_names_file_and_line(Config) ->
+    File = data(Config, "faulty.lua"),
+    faulty(File),
+    Reason = fault(f, <<"error">>),
+    ?assertMatch({lua_error, File, 7, <<"attempt to index local 't' (a nil value)">>}, Reason),
+    back(f),
+    ok = toroco:inject({s, kind}, <<"again">>),
+    await(a, alive, [<<"ok">>, <<"again">>]),
+    ok = toroco:inject({e, value}, 2),
+    await(a, erl, [1, 2]).
+
+endless_loop_hits_the_budget(doc) ->
+    ["An endless loop (in a required module) ends the behavior with {lua_limit, "
+     "File, budget} naming that module, and it restarts"];
+endless_loop_hits_the_budget(Config) ->
+    File = data(Config, "faulty.lua"),
+    faulty(File),
+    Lib = filename:join(filename:dirname(File), "lib/limits.lua"),
+    ?assertEqual({lua_limit, Lib, budget}, fault(f, <<"loop">>)),
+    back(f),
+    ok = toroco:inject({s, kind}, <<"again">>),
+    await(a, alive, [<<"ok">>, <<"again">>]).
+
+endless_allocation_hits_the_memory_cap(doc) ->
+    ["Allocating without end ends the behavior with {lua_limit, File, memory}, and "
+     "it restarts"];
+endless_allocation_hits_the_memory_cap(Config) ->
+    File = data(Config, "faulty.lua"),
+    faulty(File),
+    Reason = fault(f, <<"memory">>),
+    ?assertMatch({lua_limit, _, memory}, Reason),
+    back(f),
+    ok = toroco:inject({s, kind}, <<"again">>),
+    await(a, alive, [<<"ok">>, <<"again">>]).
+
+hung_port_is_killed(doc) ->
+    ["A C call the budget cannot see into (a pattern that backtracks for ages) hangs "
+     "the program: its owner kills it after stuck_ms and every Lua behavior restarts"];
+hung_port_is_killed(Config) ->
+    faulty(data(Config, "faulty.lua")),
+    OsPid = toroco_lua_port:os_pid(),
+    ?assertMatch({lua_port_down, _}, fault(f, <<"pattern">>)),
+    back(f),
+    ?assertNotEqual(OsPid, toroco_lua_port:os_pid()),
+    ok = toroco:inject({s, kind}, <<"again">>),
+    await(a, alive, [<<"ok">>, <<"again">>]).
+
+lua_faults_leave_erlang_layers_flowing(doc) ->
+    ["Under 1 kHz input to an Erlang behavior, a Lua behavior beside it errs, loops, "
+     "hoards memory and loses its port, restarting each time: the Erlang path loses "
+     "no event and keeps its order"];
+lua_faults_leave_erlang_layers_flowing(Config) ->
+    faulty(data(Config, "faulty.lua")),
+    ok = toroco:add_device(m, toroco_fake_sensor, #{outputs => [left, right]}),
+    actuator(b, [signal]),
+    ok = toroco:add_behavior(signaller, torobot_ex_signaller, #{}),
+    ok = toroco:set_inputs(signaller, #{left => [{m, left}], right => [{m, right}]}),
+    ok = toroco:set_inputs(b, #{signal => [{signaller, signal}]}),
+    N = 1000,
+    _ = spawn_link(fun() -> [begin ok = toroco:inject({m, left}, K), receive after 1 -> ok end end
+                             || K <- lists:seq(1, N)] end),
+    Reasons = [begin R = fault(f, Kind), back(f), R end
+               || Kind <- [<<"error">>, <<"loop">>, <<"memory">>]],
+    ?assertMatch([{lua_error, _, 7, _}, {lua_limit, _, budget}, {lua_limit, _, memory}], Reasons),
+    OsPid = toroco_lua_port:os_pid(),
+    Ref = erlang:monitor(process, whereis(toroco_names:process(f))),
+    _ = os:cmd("kill -9 " ++ integer_to_list(OsPid)),
+    receive {'DOWN', Ref, process, _, {lua_port_down, _}} -> ok
+    after ?WAIT -> ct:fail(not_stopped)
+    end,
+    back(f),
+    ok = toroco_fake_actuator:await(b, fun(H) -> length(H) >= N end, 20000),
+    ?assertEqual([{left, K} || K <- lists:seq(1, N)], values(b, signal)),
+    ok = toroco:inject({s, kind}, <<"again">>),
+    await(a, alive, [<<"ok">>, <<"again">>]).
+
+port_killed_every_lua_behavior_back(doc) ->
+    ["kill -9 of the port program: every Lua behavior stops with lua_port_down and is "
+     "back, answering, within 1 s; the Erlang path goes on in the same processes"];
+port_killed_every_lua_behavior_back(Config) ->
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [value]}),
+    Names = [l0, l1, l2],
+    actuator(a, [echo_l0, echo_l1, echo_l2, erl]),
+    [begin
+         ok = toroco_lua:add_behavior(N, #{file => data(Config, "echo.lua"), layer => L}),
+         ok = toroco:set_inputs(N, #{value => [{s, value}]})
+     end || {N, L} <- lists:zip(Names, [0, 1, 2])],
+    ok = toroco:set_inputs(a, maps:from_list([{list_to_atom("echo_" ++ atom_to_list(N)), [{N, echo}]}
+                                              || N <- Names] ++ [{erl, [{s, value}]}])),
+    ok = toroco:inject({s, value}, 1),
+    [await(a, list_to_atom("echo_" ++ atom_to_list(N)), [1]) || N <- Names],
+    Sensor = whereis(toroco_names:process(s)),
+    Owner = whereis(toroco_lua_port),
+    Refs = [{erlang:monitor(process, whereis(toroco_names:process(N))), N} || N <- Names],
+    OsPid = toroco_lua_port:os_pid(),
+    T0 = erlang:monotonic_time(millisecond),
+    _ = os:cmd("kill -9 " ++ integer_to_list(OsPid)),
+    [receive {'DOWN', R, process, _, Why} -> ?assertMatch({lua_port_down, _}, Why)
+     after ?WAIT -> ct:fail({not_stopped, N})
+     end || {R, N} <- Refs],
+    [back(N) || N <- Names],
+    ok = toroco:inject({s, value}, 2),
+    [await(a, list_to_atom("echo_" ++ atom_to_list(N)), [1, 2]) || N <- Names],
+    Back = erlang:monotonic_time(millisecond) - T0,
+    ct:pal("every Lua behavior back and answering ~b ms after kill -9", [Back]),
+    ?assert(Back < 1000),
+    ?assertNotEqual(OsPid, toroco_lua_port:os_pid()),
+    ?assertEqual(Owner, whereis(toroco_lua_port)),
+    ?assertEqual(Sensor, whereis(toroco_names:process(s))),
+    await(a, erl, [1, 2]).
+
+bad_frames_are_answered(doc) ->
+    ["A frame the program cannot read is answered with bad_frame, never a crash; a "
+     "value that cannot cross (a pid) is dropped and the behavior goes on"];
+bad_frames_are_answered(Config) ->
+    OsPid = toroco_lua_port:os_pid(),
+    ?assertEqual({bad_frame, not_a_term}, toroco_lua_port:raw(<<1, 2, 3>>)),
+    ?assertEqual({bad_frame, not_a_term}, toroco_lua_port:raw(term_to_binary(self()))),
+    ?assertEqual({bad_frame, not_a_request}, toroco_lua_port:raw(term_to_binary(hello))),
+    ?assertEqual({error, {bad_request, 7}}, toroco_lua_port:raw(term_to_binary({launch, 7}))),
+    ?assertEqual({error, {unknown_state, 999}}, toroco_lua_port:close(999)),
+    ?assertEqual({pong, 1}, toroco_lua_port:ping()),
+    ?assertEqual(OsPid, toroco_lua_port:os_pid()),
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [value]}),
+    actuator(a, [echo]),
+    %% params that cannot cross: the behavior does not start, nothing is left open
+    ?assertMatch({error, _}, toroco_lua:add_behavior(lb, #{file => data(Config, "echo.lua"),
+                                                           params => #{me => self()}})),
+    ?assertEqual(0, toroco_lua_port:states()),
+    ok = toroco_lua:add_behavior(lb, #{file => data(Config, "echo.lua")}),
+    ok = toroco:set_inputs(lb, #{value => [{s, value}]}),
+    ok = toroco:set_inputs(a, #{echo => [{lb, echo}]}),
+    Pid = whereis(toroco_names:process(lb)),
+    ok = toroco:inject({s, value}, self()),
+    ok = toroco:inject({s, value}, list_to_tuple(lists:seq(1, 300))),
+    ok = toroco:inject({s, value}, 5),
+    await(a, echo, [5]),
+    ?assertEqual(Pid, whereis(toroco_names:process(lb))).
+
+%%% ---------------------------------------------------------------------
+%%% Reload
+%%% ---------------------------------------------------------------------
+
+reload_all_or_nothing(doc) ->
+    ["reload re-reads the file: the new code answers; a file that does not compile "
+     "leaves the old one running and says why"];
+reload_all_or_nothing(Config) ->
+    File = filename:join(?config(priv_dir, Config), "versioned.lua"),
+    {ok, V1} = file:read_file(data(Config, "version1.lua")),
+    ok = file:write_file(File, V1),
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [ask]}),
+    actuator(a, [answer]),
+    ok = toroco_lua:add_behavior(v, #{file => File}),
+    ok = toroco:set_inputs(v, #{ask => [{s, ask}]}),
+    ok = toroco:set_inputs(a, #{answer => [{v, answer}]}),
+    ok = toroco:inject({s, ask}, 1),
+    await(a, answer, [{<<"v1">>, 1}]),
+    ok = file:write_file(File, binary:replace(V1, <<"'v1'">>, <<"'v2'">>)),
+    ok = toroco_lua:reload(v),
+    ok = toroco:inject({s, ask}, 2),
+    await(a, answer, [{<<"v1">>, 1}, {<<"v2">>, 2}]),
+    ok = file:write_file(File, <<"local x = = 1\n">>),
+    ?assertMatch({error, {lua_error, File, 1, _}}, toroco_lua:reload(v)),
+    ok = toroco:inject({s, ask}, 3),
+    await(a, answer, [{<<"v1">>, 1}, {<<"v2">>, 2}, {<<"v2">>, 3}]).
+
+reload_under_1khz_input(doc) ->
+    ["A reload while the behavior gets 1 kHz input loses nothing: every event is "
+     "answered once, in order, by the old code and then by the new"];
+reload_under_1khz_input(Config) ->
+    File = filename:join(?config(priv_dir, Config), "busy.lua"),
+    {ok, V1} = file:read_file(data(Config, "version1.lua")),
+    ok = file:write_file(File, V1),
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [ask]}),
+    actuator(a, [answer]),
+    ok = toroco_lua:add_behavior(v, #{file => File}),
+    ok = toroco:set_inputs(v, #{ask => [{s, ask}]}),
+    ok = toroco:set_inputs(a, #{answer => [{v, answer}]}),
+    N = 1000,
+    %% the load: one event a millisecond (pacing, not waiting on anything)
+    _ = spawn_link(fun() -> [begin ok = toroco:inject({s, ask}, K), receive after 1 -> ok end end
+                             || K <- lists:seq(1, N)] end),
+    ok = toroco_fake_actuator:await(a, fun(H) -> length(H) >= 300 end, 10000),
+    ok = file:write_file(File, binary:replace(V1, <<"'v1'">>, <<"'v2'">>)),
+    ok = toroco_lua:reload(v),
+    ok = toroco_fake_actuator:await(a, fun(H) -> length(H) >= N end, 20000),
+    Answers = values(a, answer),
+    ?assertEqual(lists:seq(1, N), [K || {_, K} <- Answers]),
+    Tags = [T || {T, _} <- Answers],
+    {Old, New} = lists:splitwith(fun(T) -> T =:= <<"v1">> end, Tags),
+    ct:pal("~b answers by the old code, ~b by the new", [length(Old), length(New)]),
+    ?assert(length(Old) >= 300),
+    ?assert(length(New) > 0),
+    ?assertEqual([], [T || T <- New, T =/= <<"v2">>]).
+
+%%% ---------------------------------------------------------------------
+%%% Lockstep
+%%% ---------------------------------------------------------------------
+
+lockstep_timers_at_simulated_deadlines(doc) ->
+    ["In lockstep a Lua behavior's wait_for_input timeout and sched.sleep fire at "
+     "their simulated deadlines, to the millisecond, and its clock is the world's"];
+lockstep_timers_at_simulated_deadlines(Config) ->
+    {module, _} = code:ensure_loaded(toroco_clock),
+    case erlang:function_exported(toroco_clock, lockstep, 1) of
+        false -> {skip, "this runtime has no lockstep yet"};
+        true -> lockstep(Config)
+    end.
+
+lockstep(Config) ->
+    ok = toroco_clock:lockstep(#{}),
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [go, more]}),
+    actuator(a, [got, more, timeout, tick]),
+    ok = toroco_lua:add_behavior(w, #{file => data(Config, "waiter.lua")}),
+    ok = toroco:set_inputs(w, #{go => [{s, go}], more => [{s, more}]}),
+    ok = toroco:set_inputs(a, #{got => [{w, got}], more => [{w, more}],
+                                timeout => [{w, timeout}]}),
+    {ok, _} = toroco_clock:tick(100, []),
+    ok = toroco:inject({s, go}, 1),
+    ok = toroco_clock:settle(),
+    {ok, _} = toroco_clock:tick(299, []),
+    ?assertEqual([{got, 1, 100}], toroco_fake_actuator:history(a)),
+    {ok, _} = toroco_clock:tick(1000, []),
+    ?assertEqual([{got, 1, 100}, {timeout, 1, 300}], toroco_fake_actuator:history(a)),
+    ok = toroco_fake_actuator:clear(a),
+    ok = toroco_lua:add_behavior(t, #{file => data(Config, "sleeper.lua")}),
+    ok = toroco:set_inputs(a, #{tick => [{t, tick}]}),
+    ok = toroco_clock:settle(),
+    {ok, _} = toroco_clock:tick(1200, []),
+    %% a tick at start (unwired yet: lost) and then one every 50 ms
+    Ticks = [{N, T} || {tick, N, T} <- toroco_fake_actuator:history(a)],
+    ?assertEqual([{K + 1, 1000 + 50 * K} || K <- lists:seq(1, 4)], Ticks).
+
+%%% ---------------------------------------------------------------------
+%%% Helpers
+%%% ---------------------------------------------------------------------
+
+data(Config, Name) ->
+    filename:join(?config(data_dir, Config), Name).
+
+actuator(Name, Inputs) ->
+    ok = toroco:add_device(Name, toroco_fake_actuator, #{inputs => Inputs}).
+
+values(A, Input) ->
+    [V || {I, V, _} <- toroco_fake_actuator:history(A), I =:= Input].
+
+await(A, Input, Want) ->
+    case toroco_fake_actuator:await(A, fun(H) -> [V || {I, V, _} <- H, I =:= Input] =:= Want end,
+                                    ?WAIT) of
+        ok -> ok;
+        {error, timeout} -> ct:fail({A, Input, want, Want, got, values(A, Input)})
+    end.
+
+%% faulty.lua as behavior f on sensor s, reporting to actuator a, beside an
+%% Erlang path e -> a; one good round first.
+faulty(File) ->
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [kind]}),
+    ok = toroco:add_device(e, toroco_fake_sensor, #{outputs => [value]}),
+    actuator(a, [alive, erl]),
+    ok = toroco_lua:add_behavior(f, #{file => File, layer => 1}),
+    ok = toroco:set_inputs(f, #{kind => [{s, kind}]}),
+    ok = toroco:set_inputs(a, #{alive => [{f, alive}], erl => [{e, value}]}),
+    ok = toroco:inject({s, kind}, <<"ok">>),
+    await(a, alive, [<<"ok">>]),
+    ok = toroco:inject({e, value}, 1),
+    await(a, erl, [1]).
+
+%% Injects Kind and returns the reason behavior Name stopped with.
+fault(Name, Kind) ->
+    Ref = erlang:monitor(process, whereis(toroco_names:process(Name))),
+    ok = toroco:inject({s, kind}, Kind),
+    receive {'DOWN', Ref, process, _, Why} -> Why
+    after 2 * ?WAIT -> ct:fail({not_stopped, Name, Kind})
+    end.
+
+%% Waits (bounded) for behavior Name to be registered and running again.
+back(Name) ->
+    back(Name, erlang:monotonic_time(millisecond) + ?WAIT).
+
+back(Name, Deadline) ->
+    case whereis(toroco_names:process(Name)) of
+        Pid when is_pid(Pid) ->
+            case catch toroco_lua:waits(Name) of
+                {ok, _} -> ok;
+                _ -> retry_back(Name, Deadline)
+            end;
+        undefined -> retry_back(Name, Deadline)
+    end.
+
+retry_back(Name, Deadline) ->
+    case erlang:monotonic_time(millisecond) < Deadline of
+        true ->
+            receive after 5 -> ok end,
+            back(Name, Deadline);
+        false -> ct:fail({not_back, Name})
+    end.

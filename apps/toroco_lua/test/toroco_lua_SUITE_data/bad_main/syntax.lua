@@ -1,0 +1,2 @@
+local toroco = require 'toroco'
+toroco.run(
