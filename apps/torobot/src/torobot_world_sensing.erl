@@ -180,9 +180,9 @@ largest(Blobs) -> lists:max(Blobs).
 %% The detector's datagram (SPEC §7b): keys in the detector's order.
 -spec datagram(torobot_world:colour(), blob() | none, #world{}) -> binary().
 datagram(Colour, none, _W) ->
-    jiffy:encode({[{color, Colour}, {none, true}]});
+    iolist_to_binary(jiffy:encode({[{color, Colour}, {none, true}]}));
 datagram(Colour, {Area, _, X, Y}, #world{time_ms = T}) ->
-    jiffy:encode({[{color, Colour}, {x, X}, {y, Y}, {area, Area}, {t, T}]}).
+    iolist_to_binary(jiffy:encode({[{color, Colour}, {x, X}, {y, Y}, {area, Area}, {t, T}]})).
 
 %% Gaussian noise that depends only on the seed, the time and the channel.
 -spec noise(#world{}, term(), number()) -> float().
