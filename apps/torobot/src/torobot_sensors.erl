@@ -1,10 +1,12 @@
 %% @doc The simulated world's sensors and fixtures beyond the Torobot's:
 %% what the library's robots (`config/robots/') sense, as pure functions of
 %% a `torobot_world' value, and the figures their runs are measured by.
-%% `torobot_world' hands the terms it does not know to {@link term/1} and
-%% calls {@link figures/1} for its summary; `torobot_sim' adds one
-%% `torobot_sim_sensor' device per entry of {@link devices/0} and feeds
-%% each tick's {@link read/2} to them.
+%% It sees the world through `torobot_world''s API only (the world uses
+%% nothing of this module): `torobot_world_file' checks the terms below
+%% and `torobot_world_step' measures the figures for the summary, which
+%% {@link figures/1} picks out; `torobot_sim' adds one `torobot_sim_sensor'
+%% device per entry of {@link devices/0} and feeds each tick's {@link
+%% read/2} to them.
 %%
 %% <h3>World-file terms</h3>
 %% All optional, at most once each unless said (defaults in brackets):
@@ -50,7 +52,6 @@
 %% </ul>
 -module(torobot_sensors).
 
--export([single_terms/0, term/1, build/1]).
 -export([devices/0, new/1, read/2]).
 -export([figures/1, lights/1, dock/1]).
 -export_type([state/0, readings/0]).
@@ -58,89 +59,9 @@
 -type readings() :: #{atom() => #{atom() => term()}}.
 -opaque state() :: {torobot_world:pose(), non_neg_integer()}.
 
--define(RANGE, #{sensors => #{front => 0, front_left => 45, front_right => -45,
-                              left => 90, right => -90, rear => 180},
-                 max_range => 1.5}).
--define(BUMPER, #{front_deg => 25, side_deg => 110}).
--define(LIGHT_SENSOR, #{mount_deg => 45, half_distance => 0.5}).
--define(BEACON, #{range => 6.0, dock_radius => 0.10}).
--define(FIGURES, [laps, coverage, docked_ms, light_distance_m, light_mean_m]).
--define(CELL, 0.2).
-
 %%====================================================================
-%% World-file terms
+%% Fixtures
 %%====================================================================
-
-%% @doc The terms of this module a world may give once only.
--spec single_terms() -> [atom()].
-single_terms() -> [range, bumper, light_sensor, dock, beacon, figures, lap_centre].
-
-%% @doc Checks one world-file term; `{ok, Key, Value}' or `error'.
--spec term(term()) -> {ok, atom(), term()} | error.
-term({range, #{} = Opts}) ->
-    options(range, Opts, ?RANGE, fun(sensors, M) when is_map(M) ->
-                                         lists:all(fun({K, V}) -> is_atom(K) andalso is_number(V) end,
-                                                   maps:to_list(M));
-                                    (max_range, V) -> positive(V);
-                                    (_, _) -> false
-                                 end);
-term({bumper, #{} = Opts}) ->
-    options(bumper, Opts, ?BUMPER, fun(_, V) -> positive(V) andalso V =< 180 end);
-term({light_sensor, #{} = Opts}) ->
-    options(light_sensor, Opts, ?LIGHT_SENSOR, fun(mount_deg, V) -> is_number(V) andalso V >= 0 andalso V < 180;
-                                                  (half_distance, V) -> positive(V)
-                                               end);
-term({beacon, #{} = Opts}) ->
-    options(beacon, Opts, ?BEACON, fun(_, V) -> positive(V) end);
-term({light, P, Power}) when is_number(Power), Power >= 0 ->
-    case point(P) of
-        {ok, Pt} -> {ok, light, {Pt, float(Power)}};
-        error -> error
-    end;
-term({dock, P}) ->
-    case point(P) of
-        {ok, Pt} -> {ok, dock, Pt};
-        error -> error
-    end;
-term({lap_centre, P}) ->
-    case point(P) of
-        {ok, Pt} -> {ok, lap_centre, Pt};
-        error -> error
-    end;
-term({figures, L}) when is_list(L) ->
-    case lists:all(fun(F) -> lists:member(F, ?FIGURES) end, L) of
-        true -> {ok, figures, L};
-        false -> error
-    end;
-term(_) ->
-    error.
-
-options(Key, Opts, Defaults, Valid) ->
-    case lists:all(fun({K, V}) -> is_map_key(K, Defaults) andalso Valid(K, V) end,
-                   maps:to_list(Opts)) of
-        true -> {ok, Key, maps:merge(Defaults, Opts)};
-        false -> error
-    end.
-
-point({X, Y}) when is_number(X), is_number(Y) -> {ok, {float(X), float(Y)}};
-point(_) -> error.
-
-positive(V) -> is_number(V) andalso V > 0.
-
-%% @doc This module's part of a world, from `torobot_world''s parsed terms
-%% (`#{Key => {Value, Term}}', lists of them for repeated terms).
--spec build(map()) -> map().
-build(Parsed) ->
-    One = fun(Key, Default) ->
-                  case Parsed of
-                      #{Key := {V, _}} -> V;
-                      #{} -> Default
-                  end
-          end,
-    #{range => One(range, ?RANGE), bumper => One(bumper, ?BUMPER),
-      light_sensor => One(light_sensor, ?LIGHT_SENSOR), beacon => One(beacon, ?BEACON),
-      lights => lists:reverse([L || {L, _} <- maps:get(light, Parsed, [])]),
-      dock => One(dock, none), figures => One(figures, []), lap_centre => One(lap_centre, none)}.
 
 %% @doc The lamps, `{Centre, Power}'.
 -spec lights(torobot_world:world()) -> [{torobot_world:point(), float()}].
@@ -251,73 +172,19 @@ beacon(W) ->
                                   torobot_world:line_of_sight(W, {X + Ox, Y + Oy}, {Dx + Ox, Dy + Oy})
                           end, [{0.0, 0.0}, Across, {-element(1, Across), -element(2, Across)}]),
             #{bearing => case Seen of
-                             true -> {round(normalise_deg(Bearing)), round(D * 100) / 100};
+                             true -> {round(torobot_geometry:normalise_deg(Bearing)),
+                                      round(D * 100) / 100};
                              false -> none
                          end,
               docked => D =< DockR}
     end.
-
-normalise_deg(D) ->
-    R = D * math:pi() / 180,
-    math:atan2(math:sin(R), math:cos(R)) * 180 / math:pi().
 
 %%====================================================================
 %% Figures
 %%====================================================================
 
 %% @doc The figures the world asks for (`{figures, [...]}'), measured on
-%% the run so far.
+%% the run so far (by `torobot_world_step', as part of the summary).
 -spec figures(torobot_world:world()) -> map().
 figures(W) ->
-    maps:from_list([{F, figure(F, W)} || F <- cfg(figures, W)]).
-
-figure(laps, W) ->
-    {Cx, Cy} = case cfg(lap_centre, W) of
-                   none -> {Aw, Ah} = torobot_world:arena(W), {Aw / 2, Ah / 2};
-                   C -> C
-               end,
-    Angles = [math:atan2(Y - Cy, X - Cx) || {_, X, Y, _} <- torobot_world:trajectory(W)],
-    Turned = lists:sum([math:atan2(math:sin(B - A), math:cos(B - A))
-                        || {A, B} <- lists:zip(lists:droplast(Angles), tl(Angles))]),
-    round(abs(Turned) / (2 * math:pi()) * 100) / 100;
-figure(coverage, W) ->
-    {Aw, Ah} = torobot_world:arena(W),
-    R = torobot_world:robot_radius(W),
-    Cells = [{(I + 0.5) * ?CELL, (J + 0.5) * ?CELL}
-             || I <- lists:seq(0, trunc(Aw / ?CELL) - 1), J <- lists:seq(0, trunc(Ah / ?CELL) - 1)],
-    Free = [C || C <- Cells, torobot_world:free(W, C)],
-    Swept = lists:usort([{trunc(X / ?CELL), trunc(Y / ?CELL)} || {_, X, Y, _} <- torobot_world:trajectory(W)]
-                        ++ [{trunc(X / ?CELL), trunc(Y / ?CELL)}
-                            || {_, X0, Y0, _} <- torobot_world:trajectory(W),
-                               {Ox, Oy} <- [{R, 0}, {-R, 0}, {0, R}, {0, -R}],
-                               {X, Y} <- [{X0 + Ox, Y0 + Oy}], X >= 0, Y >= 0]),
-    Visited = [C || {X, Y} = C <- Free, lists:member({trunc(X / ?CELL), trunc(Y / ?CELL)}, Swept)],
-    case Free of
-        [] -> 0.0;
-        _ -> round(length(Visited) / length(Free) * 100) / 100
-    end;
-figure(docked_ms, W) ->
-    #{dock_radius := DockR} = cfg(beacon, W),
-    case dock(W) of
-        none -> none;
-        {Dx, Dy} ->
-            case [T || {T, X, Y, _} <- torobot_world:trajectory(W),
-                       (X - Dx) * (X - Dx) + (Y - Dy) * (Y - Dy) =< DockR * DockR] of
-                [] -> none;
-                [T | _] -> T
-            end
-    end;
-figure(light_distance_m, W) ->
-    {X, Y, _} = torobot_world:pose(W),
-    lamp_distance(W, X, Y);
-figure(light_mean_m, W) ->
-    case [lamp_distance(W, X, Y) || {_, X, Y, _} <- torobot_world:trajectory(W)] of
-        [none | _] -> none;
-        Ds -> round(lists:sum(Ds) / length(Ds) * 100) / 100
-    end.
-
-lamp_distance(W, X, Y) ->
-    case [math:sqrt((Lx - X) * (Lx - X) + (Ly - Y) * (Ly - Y)) || {{Lx, Ly}, _} <- lights(W)] of
-        [] -> none;
-        Ds -> round(lists:min(Ds) * 100) / 100
-    end.
+    maps:with(cfg(figures, W), torobot_world:summary(W)).

@@ -178,31 +178,27 @@ simulate(WorldSpec, Opts) when is_map(Opts) ->
 %% follow the Torobot's keys. A world of named robots gives one object
 %% with a member per robot.
 -spec summary_json(summary()) -> binary().
-summary_json(#{red_touched_ms := Red, wall_contacts := Walls, blue_contacts := Blue,
-               distance_m := Distance} = Summary) ->
-    iolist_to_binary(
-      ["{\"red_touched_ms\":", case Red of
-                                   none -> "null";
-                                   _ -> integer_to_list(Red)
-                               end,
-       ",\"wall_contacts\":", integer_to_list(Walls),
-       ",\"blue_contacts\":", integer_to_list(Blue),
-       ",\"distance_m\":", float_to_list(float(Distance), [{decimals, 3}, compact]),
-       [[",\"", atom_to_list(K), "\":", figure_json(V)]
-        || {K, V} <- lists:sort(maps:to_list(maps:without([red_touched_ms, wall_contacts,
-                                                            blue_contacts, distance_m],
-                                                           Summary)))],
-       "}"]);
-summary_json(PerRobot) when is_map(PerRobot) ->
-    iolist_to_binary(
-      ["{", lists:join(",", [["\"", atom_to_binary(Name), "\":", summary_json(S)]
-                             || {Name, S} <- lists:sort(maps:to_list(PerRobot))]),
-       "}"]).
+summary_json(Summary) ->
+    iolist_to_binary(jiffy:encode(summary_value(Summary))).
 
-figure_json(none) -> "null";
-figure_json(V) when is_integer(V) -> integer_to_list(V);
-figure_json(V) when is_float(V) -> float_to_list(V, [{decimals, 3}, compact]);
-figure_json(V) -> io_lib:format("\"~0p\"", [V]).
+-define(TOROBOT_KEYS, [red_touched_ms, wall_contacts, blue_contacts, distance_m]).
+
+%% The summary for `jiffy', its keys in order; floats with three decimals.
+-spec summary_value(summary()) -> jiffy:json_value().
+summary_value(#{red_touched_ms := _, wall_contacts := _, blue_contacts := _,
+                distance_m := Distance} = Summary) ->
+    {[{K, figure_value(maps:get(K, Summary))} || K <- ?TOROBOT_KEYS, K =/= distance_m]
+     ++ [{distance_m, figure_value(float(Distance))}
+         | [{K, figure_value(V)}
+            || {K, V} <- lists:sort(maps:to_list(maps:without(?TOROBOT_KEYS, Summary)))]]};
+summary_value(PerRobot) when is_map(PerRobot) ->
+    {[{Name, summary_value(S)} || {Name, S} <- lists:sort(maps:to_list(PerRobot))]}.
+
+-spec figure_value(term()) -> jiffy:json_value().
+figure_value(none) -> null;
+figure_value(V) when is_integer(V) -> V;
+figure_value(V) when is_float(V) -> binary_to_float(float_to_binary(V, [{decimals, 3}]));
+figure_value(V) -> iolist_to_binary(io_lib:format("~0p", [V])).
 
 %% @doc Runs many worlds, several at once, and scores them: see
 %% `torobot_batch:run/1'.

@@ -55,8 +55,9 @@ reachable(Terms) ->
     Blocks = [{C, R} || {object, blue, C, R} <- Terms],
     Reds = [{C, R} || {object, red, C, R} <- Terms],
     Free = fun(P) -> clear(P, ?ROBOT_RADIUS + 0.01, Walls, Blocks ++ Reds) end,
-    Goal = fun(P) -> lists:any(fun({C, R}) -> dist(P, C) =< ?ROBOT_RADIUS + R + ?GRID end,
-                               Reds) end,
+    Goal = fun(P) -> lists:any(fun({C, R}) ->
+                                       torobot_geometry:distance(P, C) =< ?ROBOT_RADIUS + R + ?GRID
+                               end, Reds) end,
     Start = cell({X, Y}),
     search([Start], #{Start => true}, Free, Goal, {W, H}).
 
@@ -182,8 +183,9 @@ arena_walls(W, H) ->
 
 %% Whether a disc of radius Gap at P keeps off every wall and object.
 clear(P, Gap, Walls, Objects) ->
-    lists:all(fun({A, B}) -> dist(P, closest(P, A, B)) >= Gap end, Walls)
-        andalso lists:all(fun({C, R}) -> dist(P, C) >= Gap + R end, Objects).
+    lists:all(fun({A, B}) -> torobot_geometry:distance(P, torobot_geometry:closest(P, A, B)) >= Gap
+              end, Walls)
+        andalso lists:all(fun({C, R}) -> torobot_geometry:distance(P, C) >= Gap + R end, Objects).
 
 search([], _Seen, _Free, _Goal, _Size) ->
     false;
@@ -206,15 +208,3 @@ neighbours({I, J}, {W, H}) ->
     [{I + Di, J + Dj} || {Di, Dj} <- [{1, 0}, {-1, 0}, {0, 1}, {0, -1}],
                          I + Di >= 0, J + Dj >= 0,
                          (I + Di) * ?GRID =< W, (J + Dj) * ?GRID =< H].
-
-closest(P, A, B) ->
-    {Ex, Ey} = sub(B, A),
-    {Px, Py} = sub(P, A),
-    T = max(0.0, min(1.0, (Px * Ex + Py * Ey) / (Ex * Ex + Ey * Ey))),
-    {element(1, A) + Ex * T, element(2, A) + Ey * T}.
-
-sub({X1, Y1}, {X2, Y2}) -> {X1 - X2, Y1 - Y2}.
-
-dist(P, Q) ->
-    {Dx, Dy} = sub(P, Q),
-    math:sqrt(Dx * Dx + Dy * Dy).

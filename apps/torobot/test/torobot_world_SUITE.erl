@@ -11,7 +11,8 @@
 
 all() ->
     [{group, loading}, {group, kinematics}, {group, collisions}, {group, ir},
-     {group, camera}, {group, run}, {group, svg}, {group, several_robots}].
+     {group, camera}, {group, run}, {group, svg}, {group, several_robots},
+     {group, modules}].
 
 groups() ->
     [{loading, [parallel],
@@ -32,11 +33,13 @@ groups() ->
      {camera, [parallel],
       [camera_ahead, camera_left_right, camera_behind_wall, camera_out_of_fov,
        camera_out_of_range, camera_occlusion_by_object, camera_largest,
-       camera_area_shrinks, camera_datagram_keys]},
+       camera_area_shrinks, camera_datagram_keys, camera_datagram_text]},
      {run, [parallel],
       [summary_keys, done_at_duration, trajectory_tags]},
      {svg, [parallel],
-      [svg_parses, svg_write, svg_empty_run]}].
+      [svg_parses, svg_write, svg_empty_run]},
+     {modules, [parallel],
+      [no_module_cycle, world_record_stays_inside]}].
 
 %%====================================================================
 %% Loading
@@ -426,6 +429,18 @@ camera_datagram_keys(_Config) ->
     ?assertEqual(#{<<"color">> => <<"red">>, <<"none">> => true}, NR),
     ?assertEqual(#{<<"color">> => <<"blue">>, <<"none">> => true}, NB).
 
+camera_datagram_text() -> [{doc, "The datagrams are the detector's text byte for byte: compact, "
+                            "keys in the order color, x, y, area, t (or color, none)."}].
+camera_datagram_text(_Config) ->
+    Seen = torobot_world:step(world([{object, red, {3.0, 2.0}, 0.1},
+                                     {object, blue, {3.0, 2.5}, 0.1},
+                                     {robot, {1.0, 2.0, 0.0}}]), 120, {0, 0}),
+    ?assertEqual([<<"{\"color\":\"red\",\"x\":0,\"y\":14,\"area\":603,\"t\":120}">>,
+                  <<"{\"color\":\"blue\",\"x\":-69,\"y\":14,\"area\":568,\"t\":120}">>],
+                 torobot_world:camera(Seen)),
+    ?assertEqual([<<"{\"color\":\"red\",\"none\":true}">>, <<"{\"color\":\"blue\",\"none\":true}">>],
+                 torobot_world:camera(world([]))).
+
 %%====================================================================
 %% The run
 %%====================================================================
@@ -571,6 +586,41 @@ robots_summary_and_svg(_Config) ->
     [#xmlText{value = "b: " ++ _}] = xmerl_xpath:string("//text[@id='caption-b']/text()", Svg),
     Legend = [V || #xmlText{value = V} <- xmerl_xpath:string("//g[@id='legend']/text/text()", Svg)],
     ?assertEqual(["forward"], Legend).
+
+%%====================================================================
+%% Modules
+%%====================================================================
+
+no_module_cycle() -> [{doc, "No two modules of torobot call each other, directly or round a cycle "
+                       "(torobot_world and torobot_sensors were one)."}].
+no_module_cycle(_Config) ->
+    with_xref(fun(X) ->
+                      {ok, Components} = xref:q(X, "components (ME || torobot : App)"),
+                      ?assertEqual([], [C || C <- Components, length(C) > 1])
+              end).
+
+world_record_stays_inside() -> [{doc, "Only torobot_world calls the modules that share the world "
+                                 "record (torobot_world_file, _step, _sensing): the rest of the "
+                                 "project uses its API."}].
+world_record_stays_inside(_Config) ->
+    Inside = [torobot_world, torobot_world_file, torobot_world_step, torobot_world_sensing],
+    with_xref(fun(X) ->
+                      {ok, Calls} = xref:q(X, "ME"),
+                      ?assertEqual([], [{From, To} || {From, To} <- Calls,
+                                                      lists:member(To, tl(Inside)),
+                                                      not lists:member(From, Inside)])
+              end).
+
+with_xref(Check) ->
+    {ok, X} = xref:start([{xref_mode, modules}]),
+    try
+        ok = xref:set_default(X, [{warnings, false}, {verbose, false}]),
+        [{ok, _} = xref:add_application(X, code:lib_dir(App), [{name, App}])
+         || App <- [torobot, toroco_lib, toroco_live, toroco_hw]],
+        Check(X)
+    after
+        xref:stop(X)
+    end.
 
 %%====================================================================
 %% Helpers

@@ -3,7 +3,10 @@
 %% recorder and the flight recorder write every event through it: for the
 %% small messages of the event path it costs a fraction of a NIF call's
 %% fixed price (`jiffy:encode/1', used elsewhere, pays a few microseconds
-%% per call however small the value).
+%% per call however small the value). `jiffy' is the project's JSON
+%% encoder (the dashboard's pages, the detector datagrams of the simulated
+%% camera, the run's summary line, the links of `toroco_hw'); this module
+%% is the one plain-Erlang writer, for hot paths only.
 %%
 %% Strings are written as they are unless they hold `"', `\' or a control
 %% character (found with one precompiled `binary:match/2'), which are
