@@ -5,7 +5,8 @@
 %% applies the resulting plan: it starts, re-wires and stops routers and
 %% gates, starts and stops behaviors (in their layer's supervisor) and
 %% devices, and writes the wiring table, an ETS table that the processes
-%% read when they (re)start to find their place. It is never on the event path:
+%% read when they (re)start to find their place; a consumer being re-wired
+%% gets its new configuration with the call. It is never on the event path:
 %% events go emitter → (gate) → router → receiver.
 %%
 %% It also watches the layer supervisors: a layer that exceeds its restart
@@ -368,21 +369,23 @@ apply_plan(#{routers := OldR, gates := OldG, subs := OldSubs},
     _ = [ets:insert(?TABLE, {{router, K}, stored(router, Cfg)}) || {K, Cfg} <- Changed(NewR, OldR)],
     %% Only consumers that are new or whose configuration changed are touched,
     %% so a change costs in proportion to what it changes.
-    _ = [ensure(gate, K, maps:is_key(K, OldG), Caller)
+    _ = [ensure(gate, K, Cfg, maps:is_key(K, OldG), Caller)
          || {K, Cfg} <- gate_order(NewG), maps:get(K, OldG, none) =/= Cfg],
-    _ = [ensure(router, K, maps:is_key(K, OldR), Caller)
+    _ = [ensure(router, K, Cfg, maps:is_key(K, OldR), Caller)
          || {K, Cfg} <- lists:sort(maps:to_list(NewR)), maps:get(K, OldR, none) =/= Cfg],
     _ = [stop(router, K) || K <- maps:keys(OldR), not maps:is_key(K, NewR)],
     _ = [stop(gate, K) || K <- maps:keys(OldG), not maps:is_key(K, NewG)],
     ok.
 
-%% Starts a consumer that is not running, or re-wires one whose configuration
-%% changed.
-ensure(Kind, Key, Changed, Caller) ->
+%% Starts a consumer that is not running (it reads its row), or re-wires one
+%% whose configuration changed (it gets it with the call: its row may be
+%% gone or newer by the time it takes the call in).
+ensure(Kind, Key, Cfg, Changed, Caller) ->
     Mod = consumer_module(Kind),
     case toroco_routers_sup:start_consumer(Mod, Key, Caller) of
         {ok, _} -> answered(toroco_consumer:ready(Mod, Key));
-        {error, {already_started, _}} when Changed -> answered(toroco_consumer:rewire(Mod, Key, Caller));
+        {error, {already_started, _}} when Changed ->
+            answered(toroco_consumer:rewire(Mod, Key, stored(Kind, Cfg), Caller));
         {error, {already_started, _}} -> ok;
         {error, Reason} ->
             logger:error("toroco: could not start ~p ~p: ~p", [Kind, Key, Reason],
