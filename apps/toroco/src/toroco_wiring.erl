@@ -21,7 +21,10 @@
 %% of every node. A name that two nodes claim (added on both sides of a
 %% partition) is listed in `toroco:inspect()' under `name_clashes', never
 %% merged.
-
+%%
+%% The table belongs to `toroco_store', which lends it to each incarnation
+%% of this server (`toroco_store:claim/1') and takes it back when it dies:
+%% only this server writes it, every process may read it.
 -module(toroco_wiring).
 -behaviour(gen_server).
 
@@ -114,6 +117,7 @@ stopping() ->
 
 -spec init([]) -> {ok, #s{}}.
 init([]) ->
+    ok = toroco_store:claim(?TABLE),
     S = restore(),
     ok = toroco_wiring_dir:join(S#s.wiring),
     {ok, S}.
