@@ -5,7 +5,8 @@
 %% <ul>
 %% <li>`toroco_wiring': the wiring server's table (the configuration of each
 %%     router and gate, the consumers of each emitter) and its own state, so
-%%     that a crashed wiring server comes back with the wiring it had. It is
+%%     that a crashed wiring server comes back with the wiring it had (its
+%%     rows: `toroco_wiring_table'). It is
 %%     `protected': every process may read it (a consumer reads its row when
 %%     it starts), only its writer writes. The writer is the wiring server,
 %%     lent the table by {@link claim/1} with this process as its heir: when
@@ -61,10 +62,6 @@ handle_call({claim, Table}, From, S = #s{held = Held, waiting = Waiting}) ->
 handle_call(_Req, _From, S) ->
     {reply, {error, unknown_request}, S}.
 
--spec handle_cast(term(), #s{}) -> {noreply, #s{}}.
-handle_cast(_Msg, S) ->
-    {noreply, S}.
-
 %% A writer died: its table is back here, for the claim waiting or the next.
 -spec handle_info(term(), #s{}) -> {noreply, #s{}}.
 handle_info({'ETS-TRANSFER', Table, _From, lent}, S = #s{held = Held, waiting = Waiting}) ->
@@ -77,6 +74,10 @@ handle_info({'ETS-TRANSFER', Table, _From, lent}, S = #s{held = Held, waiting = 
             {noreply, S#s{held = lists:usort([Table | Held])}}
     end;
 handle_info(_Msg, S) ->
+    {noreply, S}.
+
+-spec handle_cast(term(), #s{}) -> {noreply, #s{}}.
+handle_cast(_Msg, S) ->
     {noreply, S}.
 
 %% A claimer that died meanwhile leaves the table here.

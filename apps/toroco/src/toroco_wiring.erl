@@ -22,16 +22,14 @@
 %% partition) is listed in `toroco:inspect()' under `name_clashes', never
 %% merged.
 %%
-%% The table belongs to `toroco_store', which lends it to each incarnation
-%% of this server (`toroco_store:claim/1') and takes it back when it dies:
-%% only this server writes it, every process may read it.
+%% The wiring table's rows are `toroco_wiring_table''s: this server is its
+%% only writer, lent the table by `toroco_store' in each incarnation.
 -module(toroco_wiring).
 -behaviour(gen_server).
 
 -export([start_link/0, call/1, call/2, lookup/1, subs_of/1, known/1, stopping/0, peers/0]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 
--define(TABLE, toroco_wiring).
 
 -record(s, {wiring = toroco_wiring_core:new() :: toroco_wiring_core:wiring(),
             layers = #{} :: #{non_neg_integer() => {pid(), reference()}},
@@ -82,28 +80,18 @@ peers() ->
 %% @doc A router's or gate's configuration from the wiring table.
 -spec lookup({router | gate, term()}) -> {ok, map()} | error.
 lookup(Key) ->
-    try ets:lookup(?TABLE, Key) of
-        [{_, Cfg}] -> {ok, Cfg};
-        [] -> error
-    catch error:badarg -> error
-    end.
+    toroco_wiring_table:lookup(Key).
 
 %% @doc Whether `Name' is a behavior or device of the wiring (read from the
 %% table, without asking the server).
 -spec known(atom()) -> boolean().
 known(Name) ->
-    try ets:member(?TABLE, {nodes, Name})
-    catch error:badarg -> false
-    end.
+    toroco_wiring_table:known(Name).
 
 %% @doc The consumers each output of emitter `Name' is planned to feed.
 -spec subs_of(atom()) -> #{atom() => [atom()]}.
 subs_of(Name) ->
-    try ets:lookup(?TABLE, {subs, Name}) of
-        [{_, Subs}] -> Subs;
-        [] -> #{}
-    catch error:badarg -> #{}
-    end.
+    toroco_wiring_table:subs_of(Name).
 
 %% @doc Called when the application is about to stop: layers going down from
 %% now on are being shut down, not taken out.
@@ -117,7 +105,7 @@ stopping() ->
 
 -spec init([]) -> {ok, #s{}}.
 init([]) ->
-    ok = toroco_store:claim(?TABLE),
+    ok = toroco_wiring_table:claim(),
     S = restore(),
     ok = toroco_wiring_dir:join(S#s.wiring),
     {ok, S}.
@@ -216,32 +204,17 @@ reply({error, _} = Err, _From, S, _Removed) -> {reply, Err, S}.
 %% Surviving a crash
 %%====================================================================
 
-%% The wiring and the server's state are written through to the table of
-%% `toroco_store' after each change, so a restarted server reads back what it
-%% had: the nodes (only those that changed), and the server's own state; the
-%% inputs and the inhibitors are read back from the routers' and gates'
-%% configurations, which the table holds anyway. If the network's
-%% supervisors were restarted meanwhile (everything after the store restarts
-%% with them), the network is empty, and so is the wiring.
+%% The wiring and the server's state are written through to the wiring
+%% table (`toroco_wiring_table') after each change, so a restarted server
+%% reads back what it had: the nodes (only those that changed), and the
+%% server's own state; the inputs and the inhibitors are read back from the
+%% routers' and gates' configurations, which the table holds anyway. If the
+%% network's supervisors were restarted meanwhile (everything after the
+%% store restarts with them), the network is empty, and so is the wiring.
 persist(#s{wiring = W0} = S0, S1 = #s{wiring = W1}) ->
-    diff(toroco_wiring_core:nodes(W0), toroco_wiring_core:nodes(W1)),
-    _ = meta(S0) =/= meta(S1) andalso ets:insert(?TABLE, {'$meta', meta(S1)}),
+    ok = toroco_wiring_table:nodes_changed(toroco_wiring_core:nodes(W0), toroco_wiring_core:nodes(W1)),
+    _ = meta(S0) =/= meta(S1) andalso toroco_wiring_table:write_meta(meta(S1)),
     S1.
-
-%% A node is kept as a tuple: a map of five keys costs twice the words.
-diff(Old, New) ->
-    maps:foreach(fun(K, V = #{kind := Kind, module := M, layer := L, inputs := Ins, outputs := Outs}) ->
-                         case Old of
-                             #{K := V} -> ok;
-                             #{} -> ets:insert(?TABLE, {{nodes, K}, {Kind, M, L, Ins, Outs}})
-                         end
-                 end, New),
-    maps:foreach(fun(K, _) ->
-                         case New of
-                             #{K := _} -> ok;
-                             #{} -> ets:delete(?TABLE, {nodes, K})
-                         end
-                 end, Old).
 
 meta(#s{layers = Layers, removed = Removed, stopping = Stopping, wiring = W, dir = D}) ->
     #{network => network(), layers => maps:map(fun(_, {Pid, _}) -> Pid end, Layers),
@@ -252,15 +225,10 @@ network() ->
     [whereis(Sup) || Sup <- [toroco_routers_sup, toroco_devices_sup, toroco_layers_sup]].
 
 restore() ->
-    Net = network(),
-    case ets:lookup(?TABLE, '$meta') of
-        [{_, #{network := Net, layers := Layers, removed := Removed, stopping := Stopping,
-               remote := Remote, clashes := Clashes}}] ->
-            Part = fun(P) -> ets:select(?TABLE, [{{{P, '$1'}, '$2'}, [], [{{'$1', '$2'}}]}]) end,
-            Nodes = maps:from_list([{N, #{kind => Kind, module => M, layer => L,
-                                          inputs => Ins, outputs => Outs}}
-                                     || {N, {Kind, M, L, Ins, Outs}} <- Part(nodes)]),
-            W = toroco_wiring_core:restore(Nodes, Part(router), [G || {_, G} <- Part(gate)], Remote),
+    case toroco_wiring_table:restore(network()) of
+        {ok, #{layers := Layers, removed := Removed, stopping := Stopping,
+               remote := Remote, clashes := Clashes}, Nodes, Routers, Gates} ->
+            W = toroco_wiring_core:restore(Nodes, Routers, Gates, Remote),
             %% A layer taken out while the server was down is seen here.
             {Alive, Gone} = lists:partition(fun({_, Pid}) -> is_process_alive(Pid) end,
                                             maps:to_list(Layers)),
@@ -272,10 +240,9 @@ restore() ->
                           "(~b behaviors and devices)", [map_size(Nodes)],
                           #{domain => [toroco, wiring]}),
             persist(S, S);
-        _ ->
-            ets:delete_all_objects(?TABLE),
+        fresh ->
             S = #s{},
-            ets:insert(?TABLE, {'$meta', meta(S)}),
+            ok = toroco_wiring_table:write_meta(meta(S)),
             S
     end.
 
@@ -364,13 +331,8 @@ rewire({error, _} = Err, _Caller, _S) ->
 
 %% Table first (restarting processes read it), then gates upstream-first, then
 %% routers, then whatever is no longer needed.
-apply_plan(#{routers := OldR, gates := OldG, subs := OldSubs},
-           #{routers := NewR, gates := NewG, subs := NewSubs}, Caller) ->
-    Changed = fun(New, Old) -> [{K, V} || {K, V} <- maps:to_list(New), maps:get(K, Old, none) =/= V] end,
-    _ = [ets:insert(?TABLE, {{subs, E}, Subs}) || {E, Subs} <- Changed(NewSubs, OldSubs)],
-    _ = [ets:delete(?TABLE, {subs, E}) || E <- maps:keys(OldSubs), not maps:is_key(E, NewSubs)],
-    _ = [ets:insert(?TABLE, {{gate, K}, stored(gate, Cfg)}) || {K, Cfg} <- Changed(NewG, OldG)],
-    _ = [ets:insert(?TABLE, {{router, K}, stored(router, Cfg)}) || {K, Cfg} <- Changed(NewR, OldR)],
+apply_plan(Old = #{routers := OldR, gates := OldG}, New = #{routers := NewR, gates := NewG}, Caller) ->
+    ok = toroco_wiring_table:plan_changed(Old, New),
     %% Only consumers that are new or whose configuration changed are touched,
     %% so a change costs in proportion to what it changes.
     _ = [ensure(gate, K, Cfg, maps:is_key(K, OldG), Caller)
@@ -389,7 +351,7 @@ ensure(Kind, Key, Cfg, Changed, Caller) ->
     case toroco_routers_sup:start_consumer(Mod, Key, Caller) of
         {ok, _} -> answered(toroco_consumer:ready(Mod, Key));
         {error, {already_started, _}} when Changed ->
-            answered(toroco_consumer:rewire(Mod, Key, stored(Kind, Cfg), Caller));
+            answered(toroco_consumer:rewire(Mod, Key, toroco_wiring_table:row(Kind, Cfg), Caller));
         {error, {already_started, _}} -> ok;
         {error, Reason} ->
             logger:error("toroco: could not start ~p ~p: ~p", [Kind, Key, Reason],
@@ -406,13 +368,8 @@ answered({error, Reason}) ->
 stop(Kind, Key) ->
     _ = Kind =:= router andalso toroco_router:unwire(Key),
     %% The configuration goes first: a restart racing with the stop ends.
-    ets:delete(?TABLE, {Kind, Key}),
+    ok = toroco_wiring_table:forget(Kind, Key),
     toroco_routers_sup:stop_consumer(consumer_module(Kind), Key).
-
-%% What a consumer reads of its configuration: the rest is the plan's own
-%% (its key says the rest), and every byte counts ten thousand times.
-stored(router, Cfg) -> maps:with([sources, upstreams, buffer, idle, max_age], Cfg);
-stored(gate, Cfg) -> maps:with([members, entries, upstreams, subs], Cfg).
 
 consumer_module(router) -> toroco_router;
 consumer_module(gate) -> toroco_gate.
