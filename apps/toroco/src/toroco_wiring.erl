@@ -30,7 +30,6 @@
 -export([start_link/0, call/1, call/2, lookup/1, subs_of/1, known/1, stopping/0, peers/0]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 
-
 -record(s, {wiring = toroco_wiring_core:new() :: toroco_wiring_core:wiring(),
             layers = #{} :: #{non_neg_integer() => {pid(), reference()}},
             removed = [] :: [non_neg_integer()],
