@@ -22,8 +22,9 @@
 %% partition) is listed in `toroco:inspect()' under `name_clashes', never
 %% merged.
 %%
-%% The wiring table's rows are `toroco_wiring_table''s: this server is its
-%% only writer, lent the table by `toroco_store' in each incarnation.
+%% The wiring table's rows are written down in `toroco_wiring_table': this
+%% server is the table's only writer, lent it by `toroco_store' in each
+%% incarnation.
 -module(toroco_wiring).
 -behaviour(gen_server).
 

@@ -14,7 +14,7 @@
 %% <tr><td>`{{nodes, Name}, {Kind, Module, Layer, Inputs, Outputs}}'</td>
 %%     <td>`toroco:inject/3' (a name known, not running); the wiring server</td>
 %%     <td>it restarts</td></tr>
-%% <tr><td>`{'$meta', Meta}'</td><td>the wiring server</td><td>it restarts</td></tr>
+%% <tr><td>``{'$meta', Meta}''</td><td>the wiring server</td><td>it restarts</td></tr>
 %% </table>
 -module(toroco_wiring_table).
 
