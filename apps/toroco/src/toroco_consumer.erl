@@ -10,6 +10,8 @@
 %% goes out: a router's deliveries to its receiver, a gate's forwarding to
 %% its own subscribers.
 %%
+%% A consumer reads its configuration from the wiring table when it
+%% (re)starts, and is handed the new one with the wiring server's `rewire'.
 %% Re-wiring is asynchronous. On `rewire' (or at start) the shell subscribes
 %% to the new upstreams and goes to state `syncing'; it keeps handling the
 %% events of the sources it already had, and holds back (postpones) only
@@ -34,7 +36,7 @@
 
 -include("toroco_wire.hrl").
 
--export([start_link/3, rewire/3, ready/2, info/2, call/4]).
+-export([start_link/3, rewire/4, ready/2, info/2, call/4]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3]).
 
 -type key() :: {atom(), atom()}.
@@ -93,12 +95,12 @@ start_link(Mod, Key, Caller) ->
     gen_statem:start_link({local, Mod:reg(Key)}, ?MODULE, {Mod, Key, Caller},
                           toroco_wire:start_opts()).
 
-%% @doc Takes the configuration now in the wiring table; returns once the
-%% change is in the core (every new upstream answered, died, or was waited
-%% for `sync_timeout_ms').
--spec rewire(module(), key(), pid() | none) -> ok | {error, term()}.
-rewire(Mod, Key, Caller) ->
-    call(Mod, Key, {rewire, Caller}, answer_timeout()).
+%% @doc Takes configuration `Cfg' (the wiring server's, as it writes it to
+%% the wiring table); returns once the change is in the core (every new
+%% upstream answered, died, or was waited for `sync_timeout_ms').
+-spec rewire(module(), key(), map(), pid() | none) -> ok | {error, term()}.
+rewire(Mod, Key, Cfg, Caller) ->
+    call(Mod, Key, {rewire, Cfg, Caller}, answer_timeout()).
 
 %% @doc Returns once a just-started consumer has taken its sources in.
 -spec ready(module(), key()) -> ok | {error, term()}.
@@ -231,8 +233,7 @@ handle_event({call, _}, _Req, syncing, _C) ->
     {keep_state_and_data, [postpone]};
 handle_event({call, From}, info, ready, #c{mod = Mod, data = D}) ->
     {keep_state_and_data, [{reply, From, Mod:info(toroco_clock:now_ms(), D)}]};
-handle_event({call, From}, {rewire, Caller}, ready, C = #c{mod = Mod, key = Key}) ->
-    {ok, Cfg} = toroco_wiring:lookup({Mod:kind(), Key}),
+handle_event({call, From}, {rewire, Cfg, Caller}, ready, C) ->
     case start_sync(Cfg, Caller, From, C) of
         {syncing, C1, Actions} -> {next_state, syncing, C1, Actions};
         {ready, C1, Actions} -> {keep_state, C1, Actions}

@@ -1,51 +1,41 @@
 %% @doc The wiring server: the one place where the wiring changes.
 %%
 %% It holds the current `toroco_wiring_core:wiring()', validates each request
-%% against it, and applies the resulting plan: it starts, re-wires and stops
-%% routers and gates, starts and stops behaviors (in their layer's supervisor)
-%% and devices, and keeps the wiring table, an ETS table that the processes read
-%% when they (re)start to find their place. It is never on the event path:
+%% against it (a wiring file's terms through `toroco_wiring_file'), and
+%% applies the resulting plan: it starts, re-wires and stops routers and
+%% gates, starts and stops behaviors (in their layer's supervisor) and
+%% devices, and writes the wiring table, an ETS table that the processes
+%% read when they (re)start to find their place; a consumer being re-wired
+%% gets its new configuration with the call. It is never on the event path:
 %% events go emitter → (gate) → router → receiver.
 %%
 %% It also watches the layer supervisors: a layer that exceeds its restart
 %% intensity is taken out as a whole, reported with a logger error and listed
 %% in `toroco:inspect()' under `removed_layers'.
 %%
-%% Several nodes (SPEC §13): the wiring servers of connected nodes find each
-%% other in the `pg' scope `toroco' (group `wiring') and through
-%% `net_kernel:monitor_nodes/1', and tell each other what they run (their
-%% directory: names, ports, layers, gated outputs) whenever it changes, when
-%% one starts and when a node (re)connects. Each server changes only the
-%% wiring of its own node: the inputs of its receivers, the inhibitors of its
-%% emitters; a remote name takes part through what its node told. A name
-%% removed on its node leaves the wiring of every node. A name that two
-%% nodes claim (added on both sides of a partition) is reported with a
-%% logger error and in `toroco:inspect()' under `name_clashes', never merged.
+%% Several nodes (SPEC §13): the wiring servers of connected nodes tell each
+%% other what they run (`toroco_wiring_dir', the directory's protocol). Each
+%% server changes only the wiring of its own node: the inputs of its
+%% receivers, the inhibitors of its emitters; a remote name takes part
+%% through what its node told. A name removed on its node leaves the wiring
+%% of every node. A name that two nodes claim (added on both sides of a
+%% partition) is listed in `toroco:inspect()' under `name_clashes', never
+%% merged.
+%%
+%% The wiring table's rows are written down in `toroco_wiring_table': this
+%% server is the table's only writer, lent it by `toroco_store' in each
+%% incarnation.
 -module(toroco_wiring).
 -behaviour(gen_server).
 
--include("toroco_wire.hrl").
-
 -export([start_link/0, call/1, call/2, lookup/1, subs_of/1, known/1, stopping/0, peers/0]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
-
--define(TABLE, toroco_wiring).
--define(SCOPE, toroco).
-%% wiring server -> wiring server: what a node runs; `Hello' asks for the
-%% same back, `Ack' (`none' or `{Pid, Ref}') for an acknowledgement once
-%% it is applied.
--define(DIR(Node, Dir, Hello, Ack), {'$toroco_dir', Node, Dir, Hello, Ack}).
--define(DIR_ACK(Ref, Node), {'$toroco_dir_ack', Ref, Node}).
 
 -record(s, {wiring = toroco_wiring_core:new() :: toroco_wiring_core:wiring(),
             layers = #{} :: #{non_neg_integer() => {pid(), reference()}},
             removed = [] :: [non_neg_integer()],
             stopping = false :: boolean(),
-            clashes = [] :: [{atom(), node()}],
-            %% changes whose answer waits for the other nodes to know them
-            telling = #{} :: #{reference() => {gen_server:from(), [node()]}},
-            %% the nodes whose wiring servers told this one what they run
-            known = [] :: [node()]}).
+            dir = toroco_wiring_dir:new([]) :: toroco_wiring_dir:dir()}).
 
 %%====================================================================
 %% API
@@ -85,33 +75,23 @@ call(Node, Request) ->
 %% @doc The nodes whose wiring servers this one knows, itself included.
 -spec peers() -> [node()].
 peers() ->
-    lists:usort([node() | [node(P) || P <- pg:get_members(?SCOPE, wiring)]]).
+    toroco_wiring_dir:peers().
 
 %% @doc A router's or gate's configuration from the wiring table.
 -spec lookup({router | gate, term()}) -> {ok, map()} | error.
 lookup(Key) ->
-    try ets:lookup(?TABLE, Key) of
-        [{_, Cfg}] -> {ok, Cfg};
-        [] -> error
-    catch error:badarg -> error
-    end.
+    toroco_wiring_table:lookup(Key).
 
 %% @doc Whether `Name' is a behavior or device of the wiring (read from the
 %% table, without asking the server).
 -spec known(atom()) -> boolean().
 known(Name) ->
-    try ets:member(?TABLE, {nodes, Name})
-    catch error:badarg -> false
-    end.
+    toroco_wiring_table:known(Name).
 
 %% @doc The consumers each output of emitter `Name' is planned to feed.
 -spec subs_of(atom()) -> #{atom() => [atom()]}.
 subs_of(Name) ->
-    try ets:lookup(?TABLE, {subs, Name}) of
-        [{_, Subs}] -> Subs;
-        [] -> #{}
-    catch error:badarg -> #{}
-    end.
+    toroco_wiring_table:subs_of(Name).
 
 %% @doc Called when the application is about to stop: layers going down from
 %% now on are being shut down, not taken out.
@@ -125,10 +105,9 @@ stopping() ->
 
 -spec init([]) -> {ok, #s{}}.
 init([]) ->
+    ok = toroco_wiring_table:claim(),
     S = restore(),
-    ok = pg:join(?SCOPE, wiring, self()),
-    ok = net_kernel:monitor_nodes(true),
-    _ = [tell(N, S, [], true, none) || N <- nodes()],
+    ok = toroco_wiring_dir:join(S#s.wiring),
     {ok, S}.
 
 -spec handle_call(term(), gen_server:from(), #s{}) ->
@@ -163,15 +142,12 @@ handle_call({where, Name}, _From, S = #s{wiring = W}) ->
                 {_, #{Name := #{node := N}}} -> {ok, N};
                 _ -> {error, {unknown_name, Name}}
             end, S};
-handle_call({meet, Node}, From, S = #s{telling = T}) ->
+handle_call({meet, Node}, From, S = #s{wiring = W, dir = D}) ->
     %% Before a first request to another node: it learns this one's names
     %% (and answers with its own) before the request reaches it.
-    Ref = make_ref(),
-    tell(Node, S, [], true, {self(), Ref}),
-    erlang:send_after(1000, self(), {told, Ref}),
-    {noreply, S#s{telling = T#{Ref => {From, [Node]}}}};
-handle_call(clashes, _From, S = #s{clashes = Cl}) ->
-    {reply, Cl, S};
+    {noreply, S#s{dir = toroco_wiring_dir:meet(Node, From, W, D)}};
+handle_call(clashes, _From, S = #s{dir = D}) ->
+    {reply, toroco_wiring_dir:clashes(D), S};
 handle_call(stopping, _From, S) ->
     {reply, ok, persist(S, S#s{stopping = true})};
 handle_call(Request, _From, S) ->
@@ -198,68 +174,17 @@ handle_info({'DOWN', Ref, process, _Pid, Reason}, S = #s{layers = Layers, remove
         [] ->
             {noreply, S}
     end;
-handle_info(?DIR(Node, Dir, Hello, Ack), S0 = #s{wiring = W, clashes = Cl, known = Known}) ->
-    S = S0#s{known = lists:usort([Node | Known])},
-    _ = Hello andalso tell(Node, S, [], false, none),
-    {W1, Clashes} = toroco_wiring_core:set_remote(W, Node, Dir),
-    _ = [logger:error("toroco: ~p is on both ~p and ~p: the names of a robot must be unique "
-                      "across its nodes; rename or remove one", [N, node(), Node],
-                      #{domain => [toroco, wiring]}) || N <- Clashes],
-    %% A node's clashes are those of its latest directory: one resolved
-    %% (renamed or removed on either side) is no longer listed.
-    S1 = S#s{clashes = lists:usort([{N, Node} || N <- Clashes] ++ [C || C = {_, At} <- Cl, At =/= Node])},
-    {ok, S2} = rewire({ok, W1}, none, S1),
-    resubscribe(Node, S2),
-    _ = case Ack of
-            {Pid, Ref} -> toroco_wire:send(Pid, ?DIR_ACK(Ref, node()));
-            none -> ok
-        end,
-    {noreply, persist(S, S2)};
-handle_info(?DIR_ACK(Ref, Node), S) ->
-    {noreply, told(Ref, [Node], S)};
-handle_info({told, Ref}, S = #s{telling = T}) ->
-    %% A node that did not answer in time learns it when it does.
-    case T of
-        #{Ref := {_, Waiting}} -> {noreply, told(Ref, Waiting, S)};
-        #{} -> {noreply, S}
-    end;
-handle_info({nodeup, Node}, S) ->
-    tell(Node, S, [], true, none),
-    {noreply, S};
-handle_info({nodedown, Node}, S = #s{telling = T, known = Known}) ->
-    %% Its names stay in the wiring: the routers let its sources go after
-    %% their max age, and the wiring is as it was when the node comes back.
-    {noreply, maps:fold(fun(Ref, _, Acc) -> told(Ref, [Node], Acc) end,
-                        S#s{known = lists:delete(Node, Known)}, T)};
-handle_info(_Msg, S) ->
-    {noreply, S}.
-
-%% Tells the wiring server of `Node' what this node runs; `Removed' names
-%% were just removed here.
-tell(Node, #s{wiring = W}, Removed, Hello, Ack) ->
-    Dir = #{nodes => toroco_wiring_core:directory(W), removed => Removed},
-    toroco_wire:send({?MODULE, Node}, ?DIR(node(), Dir, Hello, Ack)).
-
-told(Ref, Nodes, S = #s{telling = T}) ->
-    case T of
-        #{Ref := {From, Waiting}} ->
-            case Waiting -- Nodes of
-                [] -> gen_server:reply(From, ok), S#s{telling = maps:remove(Ref, T)};
-                Left -> S#s{telling = T#{Ref := {From, Left}}}
-            end;
-        #{} -> S
+handle_info(Msg, S = #s{wiring = W, dir = D}) ->
+    case toroco_wiring_dir:handle(Msg, W, D) of
+        {ok, D1} ->
+            {noreply, S#s{dir = D1}};
+        {told, Node, W1, Ack, D1} ->
+            {ok, S1} = rewire({ok, W1}, none, S#s{dir = D1}),
+            ok = toroco_wiring_dir:applied(Node, Ack, W1),
+            {noreply, persist(S, S1)};
+        unknown ->
+            {noreply, S}
     end.
-
-others(#s{known = Known}) ->
-    lists:usort(Known ++ peers()) -- [node()].
-
-%% The consumers fed from `Node' subscribe again to what they do not hear.
-resubscribe(Node, #s{wiring = W}) ->
-    #{routers := Rs, gates := Gs} = toroco_wiring_core:plan(W),
-    _ = [toroco_wire:send(toroco_wire:address(Reg), ?WIRE_RESUBSCRIBE)
-         || #{reg := Reg, upstreams := Ups} <- maps:values(Rs) ++ maps:values(Gs),
-            lists:any(fun({_, {_, N}}) -> N =:= Node; (_) -> false end, maps:values(Ups))],
-    ok.
 
 %% A change that the other nodes must know (a name added or removed, an
 %% output gated) is answered once each connected node has taken it in, or
@@ -267,21 +192,10 @@ resubscribe(Node, #s{wiring = W}) ->
 reply(Result, From, S) ->
     reply(Result, From, S, []).
 
-reply({ok, S0}, From, S, Removed) ->
-    %% A clash ends when this node's name goes.
-    Local = toroco_wiring_core:nodes(S0#s.wiring),
-    S1 = S0#s{clashes = [C || C = {N, _} <- S0#s.clashes, maps:is_key(N, Local)]},
-    Others = others(S),
-    Changed = Others =/= [] andalso (Removed =/= [] orelse
-        toroco_wiring_core:directory(S#s.wiring) =/= toroco_wiring_core:directory(S1#s.wiring)),
-    case Changed of
-        false ->
-            {reply, ok, persist(S, S1)};
-        true ->
-            Ref = make_ref(),
-            _ = [tell(N, S1, Removed, false, {self(), Ref}) || N <- Others],
-            erlang:send_after(1000, self(), {told, Ref}),
-            {noreply, persist(S, S1#s{telling = (S1#s.telling)#{Ref => {From, Others}}})}
+reply({ok, S1 = #s{wiring = W1, dir = D}}, From, S, Removed) ->
+    case toroco_wiring_dir:changed(S#s.wiring, W1, Removed, From, D) of
+        {reply, D1} -> {reply, ok, persist(S, S1#s{dir = D1})};
+        {noreply, D1} -> {noreply, persist(S, S1#s{dir = D1})}
     end;
 reply({error, Reason, S1}, _From, S, _Removed) -> {reply, {error, Reason}, persist(S, S1)};
 reply({error, _} = Err, _From, S, _Removed) -> {reply, Err, S}.
@@ -290,70 +204,45 @@ reply({error, _} = Err, _From, S, _Removed) -> {reply, Err, S}.
 %% Surviving a crash
 %%====================================================================
 
-%% The wiring and the server's state are written through to the table of
-%% `toroco_store' after each change, so a restarted server reads back what it
-%% had: the nodes (only those that changed), and the server's own state; the
-%% inputs and the inhibitors are read back from the routers' and gates'
-%% configurations, which the table holds anyway. If the network's
-%% supervisors were restarted meanwhile (everything after the store restarts
-%% with them), the network is empty, and so is the wiring.
+%% The wiring and the server's state are written through to the wiring
+%% table (`toroco_wiring_table') after each change, so a restarted server
+%% reads back what it had: the nodes (only those that changed), and the
+%% server's own state; the inputs and the inhibitors are read back from the
+%% routers' and gates' configurations, which the table holds anyway. If the
+%% network's supervisors were restarted meanwhile (everything after the
+%% store restarts with them), the network is empty, and so is the wiring.
 persist(#s{wiring = W0} = S0, S1 = #s{wiring = W1}) ->
-    diff(maps:get(nodes, W0), maps:get(nodes, W1)),
-    _ = meta(S0) =/= meta(S1) andalso ets:insert(?TABLE, {'$meta', meta(S1)}),
+    ok = toroco_wiring_table:nodes_changed(toroco_wiring_core:nodes(W0), toroco_wiring_core:nodes(W1)),
+    _ = meta(S0) =/= meta(S1) andalso toroco_wiring_table:write_meta(meta(S1)),
     S1.
 
-%% A node is kept as a tuple: a map of five keys costs twice the words.
-diff(Old, New) ->
-    maps:foreach(fun(K, V = #{kind := Kind, module := M, layer := L, inputs := Ins, outputs := Outs}) ->
-                         case Old of
-                             #{K := V} -> ok;
-                             #{} -> ets:insert(?TABLE, {{nodes, K}, {Kind, M, L, Ins, Outs}})
-                         end
-                 end, New),
-    maps:foreach(fun(K, _) ->
-                         case New of
-                             #{K := _} -> ok;
-                             #{} -> ets:delete(?TABLE, {nodes, K})
-                         end
-                 end, Old).
-
-meta(#s{layers = Layers, removed = Removed, stopping = Stopping, wiring = W, clashes = Cl}) ->
+meta(#s{layers = Layers, removed = Removed, stopping = Stopping, wiring = W, dir = D}) ->
     #{network => network(), layers => maps:map(fun(_, {Pid, _}) -> Pid end, Layers),
       removed => Removed, stopping => Stopping, remote => toroco_wiring_core:remote(W),
-      clashes => Cl}.
+      clashes => toroco_wiring_dir:clashes(D)}.
 
 network() ->
     [whereis(Sup) || Sup <- [toroco_routers_sup, toroco_devices_sup, toroco_layers_sup]].
 
 restore() ->
-    Net = network(),
-    case ets:lookup(?TABLE, '$meta') of
-        [{_, #{network := Net, layers := Layers, removed := Removed, stopping := Stopping,
-               remote := Remote, clashes := Clashes}}] ->
-            Part = fun(P) -> ets:select(?TABLE, [{{{P, '$1'}, '$2'}, [], [{{'$1', '$2'}}]}]) end,
-            W = #{nodes => maps:from_list([{N, #{kind => Kind, module => M, layer => L,
-                                                  inputs => Ins, outputs => Outs}}
-                                             || {N, {Kind, M, L, Ins, Outs}} <- Part(nodes)]),
-                  inputs => maps:from_list([{K, maps:with([sources, buffer, idle, max_age], Cfg)}
-                                            || {K, Cfg} <- Part(router)]),
-                  inhibitors => lists:foldl(fun({_, #{entries := Es}}, Acc) -> maps:merge(Acc, Es) end,
-                                            #{}, Part(gate)),
-                  remote => Remote},
+    case toroco_wiring_table:restore(network()) of
+        {ok, #{layers := Layers, removed := Removed, stopping := Stopping,
+               remote := Remote, clashes := Clashes}, Nodes, Routers, Gates} ->
+            W = toroco_wiring_core:restore(Nodes, Routers, Gates, Remote),
             %% A layer taken out while the server was down is seen here.
             {Alive, Gone} = lists:partition(fun({_, Pid}) -> is_process_alive(Pid) end,
                                             maps:to_list(Layers)),
             S = #s{wiring = W, removed = lists:usort([L || {L, _} <- Gone] ++ Removed),
-                   stopping = Stopping, clashes = Clashes,
+                   stopping = Stopping, dir = toroco_wiring_dir:new(Clashes),
                    layers = maps:from_list([{L, {Pid, erlang:monitor(process, Pid)}}
                                             || {L, Pid} <- Alive])},
             logger:notice("toroco: the wiring server restarted with the wiring it had "
-                          "(~b behaviors and devices)", [map_size(maps:get(nodes, W))],
+                          "(~b behaviors and devices)", [map_size(Nodes)],
                           #{domain => [toroco, wiring]}),
             persist(S, S);
-        _ ->
-            ets:delete_all_objects(?TABLE),
+        fresh ->
             S = #s{},
-            ets:insert(?TABLE, {'$meta', meta(S)}),
+            ok = toroco_wiring_table:write_meta(meta(S)),
             S
     end.
 
@@ -362,66 +251,19 @@ restore() ->
 %%====================================================================
 
 add_node(Kind, Name, Module, Opts, S = #s{wiring = W}) ->
-    case node_spec(Kind, Name, Module, Opts) of
-        {ok, Spec = #{layer := L, args := Args}} ->
-            case interface(Kind, Name, Module, Args) of
-                {ok, Ports} ->
-                    Info = Ports#{kind => Kind, module => Module, layer => L},
-                    case toroco_wiring_core:add_node(W, Name, Info) of
-                        {ok, W1} ->
-                            case start_node(Spec, S#s{wiring = W1}) of
-                                {ok, _} = Ok -> Ok;
-                                %% the node is not in the wiring; a layer
-                                %% supervisor started for it stays known
-                                {error, Reason, S1} -> {error, Reason, S1#s{wiring = W}}
-                            end;
-                        Err -> Err
+    case toroco_wiring_file:node(Kind, Name, Module, Opts) of
+        {ok, Spec, Info} ->
+            case toroco_wiring_core:add_node(W, Name, Info) of
+                {ok, W1} ->
+                    case start_node(Spec, S#s{wiring = W1}) of
+                        {ok, _} = Ok -> Ok;
+                        %% the node is not in the wiring; a layer
+                        %% supervisor started for it stays known
+                        {error, Reason, S1} -> {error, Reason, S1#s{wiring = W}}
                     end;
                 Err -> Err
             end;
         Err -> Err
-    end.
-
-node_spec(_Kind, Name, _Module, _Opts) when not is_atom(Name) ->
-    {error, {bad_name, Name}};
-node_spec(_Kind, Name, Module, _Opts) when not is_atom(Module) ->
-    {error, {bad_module, {Name, Module}}};
-node_spec(_Kind, Name, _Module, Opts) when not is_map(Opts) ->
-    {error, {bad_options, {Name, Opts}}};
-node_spec(device, Name, Module, Opts) ->
-    {ok, toroco_device:spec(Name, Module, Opts)};
-node_spec(behavior, Name, Module, Opts) ->
-    case toroco_behavior:configured(Module) of
-        true -> configured_spec(Name, Module, Opts);
-        false -> plain_spec(Name, Module, Opts)
-    end.
-
-%% A module whose ports depend on its options (`interface/1'): it gets them
-%% all but the layer, `params' included.
-configured_spec(Name, Module, Opts) ->
-    case maps:get(layer, Opts, 0) of
-        L when is_integer(L), L >= 0 ->
-            {ok, #{kind => behavior, name => Name, module => Module, layer => L,
-                   args => maps:remove(layer, Opts)}};
-        L ->
-            {error, {bad_layer, {Name, L}}}
-    end.
-
-plain_spec(Name, Module, Opts) ->
-    case {maps:keys(maps:without([layer, params], Opts)), maps:get(layer, Opts, 0),
-          maps:get(params, Opts, #{})} of
-        {[Bad | _], _, _} -> {error, {bad_option, {Name, Bad}}};
-        {[], L, _} when not is_integer(L); L < 0 -> {error, {bad_layer, {Name, L}}};
-        {[], _, P} when not is_map(P) -> {error, {bad_params, {Name, P}}};
-        {[], L, P} ->
-            {ok, #{kind => behavior, name => Name, module => Module, layer => L, args => P}}
-    end.
-
-%% A module's interface, with the node named in the error if it has none.
-interface(Kind, Name, Module, Args) ->
-    case toroco_behavior:interface(Kind, Module, Args) of
-        {error, {bad_interface, {Module, Detail}}} -> {error, {bad_interface, {Name, Module, Detail}}};
-        Other -> Other
     end.
 
 start_node(Spec = #{kind := Kind, name := Name, layer := L, module := M}, S) ->
@@ -489,30 +331,27 @@ rewire({error, _} = Err, _Caller, _S) ->
 
 %% Table first (restarting processes read it), then gates upstream-first, then
 %% routers, then whatever is no longer needed.
-apply_plan(#{routers := OldR, gates := OldG, subs := OldSubs},
-           #{routers := NewR, gates := NewG, subs := NewSubs}, Caller) ->
-    Changed = fun(New, Old) -> [{K, V} || {K, V} <- maps:to_list(New), maps:get(K, Old, none) =/= V] end,
-    _ = [ets:insert(?TABLE, {{subs, E}, Subs}) || {E, Subs} <- Changed(NewSubs, OldSubs)],
-    _ = [ets:delete(?TABLE, {subs, E}) || E <- maps:keys(OldSubs), not maps:is_key(E, NewSubs)],
-    _ = [ets:insert(?TABLE, {{gate, K}, stored(gate, Cfg)}) || {K, Cfg} <- Changed(NewG, OldG)],
-    _ = [ets:insert(?TABLE, {{router, K}, stored(router, Cfg)}) || {K, Cfg} <- Changed(NewR, OldR)],
+apply_plan(Old = #{routers := OldR, gates := OldG}, New = #{routers := NewR, gates := NewG}, Caller) ->
+    ok = toroco_wiring_table:plan_changed(Old, New),
     %% Only consumers that are new or whose configuration changed are touched,
     %% so a change costs in proportion to what it changes.
-    _ = [ensure(gate, K, maps:is_key(K, OldG), Caller)
+    _ = [ensure(gate, K, Cfg, maps:is_key(K, OldG), Caller)
          || {K, Cfg} <- gate_order(NewG), maps:get(K, OldG, none) =/= Cfg],
-    _ = [ensure(router, K, maps:is_key(K, OldR), Caller)
+    _ = [ensure(router, K, Cfg, maps:is_key(K, OldR), Caller)
          || {K, Cfg} <- lists:sort(maps:to_list(NewR)), maps:get(K, OldR, none) =/= Cfg],
     _ = [stop(router, K) || K <- maps:keys(OldR), not maps:is_key(K, NewR)],
     _ = [stop(gate, K) || K <- maps:keys(OldG), not maps:is_key(K, NewG)],
     ok.
 
-%% Starts a consumer that is not running, or re-wires one whose configuration
-%% changed.
-ensure(Kind, Key, Changed, Caller) ->
+%% Starts a consumer that is not running (it reads its row), or re-wires one
+%% whose configuration changed (it gets it with the call: its row may be
+%% gone or newer by the time it takes the call in).
+ensure(Kind, Key, Cfg, Changed, Caller) ->
     Mod = consumer_module(Kind),
     case toroco_routers_sup:start_consumer(Mod, Key, Caller) of
         {ok, _} -> answered(toroco_consumer:ready(Mod, Key));
-        {error, {already_started, _}} when Changed -> answered(toroco_consumer:rewire(Mod, Key, Caller));
+        {error, {already_started, _}} when Changed ->
+            answered(toroco_consumer:rewire(Mod, Key, toroco_wiring_table:row(Kind, Cfg), Caller));
         {error, {already_started, _}} -> ok;
         {error, Reason} ->
             logger:error("toroco: could not start ~p ~p: ~p", [Kind, Key, Reason],
@@ -529,13 +368,8 @@ answered({error, Reason}) ->
 stop(Kind, Key) ->
     _ = Kind =:= router andalso toroco_router:unwire(Key),
     %% The configuration goes first: a restart racing with the stop ends.
-    ets:delete(?TABLE, {Kind, Key}),
+    ok = toroco_wiring_table:forget(Kind, Key),
     toroco_routers_sup:stop_consumer(consumer_module(Kind), Key).
-
-%% What a consumer reads of its configuration: the rest is the plan's own
-%% (its key says the rest), and every byte counts ten thousand times.
-stored(router, Cfg) -> maps:with([sources, upstreams, buffer, idle, max_age], Cfg);
-stored(gate, Cfg) -> maps:with([members, entries, upstreams, subs], Cfg).
 
 consumer_module(router) -> toroco_router;
 consumer_module(gate) -> toroco_gate.
@@ -567,44 +401,18 @@ gates_of(Name, #s{wiring = W}) ->
 %% its nodes started and its wiring applied. A node that fails to start undoes
 %% the nodes started before it.
 load(Terms, Caller, S = #s{wiring = W}) ->
-    case validate_terms(Terms, W) of
-        {ok, W1} ->
-            Nodes = [T || T <- Terms, element(1, T) =:= behavior orelse element(1, T) =:= device],
-            case start_nodes(Nodes, S, []) of
+    case toroco_wiring_file:validate(Terms, W) of
+        {ok, W1, Specs} ->
+            case start_nodes(Specs, S, []) of
                 {ok, S1} -> rewire({ok, W1}, Caller, S1);
                 Err -> Err
             end;
         Err -> Err
     end.
 
-validate_terms([], W) ->
-    {ok, W};
-validate_terms([T | Ts], W) ->
-    case validate_term(T, W) of
-        {ok, W1} -> validate_terms(Ts, W1);
-        Err -> Err
-    end.
-
-validate_term({Kind, Name, Module, Opts}, W) when Kind =:= behavior; Kind =:= device ->
-    case node_spec(Kind, Name, Module, Opts) of
-        {ok, #{layer := L, args := Args}} ->
-            case interface(Kind, Name, Module, Args) of
-                {ok, Ports} ->
-                    toroco_wiring_core:add_node(W, Name, Ports#{kind => Kind, module => Module,
-                                                                layer => L});
-                Err -> Err
-            end;
-        Err -> Err
-    end;
-validate_term({inputs, R, Map}, W) -> toroco_wiring_core:set_inputs(W, R, Map);
-validate_term({inhibitors, E, Map}, W) -> toroco_wiring_core:set_inhibitors(W, E, Map);
-validate_term({reset, B, Srcs}, W) -> toroco_wiring_core:set_reset(W, B, Srcs);
-validate_term(Other, _W) -> {error, {bad_wiring_term, Other}}.
-
 start_nodes([], S, _Started) ->
     {ok, S};
-start_nodes([{Kind, Name, Module, Opts} | Rest], S, Started) ->
-    {ok, Spec} = node_spec(Kind, Name, Module, Opts),
+start_nodes([Spec = #{kind := Kind, name := Name} | Rest], S, Started) ->
     case start_node(Spec, S) of
         {ok, S1} -> start_nodes(Rest, S1, [{Kind, Name} | Started]);
         {error, Reason, S1} ->

@@ -28,7 +28,7 @@
 -export([new/0, add_node/3, remove_node/2, node/2, nodes/1,
          set_inputs/3, set_inhibitors/3, set_reset/3,
          inputs_of/2, inhibitors_of/2, gates/1, plan/1,
-         remote/1, set_remote/3, directory/1]).
+         remote/1, set_remote/3, directory/1, restore/4]).
 -export_type([wiring/0, node_info/0, plan/0, router_config/0, gate_config/0]).
 
 -type name() :: atom().
@@ -41,7 +41,7 @@
 -type remote_info() :: #{kind := behavior | device, module := module(), layer := non_neg_integer(),
                          inputs := [atom()], outputs := [atom()], node := node(),
                          gated := #{atom() => source()}}.
--type wiring() :: #{nodes := #{name() => node_info()},
+-opaque wiring() :: #{nodes := #{name() => node_info()},
                     remote => #{name() => remote_info()},
                     inputs := #{{name(), atom()} => input_spec()},
                     inhibitors := #{source() => [{source(), default()}]}}.
@@ -67,6 +67,20 @@
 
 -spec new() -> wiring().
 new() -> #{nodes => #{}, inputs => #{}, inhibitors => #{}, remote => #{}}.
+
+%% @doc A wiring read back from what was kept of it: its nodes, the
+%% configurations of its routers and gates as {@link plan/1} made them
+%% (the keys a consumer keeps of them are enough) and what the other nodes
+%% told of theirs.
+-spec restore(#{name() => node_info()}, [{{name(), atom()}, map()}], [map()],
+              #{name() => remote_info()}) -> wiring().
+restore(Nodes, Routers, Gates, Remote) ->
+    #{nodes => Nodes,
+      inputs => maps:from_list([{K, maps:with([sources, buffer, idle, max_age], Cfg)}
+                                || {K, Cfg} <- Routers]),
+      inhibitors => lists:foldl(fun(#{entries := Es}, Acc) -> maps:merge(Acc, Es) end,
+                                #{}, Gates),
+      remote => Remote}.
 
 -spec add_node(wiring(), name(), node_info()) -> {ok, wiring()} | {error, term()}.
 add_node(W = #{nodes := Nodes}, Name, Info) ->

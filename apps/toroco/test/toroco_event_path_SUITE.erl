@@ -18,7 +18,9 @@ groups() ->
      {resilience, [], [wiring_server_crashes_100_times_under_load, inject_into_own_output_is_refused,
                        inject_unknown_and_stopped_names, restarts_counted_from_lifecycle,
                        reset_cancels_named_timeouts, unknown_events_fall_to_the_engine,
-                       failed_first_start_in_a_new_layer]}].
+                       failed_first_start_in_a_new_layer,
+                       rewired_router_takes_its_configuration_from_the_call,
+                       wiring_table_written_by_the_wiring_server_only]}].
 
 init_per_testcase(_Case, Config) ->
     ok = toroco_test_lib:start(),
@@ -368,6 +370,52 @@ unknown_events_fall_to_the_engine(_Config) ->
     Pid ! ping,
     ok = toroco_fake_actuator:await(a, fun(H) -> [V || {_, V, _} <- H] =:= [pong] end, 2000),
     Pid = whereis(toroco_names:process(b)).
+
+rewired_router_takes_its_configuration_from_the_call() ->
+    [{doc, "A router being re-wired takes its new configuration with the wiring server's call: "
+      "its row in the wiring table gone (or not writable by a stranger) when it takes the "
+      "call in, it keeps running with its new sources."}].
+rewired_router_takes_its_configuration_from_the_call(_Config) ->
+    sensor(s1, [v]),
+    sensor(s2, [v]),
+    actuator(a, [in]),
+    ok = toroco:set_inputs(a, #{in => [{s1, v}]}),
+    Router = whereis(toroco_names:router(a, in)),
+    %% The router takes the call in only once resumed: meanwhile the row
+    %% goes, as anything that takes it (a stranger could, while the table
+    %% was public) would make it go.
+    ok = sys:suspend(Router),
+    Self = self(),
+    spawn_link(fun() -> Self ! {changed, toroco:set_inputs(a, #{in => [{s2, v}, {s1, v}]})} end),
+    ok = wait_until(fun() -> element(2, process_info(Router, message_queue_len)) > 0 end, 2000),
+    _ = (catch ets:delete(toroco_wiring, {router, {a, in}})),
+    ok = sys:resume(Router),
+    ok = receive {changed, Reply} -> Reply after 10000 -> ct:fail(no_answer) end,
+    Router = whereis(toroco_names:router(a, in)),
+    ok = toroco:inject({s2, v}, from_s2),
+    await_values(a, [from_s2]).
+
+wiring_table_written_by_the_wiring_server_only() ->
+    [{doc, "The wiring table is read by anyone and written only by the wiring server, in each "
+      "incarnation: a stranger's write is refused; after a kill of the server the new one "
+      "writes it, with the wiring it had."}].
+wiring_table_written_by_the_wiring_server_only(_Config) ->
+    sensor(s, [v]),
+    actuator(a, [in]),
+    ok = toroco:set_inputs(a, #{in => [{s, v}]}),
+    {ok, _} = toroco_wiring:lookup({router, {a, in}}),
+    {'EXIT', {badarg, _}} = (catch ets:insert(toroco_wiring, {stranger, row})),
+    {'EXIT', {badarg, _}} = (catch ets:delete(toroco_wiring, {router, {a, in}})),
+    Old = whereis(toroco_wiring),
+    exit(Old, kill),
+    ok = wait_until(fun() -> is_pid(whereis(toroco_wiring)) andalso whereis(toroco_wiring) =/= Old end,
+                    2000),
+    ok = toroco:set_inputs(a, #{in => []}),
+    error = toroco_wiring:lookup({router, {a, in}}),
+    ok = toroco:set_inputs(a, #{in => [{s, v}]}),
+    true = ets:info(toroco_wiring, owner) =:= whereis(toroco_wiring),
+    ok = toroco:inject({s, v}, after_kill),
+    await_values(a, [after_kill]).
 
 failed_first_start_in_a_new_layer() ->
     [{doc, "A behavior whose init fails, first in a new layer, is refused; the next add to that layer works."}].
