@@ -11,7 +11,8 @@ all() ->
     [placement_and_names, top_and_watch_cover_nodes, suppression_across_nodes, inhibition_gate_on_third_node,
      hierarchy_uses_remote_layers, reset_from_another_node, remote_emitter_restart_caught_up,
      stale_source_dropped_and_back, stale_gate_default_max_age, node_killed_and_restarted, partition_heals_with_wiring_as_before,
-     wiring_file_places_on_nodes, clash_after_partition_reported, over_tls].
+     wiring_file_places_on_nodes, clash_after_partition_reported, over_tls,
+     remote_behavior_shows_running_with_restarts].
 
 init_per_suite(Config) ->
     _ = application:stop(toroco_hw),
@@ -246,6 +247,22 @@ remote_emitter_restart_caught_up(Config) ->
          end, 3000),
     ok = t(A, inject, [{hi, out}, again, #{latch => true}]),
     await_values(B, act, [low, high, low, again]),
+    end_per_testcase(x, [{peers, Ps} | Config]).
+
+remote_behavior_shows_running_with_restarts() ->
+    [{doc, "a behavior on another node is running in inspect/1 and on the dashboard's page "
+      "state, with its restarts, and toroco:restart_behavior/1 from here restarts it there"}].
+remote_behavior_shows_running_with_restarts(Config) ->
+    {Ps, A, B, _C} = nodes3(),
+    ok = t(A, add_behavior, [far, tb_relay, #{layer => 1, node => B}]),
+    #{status := running, node := B, restarts := 0, process := #{state := relaying}} =
+        t(A, inspect, [far]),
+    ok = t(A, restart_behavior, [far]),
+    #{status := running, restarts := 1} = t(A, inspect, [far]),
+    %% the dashboard's reading of it, on the node where it does not run
+    {_, Readings} = erpc:call(A, toroco_live_state, readings, []),
+    [#{restarts := 1, state := {value, relaying}, info := #{status := running}}] =
+        [R || R = #{name := far} <- Readings],
     end_per_testcase(x, [{peers, Ps} | Config]).
 
 stale_source_dropped_and_back() -> [{doc, "a frozen node's latched source is let go within max_age + 50 ms (the lower source takes over) and comes back when the node thaws; a quiet live one is kept"}].
