@@ -372,11 +372,10 @@ bad_frames_are_answered(Config) ->
 %%% Reload
 %%% ---------------------------------------------------------------------
 
-reload_all_or_nothing(doc) ->
-    ["reload re-reads the file: the new code answers; a file that does not compile "
-     "leaves the old one running and says why"];
-reload_all_or_nothing(Config) ->
-    File = filename:join(?config(priv_dir, Config), "versioned.lua"),
+%% Lua behavior `v' running a copy (named `Name') of version1.lua, asked
+%% by sensor `s' and answering actuator `a'; the copy's path and text.
+versioned(Config, Name) ->
+    File = filename:join(?config(priv_dir, Config), Name),
     {ok, V1} = file:read_file(data(Config, "version1.lua")),
     ok = file:write_file(File, V1),
     ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [ask]}),
@@ -384,6 +383,13 @@ reload_all_or_nothing(Config) ->
     ok = toroco_lua:add_behavior(v, #{file => File}),
     ok = toroco:set_inputs(v, #{ask => [{s, ask}]}),
     ok = toroco:set_inputs(a, #{answer => [{v, answer}]}),
+    {File, V1}.
+
+reload_all_or_nothing(doc) ->
+    ["reload re-reads the file: the new code answers; a file that does not compile "
+     "leaves the old one running and says why"];
+reload_all_or_nothing(Config) ->
+    {File, V1} = versioned(Config, "versioned.lua"),
     ok = toroco:inject({s, ask}, 1),
     await(a, answer, [{<<"v1">>, 1}]),
     ok = file:write_file(File, binary:replace(V1, <<"'v1'">>, <<"'v2'">>)),
@@ -399,14 +405,7 @@ reload_under_1khz_input(doc) ->
     ["A reload while the behavior gets 1 kHz input loses nothing: every event is "
      "answered once, in order, by the old code and then by the new"];
 reload_under_1khz_input(Config) ->
-    File = filename:join(?config(priv_dir, Config), "busy.lua"),
-    {ok, V1} = file:read_file(data(Config, "version1.lua")),
-    ok = file:write_file(File, V1),
-    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [ask]}),
-    actuator(a, [answer]),
-    ok = toroco_lua:add_behavior(v, #{file => File}),
-    ok = toroco:set_inputs(v, #{ask => [{s, ask}]}),
-    ok = toroco:set_inputs(a, #{answer => [{v, answer}]}),
+    {File, V1} = versioned(Config, "busy.lua"),
     N = 1000,
     %% the load: one event a millisecond (pacing, not waiting on anything)
     _ = spawn_link(fun() -> [begin ok = toroco:inject({s, ask}, K), receive after 1 -> ok end end
