@@ -425,11 +425,7 @@ sense(B = #bot{world = W0, handle = H, ir = Last, port = Port, readings = LastRe
         false ->
             Ir = torobot_world:ir(W),
             {Readings, Sensors} = torobot_sensors:read(W, B#bot.sensors),
-            Changed = fun(Now, Before) ->
-                              maps:filter(fun(K, V) -> maps:get(K, Before, undefined) =/= V end,
-                                          Now)
-                      end,
-            _ = torobot_sim_robot:sense(H, Changed(Ir, Last), Changed(Readings, LastReadings)),
+            _ = torobot_sim_robot:sense(H, changed(Ir, Last), changed(Readings, LastReadings)),
             _ = [gen_udp:send(Sock, {127, 0, 0, 1}, Port, Datagram)
                  || Datagram <- torobot_world:camera(W)],
             B#bot{world = W, ir = Ir, sensors = Sensors, readings = Readings}
@@ -459,6 +455,8 @@ lockstep(B = #bot{world = W0, handle = H, ir = Last, readings = LastReadings}, O
              Motors}
     end.
 
+%% The readings that changed since the last tick: all a robot is handed,
+%% in either clock.
 changed(Now, Before) ->
     maps:filter(fun(K, V) -> maps:get(K, Before, undefined) =/= V end, Now).
 
