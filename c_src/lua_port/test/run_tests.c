@@ -141,22 +141,7 @@ const char *term_text(const char *buf, int len)
 int main(void)
 {
     const struct test_case *suites[] = {frame_tests, term_tests, port_tests};
-    int passed = 0, failed = 0;
 
     ei_init();
-    for (size_t s = 0; s < sizeof suites / sizeof suites[0]; s++) {
-        for (const struct test_case *t = suites[s]; t->name != NULL; t++) {
-            test_case_failed = false;
-            t->fn();
-            if (test_case_failed) {
-                failed++;
-                printf("FAIL %s\n", t->name);
-            } else {
-                passed++;
-            }
-            fflush(stdout);
-        }
-    }
-    printf("%d passed, %d failed\n", passed, failed);
-    return failed == 0 ? 0 : 1;
+    return run_suites(suites, sizeof suites / sizeof suites[0], NULL);
 }
