@@ -3,6 +3,7 @@
 %% sysfs tree in the case's private directory), the camera over real UDP,
 %% the function adapters, and refused options.
 -module(toroco_devices_SUITE).
+-import(toroco_test_lib, [wait_until/2]).
 
 -include_lib("common_test/include/ct.hrl").
 -include_lib("stdlib/include/assert.hrl").
@@ -651,17 +652,6 @@ send_udp(Port, Datagrams) ->
     {ok, S} = gen_udp:open(0, [binary, {ip, {127, 0, 0, 1}}]),
     [ok = gen_udp:send(S, {127, 0, 0, 1}, Port, D) || D <- Datagrams],
     gen_udp:close(S).
-
-wait_until(Fun, Timeout) when Timeout =< 0 ->
-    case Fun() of
-        true -> ok;
-        _ -> {error, timeout}
-    end;
-wait_until(Fun, Timeout) ->
-    case Fun() of
-        true -> ok;
-        _ -> timer:sleep(5), wait_until(Fun, Timeout - 5)
-    end.
 
 fake_pwm(Root, Chip, Ch) ->
     ChipDir = filename:join(Root, "class/pwm/pwmchip" ++ integer_to_list(Chip)),
