@@ -14,9 +14,11 @@
 %% run in lockstep too.
 %%
 %% The behavior ends with `{lua_error, File, Line, Message}' or `{lua_limit,
-%% File, budget | memory}' and its layer restarts it; if the program dies,
-%% every Lua behavior of the node ends with `{lua_port_down, Why}' and is
-%% restarted the same way, while Erlang behaviors go on.
+%% File, budget | memory}' and its layer restarts it. If the program dies,
+%% every Lua behavior of the node starts its Lua code again in the new
+%% program without a supervisor restart (see {@link reattach/2}: a program
+%% crash is one fault, not one per behavior, so a layer of any number of Lua
+%% behaviors outlives it), while Erlang behaviors go on.
 %%
 %% <b>Adding</b>: `toroco:add_behavior(Name, toroco_lua, #{file => Path,
 %% params => P, layer => L})' as SPEC §16 writes it (this module declares its
@@ -31,7 +33,7 @@
 -include("toroco_lua_port.hrl").
 
 -export([add_behavior/2, load_main/2, waits/1, memory/1, reload/1]).
--export([interface/1, init/1, handle_input/4, handle_event/4]).
+-export([interface/1, init/1, handle_input/4, handle_event/4, info/2]).
 -export_type([opts/0, main_opts/0]).
 
 %% `file' (required) the behavior's Lua file; `root' the program's folder,
@@ -54,6 +56,11 @@
                        budget => pos_integer(), memory => pos_integer()}.
 
 -define(LOG, #{domain => [toroco, lua]}).
+%% A behavior re-attaches to a new program at most this often in this
+%% window; one more program death in it stops the behavior, so a program that
+%% dies again and again is left to the layers' supervision.
+-define(REATTACH_MAX, 3).
+-define(REATTACH_WINDOW_MS, 10000).
 
 %%====================================================================
 %% API
@@ -215,7 +222,7 @@ init(Args = #{file := File}) ->
             %% a reset runs init/1 again in this process: its last state goes
             ok = toroco_lua_port:close_all(),
             D = #{name => Name, file => File, args => Args,
-                  owner => erlang:monitor(process, Owner), id => none},
+                  owner => erlang:monitor(process, Owner), id => none, reattached => []},
             case open(D) of
                 {ok, Id, Actions} -> {ok, running, D#{id := Id}, actions(Actions, D#{id := Id})};
                 {error, _} = Error -> Error
@@ -233,6 +240,14 @@ registered_name() ->
 handle_input(Input, Value, _S, D = #{id := Id}) ->
     activation(toroco_lua_port:input(Id, Input, Value, toroco_clock:now_ms()), D).
 
+%% @doc What `toroco:inspect(Name)' shows under `behavior': `waits' as
+%% {@link waits/1} gives them, `memory' the bytes of the Lua state.
+-spec info(running, map()) -> #{waits := [map()] | {error, term()},
+                                memory := non_neg_integer() | {error, term()}}.
+info(_S, #{id := Id}) ->
+    #{waits => case waits_of(Id) of {ok, Ws} -> Ws; Error -> Error end,
+      memory => case toroco_lua_port:memory(Id) of {ok, M} -> M; Error -> Error end}.
+
 -spec handle_event(gen_statem:event_type(), term(), running, map()) -> toroco_behavior:result().
 handle_event({timeout, {lua, Task}}, {lua_timer, Id, Task, Seq}, _S, D = #{id := Id}) ->
     activation(toroco_lua_port:timer(Id, Task, Seq, toroco_clock:now_ms()), D);
@@ -240,16 +255,13 @@ handle_event({timeout, {lua, _}}, {lua_timer, _OldId, _, _}, _S, _D) ->
     keep_state_and_data;                      % a timer of the state before a reload
 handle_event(info, {'DOWN', MRef, process, _, Why}, _S, #{owner := MRef}) ->
     {stop, {lua_port_down, Why}};
-handle_event(info, ?LUA_PORT_DOWN(Why), _S, _D) ->
-    {stop, {lua_port_down, Why}};
+handle_event(info, ?LUA_PORT_DOWN(Ids, Why), _S, D = #{id := Id}) ->
+    case lists:member(Id, Ids) of
+        true -> reattach(Why, D);
+        false -> keep_state_and_data          % a state it already re-opened
+    end;
 handle_event({call, From}, {?MODULE, waits}, _S, #{id := Id}) ->
-    Reply = case toroco_lua_port:waits(Id) of
-                {ok, Ws} -> {ok, [#{task => T, kind => binary_to_atom(K), input => waited(I),
-                                    timer => Timer}
-                                  || [T, K, I, Timer] <- Ws]};
-                Error -> Error
-            end,
-    {keep_state_and_data, [{reply, From, Reply}]};
+    {keep_state_and_data, [{reply, From, waits_of(Id)}]};
 handle_event({call, From}, {?MODULE, memory}, _S, #{id := Id}) ->
     {keep_state_and_data, [{reply, From, toroco_lua_port:memory(Id)}]};
 handle_event({call, From}, {?MODULE, reload}, _S, D = #{id := Old, name := Name}) ->
@@ -307,10 +319,38 @@ activation({error, {Bad, Why}}, #{name := Name}) when Bad =:= bad_frame; Bad =:=
     logger:warning("toroco_lua: ~p got a value that cannot cross to Lua (~p); dropped",
                    [Name, {Bad, Why}], ?LOG#{name => Name}),
     keep_state_and_data;
-activation({error, {lua_port_down, Why}}, _D) ->
-    {stop, {lua_port_down, Why}};
+activation({error, {lua_port_down, Why}}, D) ->
+    reattach(Why, D);
 activation({error, Why}, _D) ->
     {stop, {lua_port, Why}}.
+
+%% The program died (killed, crashed, or hung and killed by its owner, who
+%% has started a new one by now): the behavior's process stays and its Lua
+%% code starts again in a new state, as a Brooks reset does: its outputs are
+%% unset (latches and holds end), the new state's emissions follow, and the
+%% old state's timers, named with the old id, do nothing. No supervisor sees
+%% it, so one program death is not one restart per Lua behavior of a layer.
+%% A program that dies more than ?REATTACH_MAX times in ?REATTACH_WINDOW_MS
+%% stops the behavior with `{lua_port_down, Why}'.
+reattach(Why, D = #{name := Name, reattached := Times}) ->
+    Now = erlang:monotonic_time(millisecond),
+    Recent = [T || T <- Times, Now - T < ?REATTACH_WINDOW_MS],
+    case length(Recent) >= ?REATTACH_MAX of
+        true ->
+            logger:error("toroco_lua: ~p: lua_port died again (~p), ~b times in ~b ms; stopping",
+                         [Name, Why, length(Recent) + 1, ?REATTACH_WINDOW_MS], ?LOG#{name => Name}),
+            {stop, {lua_port_down, Why}};
+        false ->
+            case open(D) of
+                {ok, Id, Actions} ->
+                    logger:warning("toroco_lua: ~p: lua_port died (~p); its Lua code starts "
+                                   "again in the new program", [Name, Why], ?LOG#{name => Name}),
+                    D1 = D#{id := Id, reattached := [Now | Recent]},
+                    {keep_state, D1, [unset | actions(Actions, D1)]};
+                {error, Reason} ->
+                    {stop, Reason}
+            end
+    end.
 
 %% {lua_error, File, Line, Message}: File as the user named it for the
 %% behavior's own file, else the module's path in the program's folder.
@@ -336,6 +376,13 @@ root(File, Args) ->
                 unsafe -> {filename:dirname(Abs), filename:basename(Abs)};
                 Safe -> {Root, Safe}
             end
+    end.
+
+waits_of(Id) ->
+    case toroco_lua_port:waits(Id) of
+        {ok, Ws} -> {ok, [#{task => T, kind => binary_to_atom(K), input => waited(I), timer => Timer}
+                          || [T, K, I, Timer] <- Ws]};
+        Error -> Error
     end.
 
 waited(false) -> none;

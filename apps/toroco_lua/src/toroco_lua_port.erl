@@ -16,16 +16,17 @@
 %% handled as any death of the program.
 %%
 %% If the program dies, every caller waiting gets `{error, {lua_port_down,
-%% Why}}', every Lua behavior that opened a state is told (below) and stops,
-%% so its layer restarts it, and a new program is started at once.
+%% Why}}', every Lua behavior that opened a state is told (below) and a new
+%% program is started at once, where the behaviors open their states again.
 %%
 %% <table>
 %% <tr><th>message</th><th>from → to</th><th>when</th><th>answer</th></tr>
 %% <tr><td>call `{request, Req, Now}'</td><td>a Lua behavior → owner</td>
 %%     <td>`open', `input', `timer', `waits', `memory', `close'</td>
 %%     <td>the program's result for that request</td></tr>
-%% <tr><td>`{toroco_lua_port, down, Why}'</td><td>owner → each behavior with a state</td>
-%%     <td>the program died</td><td>none: the behavior stops</td></tr>
+%% <tr><td>`{toroco_lua_port, down, Ids, Why}'</td><td>owner → each behavior with a state</td>
+%%     <td>the program died, with the behavior's states `Ids'</td><td>none: the
+%%     behavior opens a new state (toroco_lua)</td></tr>
 %% <tr><td>monitor `DOWN' of a behavior</td><td>runtime → owner</td>
 %%     <td>a behavior with states stopped</td><td>the owner closes its states</td></tr>
 %% </table>
@@ -309,9 +310,9 @@ restart(Why, D = #d{pending = Q, clients = Cs}) ->
     logger:error("toroco_lua_port: lua_port died (~p); ~b Lua behaviors restart",
                  [Why, map_size(Cs)], ?LOG),
     [reply(From, {error, {lua_port_down, Why}}) || {_, From, _} <- queue:to_list(Q)],
-    maps:foreach(fun(Pid, {MRef, _}) ->
+    maps:foreach(fun(Pid, {MRef, Ids}) ->
                          erlang:demonitor(MRef, [flush]),
-                         Pid ! ?LUA_PORT_DOWN(Why)
+                         Pid ! ?LUA_PORT_DOWN(Ids, Why)
                  end, Cs),
     case start_port() of
         {ok, D1} -> {keep_state, D1#d{next_id = D#d.next_id, next_ref = D#d.next_ref},
