@@ -10,7 +10,7 @@
 
 -export([all/0, groups/0, suite/0, init_per_testcase/2, end_per_testcase/2]).
 -export([log/2]).
--export([interface_from_the_file/1, values_cross_both_ways/1,
+-export([interface_from_the_file/1, values_cross_both_ways/1, a_burst_arrives_whole_and_in_order/1,
          wait_for_input_with_and_without_timeout/1, sleep_on_the_runtime_clock/1,
          latches_reach_the_actuator/1, print_goes_to_the_logger/1,
          lua_error_names_file_and_line/1, endless_loop_hits_the_budget/1,
@@ -30,7 +30,7 @@ all() ->
     [{group, api}, {group, faults}, {group, reload}, {group, lockstep}].
 
 groups() ->
-    [{api, [], [interface_from_the_file, values_cross_both_ways,
+    [{api, [], [interface_from_the_file, values_cross_both_ways, a_burst_arrives_whole_and_in_order,
                 wait_for_input_with_and_without_timeout, sleep_on_the_runtime_clock,
                 latches_reach_the_actuator, print_goes_to_the_logger, reset_starts_a_fresh_state,
                 load_main_errors_name_the_line, load_main_from_the_program_folder]},
@@ -109,6 +109,26 @@ values_cross_both_ways(Config) ->
     await(a, count, [2, 1, 1, 1, 1, 1, 1, 0, 1, 1, 2]),
     [Made | _] = values(a, made),
     ?assertEqual({1, 2.5, <<"text">>, true, [1, 2], #{<<"k">> => <<"v">>}}, Made).
+
+a_burst_arrives_whole_and_in_order(doc) ->
+    ["2,000 events injected at once through two Lua relays in a row, their activations "
+     "in flight together (window 32, and 1): all reach the actuator once, in order, and "
+     "inspect answers in the middle of it"];
+a_burst_arrives_whole_and_in_order(Config) ->
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [value]}),
+    actuator(a, [echo]),
+    N = 2000,
+    [begin
+         ok = toroco_lua:add_behavior(B, #{file => data(Config, "echo.lua"), window => W}),
+         ok = toroco:set_inputs(B, #{value => [Src]})
+     end || {B, W, Src} <- [{r1, 32, {s, value}}, {r2, 1, {r1, echo}}]],
+    ok = toroco:set_inputs(a, #{echo => [{r2, echo}]}),
+    [begin
+         ok = toroco:inject({s, value}, K),
+         _ = K =:= N div 2 andalso ?assertMatch(#{behavior := #{waits := [_]}}, toroco:inspect(r1))
+     end || K <- lists:seq(1, N)],
+    ok = toroco_fake_actuator:await(a, fun(H) -> length(H) >= N end, 20000),
+    ?assertEqual(lists:seq(1, N), values(a, echo)).
 
 wait_for_input_with_and_without_timeout(doc) ->
     ["wait_for_input pauses the coroutine until its input; with a timeout it gives nil "
