@@ -18,18 +18,7 @@ main([Dir | _]) ->
     {ok, _} = application:ensure_all_started(toroco_hw),
     {ok, _} = application:ensure_all_started(toroco_lua),
     Relay = filename:absname("bench/lua/relay.lua"),
-    Lua = chain(lua, Relay, N),
-    %% the same with lua_port polling 50 µs for the next request before it
-    %% sleeps (env spin_us; off by default: it costs CPU, and a board of
-    %% one core has none to spare)
-    ok = application:stop(toroco_lua),
-    ok = application:set_env(toroco_lua, spin_us, 50),
-    {ok, _} = application:ensure_all_started(toroco_lua),
-    Spin = (chain(lua, Relay, N))#{kind := 'lua, spin_us 50'},
-    ok = application:stop(toroco_lua),
-    ok = application:unset_env(toroco_lua, spin_us),
-    {ok, _} = application:ensure_all_started(toroco_lua),
-    Rows = [Lua, Spin, chain(erlang, Relay, N)],
+    Rows = [chain(lua, Relay, N), chain(erlang, Relay, N)],
     Idle = idle(Relay),
     Out = io_lib:format(
             "~n### Lua behaviors~n~n"
@@ -40,9 +29,8 @@ main([Dir | _]) ->
             "Idle Lua behavior (one trigger, ~b of them): ~.1f KiB of Lua state + ~.1f KiB "
             "for its gen_statem, ~.1f KiB in all.~n",
             [N, ?WINDOW,
-             [io_lib:format("| ~ts | ~.1f \x{b5}s | ~.1f \x{b5}s | ~b events/s |~n", [K, P50, P99, Rate])
-              || #{kind := K0, p50 := P50, p99 := P99, rate := Rate} <- Rows,
-                 K <- [atom_to_list(K0)]],
+             [io_lib:format("| ~p | ~.1f \x{b5}s | ~.1f \x{b5}s | ~b events/s |~n", [K, P50, P99, Rate])
+              || #{kind := K, p50 := P50, p99 := P99, rate := Rate} <- Rows],
              ?IDLE, maps:get(lua_kib, Idle), maps:get(process_kib, Idle),
              maps:get(lua_kib, Idle) + maps:get(process_kib, Idle)]),
     ok = io:setopts([{encoding, unicode}]),
