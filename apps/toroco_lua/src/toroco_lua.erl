@@ -226,12 +226,17 @@ init(Args = #{file := File}) ->
             D = #{name => Name, file => File, args => Args,
                   owner => erlang:monitor(process, Owner), id => none, port => none,
                   reattached => [], out => queue:new(), seq => 1, batch => [],
-                  window => max(1, maps:get(window, Args, env(window)))},
+                  window => window(maps:get(window, Args, env(window)))},
             case open(D) of
                 {ok, D1, Actions} -> {ok, running, D1, actions(Actions, D1)};
                 {error, _} = Error -> Error
             end
     end.
+
+%% At least one in flight, and fewer than the 65,535 sequence numbers a
+%% state's requests are told apart by.
+window(W) when is_integer(W) -> min(max(W, 1), 1024);
+window(_) -> 32.
 
 %% The name the log gives a behavior added without `name' in its options.
 registered_name() ->

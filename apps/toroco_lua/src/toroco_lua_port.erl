@@ -446,7 +446,9 @@ kill(OsPid) ->
 
 %% The ref of an answer `{reply, Ref, _}', read from its first bytes as the
 %% program writes them (ei: version, small tuple, the atom, an integer of
-%% one byte, four, or a small big); anything else is not a state's answer.
+%% one byte, four, or a small big); an answer written otherwise (an ei that
+%% encodes atoms another way) is decoded whole; anything else is not a
+%% state's answer.
 ref(<<131, 104, 3, 119, 5, "reply", Int/binary>>) ->
     case Int of
         <<97, Ref, _/binary>> -> Ref;
@@ -454,7 +456,11 @@ ref(<<131, 104, 3, 119, 5, "reply", Int/binary>>) ->
         <<110, N, 0, Ref:N/little-unit:8, _/binary>> -> Ref;
         _ -> none
     end;
-ref(_) -> none.
+ref(Bin) ->
+    case decode(Bin) of
+        {reply, Ref, _} when is_integer(Ref) -> Ref;
+        _ -> none
+    end.
 
 %% Sends {Op, Ref, Args...}; the caller waits in the queue.
 send(Req, From, D = #d{port = Port, next_ref = Ref, pending = Q}) ->
