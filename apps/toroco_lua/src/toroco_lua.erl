@@ -272,11 +272,11 @@ handle_event(info, {?MODULE, flush, Id}, _S, D = #{id := Id}) ->
 handle_event(info, {?MODULE, flush, _OldId}, _S, _D) ->
     keep_state_and_data;
 handle_event(info, {timeout, _, {lua_stuck, Ref}}, _S, #{out := Out, port := Port}) ->
-    case queue:peek(Out) of
-        {value, Ref} -> toroco_lua_port:stuck(Port);
-        {value, Newer} -> watchdog(Newer);
-        empty -> ok
-    end,
+    _ = case queue:peek(Out) of
+            {value, Ref} -> toroco_lua_port:stuck(Port);
+            {value, Newer} -> watchdog(Newer);
+            empty -> ok
+        end,
     keep_state_and_data;
 handle_event(info, {'DOWN', MRef, process, _, Why}, _S, #{owner := MRef}) ->
     {stop, {lua_port_down, Why}};

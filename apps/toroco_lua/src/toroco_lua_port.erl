@@ -180,7 +180,7 @@ request(C, Seq, Req) ->
 encode({Id, _, _}, Seq, Req) ->
     Ref = Id bsl 16 bor Seq,
     case frame(Req, Ref, Id) of
-        {ok, Frame} -> {ok, Ref, [<<(byte_size(Frame)):32>> | Frame]};
+        {ok, Frame} -> {ok, Ref, [<<(byte_size(Frame)):32>>, Frame]};
         {error, _} = Error -> Error
     end.
 
@@ -192,8 +192,9 @@ write({_, Port, _}, Frames) ->
     catch error:badarg -> {error, {lua_port_down, closed}}
     end.
 
-%% @doc The result in an answer `request/3''s caller got.
--spec answer(ref(), binary()) -> result().
+%% @doc The result in an answer `request/3''s caller got: an activation's
+%% `result()', or `waits''s and `memory''s.
+-spec answer(ref(), binary()) -> term().
 answer(Ref, Bin) ->
     case decode(Bin) of
         {reply, Ref, Result} -> Result;
@@ -204,7 +205,7 @@ answer(Ref, Bin) ->
 %% other in the mailbox. While it waits: the program's death (the owner's
 %% word, naming the state), the owner's, or no answer in stuck_ms, when the
 %% owner is asked to kill the program and its word is awaited.
--spec await(conn(), ref()) -> result().
+-spec await(conn(), ref()) -> term().
 await({Id, Port, OwnerMon}, Ref) ->
     await(Id, Ref, Port, OwnerMon, stuck_ms()).
 
@@ -344,7 +345,7 @@ handle_event({call, From}, {open, Pid, {File, Dir, Params, B, M}, Now}, _S,
     D1 = add_client(Pid, Id, D#d{next_id = Id + 1}),
     keep(D, send({open, Id, Now, File, Dir, Params, B, M}, From, D1));
 handle_event({call, From}, {raw, Bin}, _S, D = #d{port = Port, pending = Q, next_ref = Ref}) ->
-    true = port_command(Port, [<<(byte_size(Bin)):32>> | Bin]),
+    true = port_command(Port, [<<(byte_size(Bin)):32>>, Bin]),
     keep(D, D#d{pending = queue:in({Ref, From, raw}, Q), next_ref = Ref - 1});
 handle_event({call, From}, os_pid, _S, #d{os_pid = OsPid}) ->
     {keep_state_and_data, [{reply, From, OsPid}]};
@@ -465,7 +466,7 @@ ref(Bin) ->
 %% Sends {Op, Ref, Args...}; the caller waits in the queue.
 send(Req, From, D = #d{port = Port, next_ref = Ref, pending = Q}) ->
     Frame = term_to_binary(erlang:insert_element(2, Req, Ref)),
-    true = port_command(Port, [<<(byte_size(Frame)):32>> | Frame]),
+    true = port_command(Port, [<<(byte_size(Frame)):32>>, Frame]),
     D#d{next_ref = Ref - 1, pending = queue:in({Ref, From, Req}, Q)}.
 
 %% The program's atoms are all known here, so nothing it sends makes atoms.
