@@ -139,10 +139,32 @@ main_call(<<"set_inhibitors">>, [E, Outputs], _Ctx) ->
 main_call(<<"suspend_behavior">>, [B], _Ctx) -> toroco:suspend_behavior(binary_to_atom(B));
 main_call(<<"resume_behavior">>, [B], _Ctx) -> toroco:resume_behavior(binary_to_atom(B));
 main_call(<<"remove_behavior">>, [B], _Ctx) -> toroco:remove_behavior(binary_to_atom(B));
+main_call(<<"configure_polling">>, [D, E, Ms], _Ctx) ->
+    configure_polling(D, E, Ms);
 main_call(<<"run">>, _, _Ctx) -> ok;
 main_call(Op, Args, _Ctx) -> {error, {bad_main_call, {Op, Args}}}.
 
 sources(Ss) -> [{binary_to_atom(E), binary_to_atom(O)} || [E, O] <- Ss].
+
+%% configure_polling(device.D.E, seconds): D must be a device on the node
+%% with output E; one that can be polled (toroco_poll_sensor) is asked to
+%% poll every Ms, one that emits by itself answers unknown_call and is left
+%% as it is.
+configure_polling(D, E, Ms) ->
+    Dev = binary_to_atom(D),
+    Out = binary_to_atom(E),
+    case toroco:inspect(Dev) of
+        #{kind := device, outputs := #{Out := _}} ->
+            try toroco_device:call(Dev, {toroco_poll, every_ms, Ms}, 5000) of
+                ok -> ok;
+                {error, {unknown_call, _}} -> ok;
+                {error, _} = Error -> Error
+            catch exit:Why -> {error, {Dev, Why}}
+            end;
+        #{kind := device} -> {error, {unknown_output, {Dev, Out}}};
+        #{} -> {error, {not_a_device, Dev}};
+        {error, _} = Error -> Error
+    end.
 
 %% An empty Lua table crosses as [] (SPEC §16); as a set of keys it is #{}.
 table([]) -> #{};

@@ -19,7 +19,7 @@
          port_killed_every_lua_behavior_back/1, bad_frames_are_answered/1,
          port_dying_again_and_again_is_left_to_supervision/1,
          reload_all_or_nothing/1, reload_under_1khz_input/1,
-         load_main_errors_name_the_line/1, load_main_from_the_program_folder/1, lockstep_timers_at_simulated_deadlines/1]).
+         load_main_errors_name_the_line/1, configure_polling_sets_the_period/1, load_main_from_the_program_folder/1, lockstep_timers_at_simulated_deadlines/1]).
 
 -define(WAIT, 3000).
 
@@ -33,7 +33,8 @@ groups() ->
     [{api, [], [interface_from_the_file, values_cross_both_ways, a_burst_arrives_whole_and_in_order,
                 wait_for_input_with_and_without_timeout, sleep_on_the_runtime_clock,
                 latches_reach_the_actuator, print_goes_to_the_logger, reset_starts_a_fresh_state,
-                load_main_errors_name_the_line, load_main_from_the_program_folder]},
+                load_main_errors_name_the_line, load_main_from_the_program_folder,
+                configure_polling_sets_the_period]},
      {faults, [], [lua_error_names_file_and_line, endless_loop_hits_the_budget,
                    endless_allocation_hits_the_memory_cap, hung_port_is_killed,
                    lua_faults_leave_erlang_layers_flowing,
@@ -235,6 +236,37 @@ load_main_from_the_program_folder(Config) ->
                  toroco_lua:load_main(data(Config, "prog/main.lua"), #{})),
     ok = toroco:inject({s, value}, 21),
     await(a, twice, [42]).
+
+configure_polling_sets_the_period(doc) ->
+    ["configure_polling(device.D.E, s) has a device that can be polled poll every s "
+     "and leaves one that emits by itself as it is; a converter, or an output the "
+     "device has not, is refused with the main file's line"];
+configure_polling_sets_the_period(Config) ->
+    ok = toroco:add_device(p, toroco_poll_sensor, #{fn => fun() -> 1 end, every_ms => 60000}),
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [value]}),
+    #{device := #{every_ms := 60000}} = toroco:inspect(p),
+    ?assertEqual({ok, #{behaviors => []}},
+                 toroco_lua:load_main(data(Config, "polling/main.lua"), #{})),
+    #{device := #{every_ms := 20}} = toroco:inspect(p),
+    %% polled again and again: at 60 s a period, the first poll would be the only one
+    Deadline = erlang:monotonic_time(millisecond) + ?WAIT,
+    polled(p, 5, Deadline),
+    Conv = data(Config, "polling/converter.lua"),
+    {error, {Conv, 2, Msg}} = toroco_lua:load_main(Conv, #{}),
+    ?assertMatch({_, _}, binary:match(Msg, <<"converters are not supported">>)),
+    Unknown = data(Config, "polling/unknown.lua"),
+    ?assertEqual({error, {Unknown, 3, {unknown_output, {p, nope}}}},
+                 toroco_lua:load_main(Unknown, #{})).
+
+polled(Name, N, Deadline) ->
+    case toroco:inspect(Name) of
+        #{device := #{polls := P}} when P >= N -> ok;
+        _ ->
+            case erlang:monotonic_time(millisecond) < Deadline of
+                true -> receive after 10 -> ok end, polled(Name, N, Deadline);
+                false -> ct:fail({not_polled, Name, N})
+            end
+    end.
 
 load_main_errors_name_the_line(doc) ->
     ["load_main/2 stops at the first refused call with the main file's line, and "
