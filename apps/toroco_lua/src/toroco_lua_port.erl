@@ -319,8 +319,11 @@ init([]) ->
         {error, Reason} -> {stop, Reason}
     end.
 
+%% The program: priv/lua_port, or app env `executable' (the release suite
+%% runs the board's armhf build through qemu).
 start_port() ->
-    Exe = filename:join(code:priv_dir(toroco_lua), "lua_port"),
+    Exe = application:get_env(toroco_lua, executable,
+                              filename:join(code:priv_dir(toroco_lua), "lua_port")),
     case filelib:is_regular(Exe) of
         false -> {error, {lua_port_missing, Exe}};
         true ->
