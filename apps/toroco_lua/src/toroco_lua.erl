@@ -5,9 +5,10 @@
 %% A Lua behavior is a behavior like any other: a gen_statem in its layer,
 %% with suppression, inhibition, latches, holds, suspend/resume/reset/remove,
 %% the tap and recordings. Each input it gets is one activation of its Lua
-%% state, run to completion inside `handle_input/4' through a bounded call
-%% to the port's owner, and what the Lua code emitted comes back as the
-%% callback's actions: `set_output{motors_setvel = {20, 20}}' becomes
+%% state, written to the program by this process; up to `window' are in
+%% flight (one at a time, inside `handle_input/4', in lockstep: see
+%% `activate/2'), and what the Lua code emitted comes back, in order, as the
+%% actions of the answer's message: `set_output{motors_setvel = {20, 20}}' becomes
 %% `{set, #{motors_setvel => {20, 20}}}'. Time is the runtime's: the state
 %% reads `toroco_clock:now_ms()' and its timers (`wait_for_input' timeouts,
 %% `sched.sleep') are this process's gen_statem timeouts, so Lua behaviors

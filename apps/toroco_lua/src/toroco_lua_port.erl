@@ -1,8 +1,9 @@
 %% @doc The owner of the `lua_port' program (c_src/lua_port): one per node,
 %% registered as `toroco_lua_port', under {@link toroco_lua_sup}.
 %%
-%% It spawns `priv/lua_port' as an Erlang port (`{packet, 4}', terms; the
-%% frames are in c_src/lua_port/PROTOCOL.md), hands out state ids, and
+%% It spawns `priv/lua_port' as an Erlang port (in stream mode, frames of
+%% `{packet, 4}''s layout cut here, terms; the frames are in
+%% c_src/lua_port/PROTOCOL.md), hands out state ids, and
 %% passes the program's answers on. It never waits in a callback.
 %%
 %% <b>The event path skips it one way.</b> A Lua behavior writes its
