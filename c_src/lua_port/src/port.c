@@ -281,6 +281,7 @@ void port_handle(struct port *p, const unsigned char *frame, size_t len, ei_x_bu
 /* ---- the loop ---------------------------------------------------------- */
 
 #define OUT_FLUSH (64u << 10)        /* answers gathered past this go out at once */
+#define OUT_HOLD_US 500              /* nor, after an activation, held longer than this */
 
 static long long now_us(void)
 {
@@ -338,15 +339,26 @@ int port_run_spin(int in_fd, int out_fd, long spin_us)
             rc = 1;
             break;
         }
-        /* the answers to what this read brought, written together (a
-         * batch's first answer waits for its last: at most the frames one
-         * read took, each within its budget) */
+        /* the answers to what this read brought, written together; those
+         * held longer than OUT_HOLD_US go out after the activation that made
+         * them wait, so that a batch of slow activations answers as it goes
+         * (an answer before a long one still waits for that one, at most
+         * its budget) */
+        long long held_since = 0;
         while ((st = frame_reader_next(&in, &frame, &len)) != FRAME_NONE) {
             ei_x_buff x;
             if (st == FRAME_TOO_BIG)
                 port_too_big(&x, len);
             else
                 port_handle(p, frame, len, &x);
+            if (out.len > 0 && now_us() - held_since > OUT_HOLD_US &&
+                frame_out_flush(&out, out_fd) != 0) {
+                ei_x_free(&x);
+                rc = 1;
+                goto out;
+            }
+            if (out.len == 0)
+                held_since = now_us();
             int w = frame_out_add(&out, x.buff, (size_t)x.index);
             ei_x_free(&x);
             if (w != 0 || (out.len >= OUT_FLUSH && frame_out_flush(&out, out_fd) != 0)) {
