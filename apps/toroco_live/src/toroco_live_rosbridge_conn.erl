@@ -291,10 +291,22 @@ client_message({close, _, _}, {ok, C}) ->
     close(C, 1000, normal).
 
 text_message(Text, C) ->
-    try jiffy:decode(Text, [return_maps]) of
-        #{<<"op">> := Op} = M when is_binary(Op) -> op(Op, M, C);
+    case jiffy_decode(Text) of
+        #{<<"op">> := Op} = M when is_binary(Op) -> safe_op(Op, M, C);
+        not_json -> fault(C, null, <<"not JSON">>);
         _ -> fault(C, null, <<"a JSON object with an \"op\" field was expected">>)
-    catch _:_ -> fault(C, null, <<"not JSON">>)
+    end.
+
+%% A message this module did not foresee is a fault of the client's, logged,
+%% never a crash of the connection.
+safe_op(Op, M, C) ->
+    try op(Op, M, C)
+    catch
+        exit:normal:_ -> exit(normal);
+        Class:Why:Stack ->
+            logger:error("rosbridge: ~ts failed: ~0p:~0P ~0P", [text(Op), Class, Why, 20, Stack, 20],
+                         ?LOG),
+            fault(C, maps:get(<<"id">>, M, null), [<<"op ">>, text(Op), <<" could not be handled">>])
     end.
 
 op(Op, M, C) ->
@@ -392,7 +404,7 @@ subscribe(Id, M, C = #conn{subs = Subs}) ->
         case {known_type(Topic), maps:get(<<"type">>, M, null)} of
             _ when Count >= ?MAX_SUBS ->
                 fault(C, Id, io_lib:format("at most ~b subscriptions per connection", [?MAX_SUBS]));
-            {error, _} ->
+            {{error, _}, _} ->
                 fault(C, Id, [<<"unknown topic ">>, Topic, <<" (the robot's topics: call /rosapi/topics)">>]);
             {{ok, Type}, Asked} when Asked =/= null, Asked =/= <<>> ->
                 case same_type(Asked, Type) of
@@ -599,7 +611,7 @@ pieces_in(Id, Total, Got, _Bytes, _Ref, C) when map_size(Got) =:= Total ->
     C1 = drop_fragments(Id, C),
     case jiffy_decode(Whole) of
         #{<<"op">> := <<"fragment">>} -> fault(C1, Id, <<"fragments of fragments are not taken">>);
-        #{<<"op">> := Op} = M when is_binary(Op) -> op(Op, M, C1);
+        #{<<"op">> := Op} = M when is_binary(Op) -> safe_op(Op, M, C1);
         _ -> fault(C1, Id, [<<"the fragments of message ">>, text(Id),
                             <<" do not make a JSON object with an \"op\"">>])
     end;
