@@ -18,7 +18,9 @@
 %%     (`toroco_live_ros_device:publish/3'). Publishing needs the
 %%     dashboard's token.</li>
 %% <li>`call_service' (`service', `args', `id'): `/rosapi/topics',
-%%     `/rosapi/topic_type', `/rosapi/services', `/toroco/inspect' (`args'
+%%     `/rosapi/topics_and_raw_types' (with each type's message definition,
+%%     `toroco_live_ros:definition/1', which Foxglove's Rosbridge connection
+%%     reads for ROS 2), `/rosapi/topic_type', `/rosapi/services', `/toroco/inspect' (`args'
 %%     `{}' or `{"name": N}'), answered with `service_response'. None of
 %%     them changes the robot, so none needs the token.</li>
 %% <li>`auth' (`mac' or `token': the dashboard's token; `?token=T' on the
@@ -456,7 +458,9 @@ known_type(Topic) ->
         [] -> {error, unknown_topic}
     end.
 
-%% `pkg/Type' (as ROS 1 and many clients write it) is `pkg/msg/Type'.
+%% `pkg/Type' (as ROS 1 and many clients write it) is `pkg/msg/Type'; no
+%% type is the topic's.
+same_type(null, _) -> true;
 same_type(Asked, Type) when is_binary(Asked) ->
     case binary:split(Asked, <<"/">>, [global]) of
         [Pkg, Name] -> <<Pkg/binary, "/msg/", Name/binary>> =:= Type;
@@ -531,8 +535,8 @@ hand_over(Id, <<$/, Name/binary>> = Topic, Msg, C) ->
 %% Services
 %%--------------------------------------------------------------------
 
--define(SERVICES, [<<"/rosapi/topics">>, <<"/rosapi/topic_type">>, <<"/rosapi/services">>,
-                   <<"/toroco/inspect">>]).
+-define(SERVICES, [<<"/rosapi/topics">>, <<"/rosapi/topics_and_raw_types">>,
+                   <<"/rosapi/topic_type">>, <<"/rosapi/services">>, <<"/toroco/inspect">>]).
 
 call_service(Id, Service, Args, C) ->
     case service(Service, Args) of
@@ -548,6 +552,10 @@ call_service(Id, Service, Args, C) ->
 service(<<"/rosapi/topics">>, _) ->
     Topics = toroco_live_rosbridge:topics(),
     {ok, #{topics => [T || #{topic := T} <- Topics], types => [Ty || #{type := Ty} <- Topics]}};
+service(<<"/rosapi/topics_and_raw_types">>, _) ->
+    Topics = toroco_live_rosbridge:topics(),
+    {ok, #{topics => [T || #{topic := T} <- Topics], types => [Ty || #{type := Ty} <- Topics],
+           typedefs_full_text => [toroco_live_ros:definition(Ty) || #{type := Ty} <- Topics]}};
 service(<<"/rosapi/topic_type">>, #{<<"topic">> := T}) when is_binary(T) ->
     case known_type(slash(T)) of
         {ok, Type} -> {ok, #{type => Type}};

@@ -83,8 +83,18 @@ topics_and_types(Config) ->
     {ok, #{<<"type">> := <<"sensor_msgs/msg/Range">>}, _} = await(C, <<"topic_type">>),
     toroco_live_js:send(C, #{cmd => getServices}),
     {ok, #{<<"services">> := Services}, _} = await(C, <<"services">>),
-    [<<"/rosapi/services">>, <<"/rosapi/topic_type">>, <<"/rosapi/topics">>, <<"/toroco/inspect">>] =
-        lists:sort(Services),
+    [<<"/rosapi/services">>, <<"/rosapi/topic_type">>, <<"/rosapi/topics">>,
+     <<"/rosapi/topics_and_raw_types">>, <<"/toroco/inspect">>] = lists:sort(Services),
+    %% What Foxglove's Rosbridge connection reads: each type's definition, which
+    %% @foxglove/rosmsg parses with its dependencies.
+    toroco_live_js:send(C, #{cmd => rawTypes}),
+    {ok, #{<<"topics">> := Topics, <<"parsed">> := Parsed}, _} = await(C, <<"raw_types">>),
+    Defs = maps:from_list(lists:zip(Topics, Parsed)),
+    [#{<<"name">> := null, <<"fields">> := 2}, #{<<"name">> := <<"geometry_msgs/Vector3">>, <<"fields">> := 3}] =
+        maps:get(<<"/cmd_vel">>, Defs),
+    %% Range: 2 constants and 7 fields; Header; Time
+    [#{<<"fields">> := 9}, #{<<"name">> := <<"std_msgs/Header">>}, #{<<"name">> := <<"builtin_interfaces/Time">>}] =
+        maps:get(<<"/range/front">>, Defs),
     ok.
 
 services_round_trip() ->

@@ -4,6 +4,8 @@
 //   {"cmd":"connect","url":U}                 -> open | error | close {code}
 //   {"cmd":"getTopics"}                       -> topics {topics, types}
 //   {"cmd":"getServices"}                     -> services {services}
+//   {"cmd":"rawTypes"}                        -> raw_types {topics, types, parsed}: each
+//                                                definition parsed by @foxglove/rosmsg
 //   {"cmd":"getTopicType","topic":T}          -> topic_type {type}
 //   {"cmd":"subscribe","topic":T,"type":Ty, "throttle_rate":Ms, "queue_length":N}
 //                                             -> message {topic, msg} per message
@@ -79,6 +81,15 @@ async function main() {
           ros.getTopics((r) => out({ ev: "topics", topics: r.topics, types: r.types }),
                         (e) => out({ ev: "topics_failed", error: String(e) }));
           break;
+        case "rawTypes": {
+          // rosapi/topics_and_raw_types, each definition parsed as ROS 2 tooling does
+          const { parse } = require(path.join(modules, "@foxglove", "rosmsg"));
+          new ROSLIB.Service({ ros, name: "rosapi/topics_and_raw_types", serviceType: "" }).callService({},
+            (r) => out({ ev: "raw_types", topics: r.topics, types: r.types,
+                         parsed: r.typedefs_full_text.map((t) => parse(t, { ros2: true }).map((d) => ({ name: d.name || null, fields: d.definitions.length }))) }),
+            (e) => out({ ev: "raw_types_failed", error: String(e) }));
+          break;
+        }
         case "getServices":
           ros.getServices((s) => out({ ev: "services", services: s }),
                           (e) => out({ ev: "services_failed", error: String(e) }));
