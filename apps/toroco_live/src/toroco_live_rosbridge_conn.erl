@@ -20,7 +20,8 @@
 %% <li>`call_service' (`service', `args', `id'): `/rosapi/topics',
 %%     `/rosapi/topics_and_raw_types' (with each type's message definition,
 %%     `toroco_live_ros:definition/1', which Foxglove's Rosbridge connection
-%%     reads for ROS 2), `/rosapi/topic_type', `/rosapi/services', `/toroco/inspect' (`args'
+%%     reads for ROS 2), `/rosapi/topic_type', `/rosapi/services',
+%%     `/rosapi/get_ros_version' (2, `jazzy': the types' distribution), `/toroco/inspect' (`args'
 %%     `{}' or `{"name": N}'), answered with `service_response'. None of
 %%     them changes the robot, so none needs the token.</li>
 %% <li>`auth' (`mac' or `token': the dashboard's token; `?token=T' on the
@@ -536,7 +537,8 @@ hand_over(Id, <<$/, Name/binary>> = Topic, Msg, C) ->
 %%--------------------------------------------------------------------
 
 -define(SERVICES, [<<"/rosapi/topics">>, <<"/rosapi/topics_and_raw_types">>,
-                   <<"/rosapi/topic_type">>, <<"/rosapi/services">>, <<"/toroco/inspect">>]).
+                   <<"/rosapi/topic_type">>, <<"/rosapi/services">>, <<"/rosapi/get_ros_version">>,
+                   <<"/toroco/inspect">>]).
 
 call_service(Id, Service, Args, C) ->
     case service(Service, Args) of
@@ -563,6 +565,9 @@ service(<<"/rosapi/topic_type">>, #{<<"topic">> := T}) when is_binary(T) ->
     end;
 service(<<"/rosapi/topic_type">>, _) ->
     {error, <<"/rosapi/topic_type needs {\"topic\": T}">>};
+service(<<"/rosapi/get_ros_version">>, _) ->
+    %% The message types are Jazzy's (Range has `variance').
+    {ok, #{version => 2, distro => <<"jazzy">>}};
 service(<<"/rosapi/services">>, _) ->
     {ok, #{services => ?SERVICES}};
 service(<<"/toroco/inspect">>, Args) when Args =:= #{}; Args =:= null; Args =:= [] ->

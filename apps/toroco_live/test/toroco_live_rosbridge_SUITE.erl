@@ -68,7 +68,7 @@ fake_robot() ->
 
 topics_and_types() ->
     [{doc, "roslib's getTopics lists the robot's topics with their ROS 2 types, getTopicType "
-      "answers one, getServices lists the four services"}].
+      "answers one, getServices lists the services; topics_and_raw_types gives definitions ROS 2 tooling parses"}].
 topics_and_types(Config) ->
     C = connect(Config, url),
     toroco_live_js:send(C, #{cmd => getTopics}),
@@ -83,8 +83,9 @@ topics_and_types(Config) ->
     {ok, #{<<"type">> := <<"sensor_msgs/msg/Range">>}, _} = await(C, <<"topic_type">>),
     toroco_live_js:send(C, #{cmd => getServices}),
     {ok, #{<<"services">> := Services}, _} = await(C, <<"services">>),
-    [<<"/rosapi/services">>, <<"/rosapi/topic_type">>, <<"/rosapi/topics">>,
-     <<"/rosapi/topics_and_raw_types">>, <<"/toroco/inspect">>] = lists:sort(Services),
+    [<<"/rosapi/get_ros_version">>, <<"/rosapi/services">>, <<"/rosapi/topic_type">>,
+     <<"/rosapi/topics">>, <<"/rosapi/topics_and_raw_types">>, <<"/toroco/inspect">>] =
+        lists:sort(Services),
     %% What Foxglove's Rosbridge connection reads: each type's definition, which
     %% @foxglove/rosmsg parses with its dependencies.
     toroco_live_js:send(C, #{cmd => rawTypes}),
