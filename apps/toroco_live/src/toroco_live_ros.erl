@@ -222,9 +222,7 @@ struct(Type, Msg, Path) when is_map(Msg) ->
     _ = [throw({bad_field, join(Path, key_text(K))})
          || K <- maps:keys(Msg), not lists:member(key_text(K), Names)],
     maps:from_list([{N, field(FT, lookup(N, Msg), join(Path, atom_to_binary(N)))}
-                    || {N, FT} <- Fields]);
-struct(_, _, Path) ->
-    throw({bad_field, Path}).
+                    || {N, FT} <- Fields]).
 
 lookup(N, Msg) ->
     case Msg of
