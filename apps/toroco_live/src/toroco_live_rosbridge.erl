@@ -23,7 +23,7 @@
 %% | conn | hub  | `{subscribe, Conn, Topic}'           | first subscription to a topic | none |
 %% | conn | hub  | `{unsubscribe, Conn, Topic}'         | its last one went       | none |
 %% | conn | hub  | `{count, Counter}'                   | a fault, a publish, ... | none |
-%% | hub  | conn | `{rosbridge, message, Topic, Json}'  | a message on a subscribed topic | none |
+%% | hub  | conn | `{rosbridge, message, Topic, Type, Json, Msg}' | a message on a subscribed topic (its JSON, and the map for CBOR) | none |
 %% | hub  | conn | `{rosbridge, dropped, N}'            | N messages were not sent to it | none |
 %% A connection whose mailbox holds more than `?CONN_QUEUE' messages gets no
 %% more until it drains; the hub counts what it skipped and tells it.
@@ -109,8 +109,10 @@ unsubscribe(Conn, Topic) -> gen_server:cast(?MODULE, {unsubscribe, Conn, Topic})
 count(Counter) -> gen_server:cast(?MODULE, {count, Counter}).
 
 %% @doc What a hub message says, for the connection's `handle_info'.
--spec receive_hub(term()) -> {ok, {message, binary(), binary()} | {dropped, pos_integer()}} | error.
-receive_hub({rosbridge, message, Topic, Json}) -> {ok, {message, Topic, Json}};
+-spec receive_hub(term()) ->
+          {ok, {message, binary(), {binary(), binary(), toroco_live_ros:message()}}
+               | {dropped, pos_integer()}} | error.
+receive_hub({rosbridge, message, Topic, Type, Json, Msg}) -> {ok, {message, Topic, {Type, Json, Msg}}};
 receive_hub({rosbridge, dropped, N}) -> {ok, {dropped, N}};
 receive_hub(_) -> error.
 
@@ -261,12 +263,12 @@ event(Event, H = #hub{subs = Subs}) ->
         _ -> H
     end.
 
-deliver({Topic, _Type, Msg}, H = #hub{subs = Subs}) ->
+deliver({Topic, Type, Msg}, H = #hub{subs = Subs}) ->
     case maps:get(Topic, Subs, []) of
         [] -> H;
         Conns ->
             Json = iolist_to_binary(jiffy:encode(Msg)),
-            lists:foldl(fun(C, Acc) -> send_to(C, {rosbridge, message, Topic, Json}, Acc) end,
+            lists:foldl(fun(C, Acc) -> send_to(C, {rosbridge, message, Topic, Type, Json, Msg}, Acc) end,
                         H, Conns)
     end.
 

@@ -34,7 +34,12 @@
 %%     this server calls no client services).</li>
 %% </ul>
 %% Topic and service names are taken with or without the leading slash.
-%% `compression' other than `none' is refused (JSON only), naming it.
+%% A subscription's `compression' may be `none' (JSON text), `cbor' (the
+%% publish operation as CBOR, a binary frame: `toroco_live_cbor') or
+%% `cbor-raw' (CBOR with `msg' `{bytes, secs, nsecs}', the message's CDR
+%% bytes: `toroco_live_cdr'; what Foxglove's Rosbridge connection asks
+%% for); any other (`png') is refused naming it, and so is any compression
+%% on another operation.
 %%
 %% Bad input gets a `status' of level `error' naming the fault and the
 %% operation's `id', and changes nothing. Messages are at most the app env
@@ -68,7 +73,9 @@
 -record(sub, {ids = #{} :: #{term() => #{throttle := non_neg_integer(), queue := pos_integer(),
                                           fragment := pos_integer() | none}},
               last = none :: none | integer(),
-              queue = [] :: [binary()],
+              %% the last subscribe's: none, cbor or cbor_raw
+              compression = none :: none | cbor | cbor_raw,
+              queue = [] :: [{binary(), binary(), toroco_live_ros:message()}],
               timer = none :: none | reference()}).
 
 -record(conn, {socket :: mochiweb_socket:socket(),
@@ -174,7 +181,7 @@ handle_info({fragments_expired, Id, Ref}, C = #conn{fragments = F}) ->
     end;
 handle_info(Msg, C) ->
     case toroco_live_rosbridge:receive_hub(Msg) of
-        {ok, {message, Topic, Json}} -> {noreply, message(Topic, Json, C)};
+        {ok, {message, Topic, Message}} -> {noreply, message(Topic, Message, C)};
         {ok, {dropped, N}} ->
             {noreply, status(C, warning, null,
                              io_lib:format("~b messages were dropped: this client reads more "
@@ -193,16 +200,16 @@ reply(Stop) -> Stop.
 %% From the hub: messages on subscribed topics
 %%====================================================================
 
-message(Topic, Json, C = #conn{subs = Subs}) ->
+message(Topic, Message, C = #conn{subs = Subs}) ->
     case Subs of
         #{Topic := Sub} ->
             Throttle = throttle(Sub),
             Now = erlang:monotonic_time(millisecond),
             case Sub#sub.last of
                 Last when Throttle =:= 0; Last =:= none; Now - Last >= Throttle ->
-                    publish_out(Topic, Json, C#conn{subs = Subs#{Topic := Sub#sub{last = Now}}});
+                    publish_out(Topic, Message, C#conn{subs = Subs#{Topic := Sub#sub{last = Now}}});
                 Last ->
-                    Queue0 = Sub#sub.queue ++ [Json],
+                    Queue0 = Sub#sub.queue ++ [Message],
                     Queue = lists:nthtail(max(0, length(Queue0) - queue_length(Sub)), Queue0),
                     Timer = case Sub#sub.timer of
                                 none -> erlang:send_after(Last + Throttle - Now, self(), {flush, Topic});
@@ -215,12 +222,12 @@ message(Topic, Json, C = #conn{subs = Subs}) ->
 
 flush(Topic, C = #conn{subs = Subs}) ->
     case Subs of
-        #{Topic := Sub = #sub{queue = [Json | Rest]}} ->
+        #{Topic := Sub = #sub{queue = [Message | Rest]}} ->
             Timer = case Rest of
                         [] -> none;
                         _ -> erlang:send_after(throttle(Sub), self(), {flush, Topic})
                     end,
-            publish_out(Topic, Json,
+            publish_out(Topic, Message,
                         C#conn{subs = Subs#{Topic := Sub#sub{queue = Rest, timer = Timer,
                                                              last = erlang:monotonic_time(millisecond)}}});
         #{Topic := Sub} -> C#conn{subs = Subs#{Topic := Sub#sub{timer = none}}};
@@ -235,12 +242,27 @@ fragment_size(#sub{ids = Ids}) ->
         Fs -> lists:min(Fs)
     end.
 
-publish_out(Topic, Json, C = #conn{subs = Subs}) ->
-    Text = iolist_to_binary([<<"{\"op\":\"publish\",\"topic\":">>, jiffy:encode(Topic),
-                             <<",\"msg\":">>, Json, $}]),
-    case fragment_size(maps:get(Topic, Subs)) of
-        Size when is_integer(Size), byte_size(Text) > Size -> send_fragments(Text, Size, C);
-        _ -> send_text(C, Text)
+publish_out(Topic, {Type, Json, Msg}, C = #conn{subs = Subs}) ->
+    Sub = maps:get(Topic, Subs),
+    case Sub#sub.compression of
+        none ->
+            Text = iolist_to_binary([<<"{\"op\":\"publish\",\"topic\":">>, jiffy:encode(Topic),
+                                     <<",\"msg\":">>, Json, $}]),
+            case fragment_size(Sub) of
+                Size when is_integer(Size), byte_size(Text) > Size -> send_fragments(Text, Size, C);
+                _ -> send_text(C, Text)
+            end;
+        cbor ->
+            send_binary(C, toroco_live_cbor:encode(#{op => publish, topic => Topic, msg => Msg}));
+        cbor_raw ->
+            %% As rosbridge does for ROS 2: the CDR bytes and the time.
+            #{sec := Sec, nanosec := Nsec} =
+                case Msg of
+                    #{header := #{stamp := Stamp}} -> Stamp;
+                    #{} -> toroco_live_ros:stamp(erlang:system_time(nanosecond))
+                end,
+            Raw = #{bytes => {bytes, toroco_live_cdr:encode(Type, Msg)}, secs => Sec, nsecs => Nsec},
+            send_binary(C, toroco_live_cbor:encode(#{op => publish, topic => Topic, msg => Raw}))
     end.
 
 %% Pieces cut at character boundaries, so each is a JSON string.
@@ -314,10 +336,15 @@ safe_op(Op, M, C) ->
 
 op(Op, M, C) ->
     Id = maps:get(<<"id">>, M, null),
-    case maps:get(<<"compression">>, M, <<"none">>) of
-        Comp when Comp =:= <<"none">>; Comp =:= null; Op =:= <<"fragment">> -> op(Op, Id, M, C);
-        Comp -> fault(C, Id, [<<"compression ">>, text(Comp),
-                              <<" is not supported: this server speaks JSON only (compression none)">>])
+    case {Op, maps:get(<<"compression">>, M, <<"none">>)} of
+        {_, Comp} when Comp =:= <<"none">>; Comp =:= null; Op =:= <<"fragment">> -> op(Op, Id, M, C);
+        {<<"subscribe">>, Comp} when Comp =:= <<"cbor">>; Comp =:= <<"cbor-raw">> -> op(Op, Id, M, C);
+        {<<"subscribe">>, Comp} ->
+            fault(C, Id, [<<"compression ">>, text(Comp), <<" is not supported: "
+                                                          "none (JSON), cbor or cbor-raw">>]);
+        {_, Comp} ->
+            fault(C, Id, [<<"compression ">>, text(Comp), <<" is not supported for ">>, Op,
+                          <<": JSON only">>])
     end.
 
 op(<<"subscribe">>, Id, M, C) ->
@@ -397,6 +424,11 @@ rate(Id, C = #conn{window = {Start, N}}, Fun) ->
 
 subscribe(Id, M, C = #conn{subs = Subs}) ->
     with_topic(Id, M, C, fun(Topic) ->
+        Compression = case maps:get(<<"compression">>, M, null) of
+                          <<"cbor">> -> cbor;
+                          <<"cbor-raw">> -> cbor_raw;
+                          _ -> none
+                      end,
         Opts = #{throttle => int(maps:get(<<"throttle_rate">>, M, 0), 0),
                  queue => max(1, int(maps:get(<<"queue_length">>, M, 1), 1)),
                  fragment => case int(maps:get(<<"fragment_size">>, M, 0), 0) of
@@ -411,12 +443,12 @@ subscribe(Id, M, C = #conn{subs = Subs}) ->
                 fault(C, Id, [<<"unknown topic ">>, Topic, <<" (the robot's topics: call /rosapi/topics)">>]);
             {{ok, Type}, Asked} when Asked =/= null, Asked =/= <<>> ->
                 case same_type(Asked, Type) of
-                    true -> {ok, add_sub(Topic, Id, Opts, C)};
+                    true -> {ok, add_sub(Topic, Id, Opts, Compression, C)};
                     false -> fault(C, Id, [<<"topic ">>, Topic, <<" is of type ">>, Type,
                                            <<", not ">>, text(Asked)])
                 end;
             {{ok, _}, _} ->
-                {ok, add_sub(Topic, Id, Opts, C)}
+                {ok, add_sub(Topic, Id, Opts, Compression, C)}
         end
     end).
 
@@ -424,12 +456,13 @@ int(N, _) when is_integer(N), N >= 0, N =< 1 bsl 31 -> N;
 int(F, _) when is_float(F), F >= 0, F =< 1 bsl 31 -> round(F);
 int(_, Default) -> Default.
 
-add_sub(Topic, Id, Opts, C = #conn{subs = Subs}) ->
+add_sub(Topic, Id, Opts, Compression, C = #conn{subs = Subs}) ->
     Sub = case Subs of
               #{Topic := S} -> S;
               #{} -> toroco_live_rosbridge:subscribe(self(), Topic), #sub{}
           end,
-    C#conn{subs = Subs#{Topic => Sub#sub{ids = (Sub#sub.ids)#{Id => Opts}}}}.
+    C#conn{subs = Subs#{Topic => Sub#sub{ids = (Sub#sub.ids)#{Id => Opts},
+                                         compression = Compression}}}.
 
 unsubscribe(Id, M, C = #conn{subs = Subs}) ->
     with_topic(Id, M, C, fun(Topic) ->
@@ -674,6 +707,12 @@ severity(error) -> 3.
 
 send_json(C, Map) ->
     send_text(C, jiffy:encode(Map)).
+
+send_binary(C, Bin) ->
+    case send(C, toroco_live_ws_frame:frame(binary, Bin)) of
+        {noreply, C1} -> C1;
+        {stop, _, _} -> exit(normal)
+    end.
 
 send_text(C, Text) ->
     case send(C, toroco_live_ws_frame:frame(text, Text)) of

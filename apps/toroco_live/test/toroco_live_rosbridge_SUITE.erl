@@ -9,7 +9,7 @@
 -compile([export_all, nowarn_export_all]).
 
 all() ->
-    [topics_and_types, services_round_trip, publish_needs_the_token, subscribe_throttled,
+    [topics_and_types, services_round_trip, publish_needs_the_token, subscribe_throttled, cbor_raw,
      fragments_out, bad_input, flood_disconnected, client_that_never_reads, not_a_websocket,
      start_options, simulated_range_and_odometry, drive_the_teleop_robot].
 
@@ -179,6 +179,51 @@ subscribe_throttled(Config) ->
     true = length(Got) =< 1 + Ms div 300 + 1,
     ok.
 
+cbor_raw() ->
+    [{doc, "A cbor-raw subscription (what Foxglove's Rosbridge connection asks for) carries "
+      "each message as CDR bytes that @foxglove/rosmsg2-serialization reads back, with the "
+      "definition from /rosapi/topics_and_raw_types, to the values the robot emitted"}].
+cbor_raw(Config) ->
+    C = connect(Config, url),
+    %% As torobot_sim tells toroco_live_world about a step.
+    Snapshot = #{run => cbor_raw, t_ms => 0, arena => {4.0, 3.0}, walls => [], objects => [],
+                 robots => [#{name => torobot, pose => {1.25, 0.5, 90.0}, radius => 0.12}]},
+    toroco_live_world ! {toroco_live_world, snapshot, Snapshot},
+    await_topic(C, <<"/odom">>),
+    [toroco_live_js:send(C, #{cmd => subscribe_raw, topic => T})
+     || T <- [<<"/range/front">>, <<"/toroco/motors/applied">>, <<"/toroco/out/s/dist">>, <<"/odom">>]],
+    await_subscribed(C, 4),
+    ok = toroco:inject({range, front}, 0.37),
+    ok = toroco:inject({motors, applied}, {20, 60}),
+    ok = toroco:inject({s, dist}, {7, <<"cm">>}),
+    Raw = fun(Topic) ->
+                  {ok, #{<<"msg">> := M, <<"secs">> := Secs}, _} =
+                      toroco_live_js:await(C, fun(#{<<"ev">> := <<"raw_message">>, <<"topic">> := T}) -> T =:= Topic;
+                                                 (_) -> false
+                                              end, 10000),
+                  true = is_integer(Secs),
+                  M
+          end,
+    #{<<"range">> := R, <<"radiation_type">> := 1, <<"variance">> := _,
+      <<"header">> := #{<<"frame_id">> := <<"range_front">>, <<"stamp">> := #{<<"sec">> := _}}} =
+        Raw(<<"/range/front">>),
+    true = abs(R - 0.37) < 1.0e-6,    % float32
+    G = toroco_live_ros:geometry(),
+    #{linear := #{x := Vx}, angular := #{z := Wz}} = toroco_live_ros:wheels_to_twist({20, 60}, G),
+    #{<<"linear">> := #{<<"x">> := X}, <<"angular">> := #{<<"z">> := Z}} = Raw(<<"/toroco/motors/applied">>),
+    true = abs(X - Vx) < 1.0e-12 andalso abs(Z - Wz) < 1.0e-12,
+    #{<<"data">> := Data} = Raw(<<"/toroco/out/s/dist">>),
+    #{<<"term">> := <<"{7,<<\"cm\">>}">>} = jiffy:decode(Data, [return_maps]),
+    toroco_live_world ! {toroco_live_world, snapshot, Snapshot#{t_ms => 50}},
+    #{<<"header">> := #{<<"frame_id">> := <<"odom">>}, <<"child_frame_id">> := <<"base_link">>,
+      <<"pose">> := #{<<"pose">> := #{<<"position">> := #{<<"x">> := 1.25, <<"y">> := 0.5},
+                                      <<"orientation">> := #{<<"w">> := Qw}},
+                      <<"covariance">> := Cov},
+      <<"twist">> := #{<<"covariance">> := [-1 | _] = Cov2}} = Raw(<<"/odom">>),
+    true = abs(Qw - math:sqrt(0.5)) < 1.0e-12,
+    {36, 36} = {length(Cov), length(Cov2)},
+    ok.
+
 fragments_out() ->
     [{doc, "A subscription with fragment_size gets long messages as fragment operations "
       "that join to the publish operation"}].
@@ -218,8 +263,8 @@ bad_input(Config) ->
            {<<"{\"op\":\"subscribe\",\"topic\":\"/range/front\",\"type\":\"std_msgs/msg/Int8\"}">>,
             "is of type sensor_msgs/msg/Range"},
            {<<"{\"op\":\"call_service\",\"service\":\"/nope\",\"id\":\"c1\"}">>, "unknown service /nope"},
-           {<<"{\"op\":\"subscribe\",\"topic\":\"/range/front\",\"compression\":\"cbor\"}">>,
-            "compression cbor is not supported"},
+           {<<"{\"op\":\"subscribe\",\"topic\":\"/range/front\",\"compression\":\"png\"}">>,
+            "compression png is not supported: none (JSON), cbor or cbor-raw"},
            {<<"{\"op\":\"service_response\",\"id\":\"zz\",\"values\":{}}">>, "calls no client services"},
            {<<"{\"op\":\"set_level\",\"level\":\"loud\"}">>, "unknown level"},
            {<<"{\"op\":\"fragment\",\"id\":\"m1\",\"data\":\"{\\\"op\\\":\",\"num\":0,\"total\":2}">>,

@@ -9,6 +9,8 @@
 //   {"cmd":"getTopicType","topic":T}          -> topic_type {type}
 //   {"cmd":"subscribe","topic":T,"type":Ty, "throttle_rate":Ms, "queue_length":N}
 //                                             -> message {topic, msg} per message
+//   {"cmd":"subscribe_raw","topic":T}         -> raw_message {topic, secs, nsecs, msg}: a cbor-raw
+//                                                subscription decoded as Foxglove does
 //   {"cmd":"unsubscribe","topic":T}
 //   {"cmd":"publish","topic":T,"type":Ty,"msg":M}
 //   {"cmd":"drive","topic":T,"type":Ty,"msg":M,"hz":H,"ms":D}
@@ -28,7 +30,9 @@ const readline = require("readline");
 const path = require("path");
 const { pathToFileURL } = require("url");
 
-const out = (ev) => process.stdout.write(JSON.stringify(ev) + "\n");
+// Typed arrays (a CDR reader's float64[36]) as plain arrays.
+const out = (ev) => process.stdout.write(
+  JSON.stringify(ev, (k, v) => (ArrayBuffer.isView(v) ? Array.from(v) : v)) + "\n");
 // The suite closes the port when a case ends: stdout goes, so does the driver.
 process.stdout.on("error", () => process.exit(0));
 const modules = process.env.NODE_PATH;
@@ -103,6 +107,22 @@ async function main() {
           for (const k of ["throttle_rate", "queue_length"]) if (k in c) extra[k] = c[k];
           topic(c.topic, c.type, extra).subscribe((msg) => out({ ev: "message", topic: c.topic, msg }));
           out({ ev: "subscribed", topic: c.topic });
+          break;
+        }
+        case "subscribe_raw": {
+          // What Foxglove's Rosbridge connection does for ROS 2: the type's
+          // definition from rosapi/topics_and_raw_types, a cbor-raw
+          // subscription, each message's CDR bytes read with MessageReader.
+          const { parse } = require(path.join(modules, "@foxglove", "rosmsg"));
+          const { MessageReader } = require(path.join(modules, "@foxglove", "rosmsg2-serialization"));
+          new ROSLIB.Service({ ros, name: "rosapi/topics_and_raw_types", serviceType: "" }).callService({}, (r) => {
+            const i = r.topics.indexOf(c.topic);
+            const reader = new MessageReader(parse(r.typedefs_full_text[i], { ros2: true }));
+            new ROSLIB.Topic({ ros, name: c.topic, messageType: r.types[i], compression: "cbor-raw" })
+              .subscribe((m) => out({ ev: "raw_message", topic: c.topic, secs: m.secs, nsecs: m.nsecs,
+                                      msg: reader.readMessage(m.bytes) }));
+            out({ ev: "subscribed", topic: c.topic });
+          }, (e) => out({ ev: "raw_types_failed", error: String(e) }));
           break;
         }
         case "unsubscribe":
