@@ -6,7 +6,7 @@
 
 all() ->
     [twist_wheels_round_trip, twist_checked_against_its_type, messages_have_every_field,
-     topics_of_a_wiring, geometry_from_env, stamps, definitions].
+     topics_of_a_wiring, geometry_from_env, stamps, definitions, cbor_vectors, cdr_layout].
 
 twist_wheels_round_trip() ->
     [{doc, "Wheels -> Twist -> wheels gives the same servo units; forward is +x, left wheel "
@@ -142,4 +142,36 @@ definitions(_Config) ->
     <<"uint8 ULTRASOUND=0\nuint8 INFRARED=1\nstd_msgs/Header header\n", _/binary>> =
         toroco_live_ros:definition(<<"sensor_msgs/msg/Range">>),
     <<"string data\n">> = toroco_live_ros:definition(<<"std_msgs/msg/String">>),
+    ok.
+
+cbor_vectors() ->
+    [{doc, "CBOR encodes as RFC 8949's examples: small and large integers, negatives, "
+      "floats as 64-bit, text and byte strings, arrays, maps, true and null"}].
+cbor_vectors(_Config) ->
+    E = fun toroco_live_cbor:encode/1,
+    <<16#00>> = E(0), <<16#17>> = E(23), <<16#18, 16#18>> = E(24), <<16#19, 16#03, 16#e8>> = E(1000),
+    <<16#1a, 16#00, 16#0f, 16#42, 16#40>> = E(1000000), <<16#20>> = E(-1), <<16#38, 16#63>> = E(-100),
+    <<16#fb, 16#3f, 16#f1, 16#99, 16#99, 16#99, 16#99, 16#99, 16#9a>> = E(1.1),
+    <<16#61, $a>> = E(<<"a">>), <<16#41, 1>> = E({bytes, <<1>>}),
+    <<16#83, 1, 2, 3>> = E([1, 2, 3]), <<16#a1, 16#61, $a, 1>> = E(#{a => 1}),
+    <<16#f5>> = E(true), <<16#f6>> = E(null), <<16#63, "ros">> = E(ros),
+    ok.
+
+cdr_layout() ->
+    [{doc, "CDR: the little-endian encapsulation header, primitives aligned to their size "
+      "from the start of the data, strings with their length and NUL"}].
+cdr_layout(_Config) ->
+    <<0, 1, 0, 0, 3:32/little, "hi", 0>> =
+        toroco_live_cdr:encode(<<"std_msgs/msg/String">>, #{data => <<"hi">>}),
+    G = toroco_live_ros:geometry(),
+    <<0, 1, 0, 0, X:64/float-little, 0:64, 0:64, 0:64, 0:64, Z:64/float-little>> =
+        toroco_live_cdr:encode(<<"geometry_msgs/msg/Twist">>, toroco_live_ros:wheels_to_twist({50, 100}, G)),
+    #{linear := #{x := X}, angular := #{z := Z}} = toroco_live_ros:wheels_to_twist({50, 100}, G),
+    [{_, _, Range}] = toroco_live_ros:of_event({emit, 1000000002, {range, front}, send, 0.5}),
+    %% stamp (8), frame_id "range_front" (4 + 12), radiation_type (1), 3 bytes of padding,
+    %% then five float32.
+    <<0, 1, 0, 0, 1:32/little, 2:32/little, 12:32/little, "range_front", 0, 1, 0, 0, 0,
+      _Fov:32/float-little, _Min:32/float-little, _Max:32/float-little, R:32/float-little,
+      0:32>> = toroco_live_cdr:encode(<<"sensor_msgs/msg/Range">>, Range),
+    true = R == 0.5,
     ok.
