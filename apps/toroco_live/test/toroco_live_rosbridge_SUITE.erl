@@ -11,7 +11,7 @@
 all() ->
     [topics_and_types, services_round_trip, publish_needs_the_token, subscribe_throttled, cbor_raw,
      fragments_out, bad_input, flood_disconnected, client_that_never_reads, not_a_websocket,
-     start_options, simulated_range_and_odometry, drive_the_teleop_robot].
+     start_options, lockstep_stimulus, simulated_range_and_odometry, drive_the_teleop_robot].
 
 suite() -> [{timetrap, {seconds, 90}}].
 
@@ -377,6 +377,28 @@ start_options(Config) ->
         toroco_live:start(#{http => 0, foxglove => off, rosbridge => Taken}),
     not_running = toroco_live:info(),
     gen_tcp:close(L),
+    ok.
+
+lockstep_stimulus() ->
+    [{doc, "In lockstep a Twist handed to a tick as the ros device's stimulus reaches the "
+      "wiring as {Left, Right} at that tick, in the trace; a live publish is taken too"}].
+lockstep_stimulus(_Config) ->
+    ok = toroco_clock:lockstep(#{trace => true}),
+    try
+        Twist = #{<<"linear">> => #{<<"x">> => 0.125}},
+        {ok, Lines} = toroco_clock:tick(100, [toroco_live_ros_device:stimulus(ros, Twist)]),
+        [{v, {50, 50}, _}] = toroco_fake_actuator:history(cmd),
+        Trace = iolist_to_binary(Lines),
+        ct:log("~s", [Trace]),
+        true = nomatch =/= binary:match(Trace, <<"cmd_vel">>),
+        %% A live publish arrives when it arrives, and is taken.
+        ok = toroco_live_ros_device:publish(ros, cmd_vel, #{angular => #{z => 1.0}}),
+        ok = toroco_clock:settle(),
+        {ok, _} = toroco_clock:tick(200, []),
+        [{v, {50, 50}, _}, {v, {-40, 40}, _}] = toroco_fake_actuator:history(cmd)
+    after
+        toroco_clock:realtime()
+    end,
     ok.
 
 simulated_range_and_odometry() ->
