@@ -14,11 +14,11 @@ main([Dir, Root]) ->
     World = filename:join([Root, "config", "worlds", "default.world"]),
     io:format("~n## Simulated lab~n~n"),
     speeds(World, Wiring, Dir, case Quick of
-                                   true -> [5, 10, 20, 40, 80];
+                                   true -> [10, 40, 80];
                                    false -> [2, 5, 10, 20, 40, 80, 160]
                                end),
     robots(Wiring, Dir, case Quick of
-                            true -> [1, 2, 4];
+                            true -> [1, 4];
                             false -> [1, 2, 4, 8, 12]
                         end),
     halt(0).

@@ -23,55 +23,66 @@ setup(Dir) ->
     logger:set_primary_config(level, error),
     os:getenv("TOROCO_BENCH_QUICK") =:= "1".
 
+%% `main([Dir])' runs the sections `tap', `raw' and `scaling'; `main([Dir,
+%% Sections])' the ones named (comma-separated) of: `tap' (the observer
+%% tap's cost), `raw' (the thesis' internal and external tests against
+%% their raw references, and open-loop throughput), `internal' (the
+%% internal test alone, closed and 10 ms), `scaling' (sources per input,
+%% fan-out, behaviors alive), `memory' (memory per idle behavior, by part).
 main([Dir]) ->
+    main([Dir, "tap,raw,scaling"]);
+main([Dir, Sections]) ->
     Quick = setup(Dir),
     N = case Quick of true -> 2000; false -> ?N end,
     io:format("~ts~n~nMachine: ~ts~nOTP ~s, ~w schedulers~n~n",
               [<<"# Torocó benchmark"/utf8>>, machine(), erlang:system_info(otp_release),
                erlang:system_info(schedulers_online)]),
     warm_up(),
-    case os:getenv("TOROCO_BENCH_ONLY") of
-        "memory" ->
-            memory_table([10, 1000, 10000]),
-            halt(0);
-        "internal" ->
-            table("Internal test", [internal(I, N, Dir) || I <- [closed, 10]], Dir, "internal"),
-            halt(0);
-        _ -> ok
-    end,
+    [section(list_to_atom(S), Quick, N, Dir) || S <- string:lexemes(Sections, ",")],
+    io:format("~nCSV files and latency CDFs (SVG) in ~s~n", [Dir]),
+    halt(0).
+
+section(memory, Quick, _N, _Dir) ->
+    memory_table(case Quick of true -> [10, 1000]; false -> [10, 1000, 10000] end);
+section(internal, _Quick, N, Dir) ->
+    table("Internal test", [internal(I, N, Dir) || I <- [closed, 10]], Dir, "internal");
+section(tap, _Quick, N, Dir) ->
     Tap = [tap_row(Sub, N, Dir) || Sub <- [none, one, none, one]],
     table("Observer tap: the closed loop with no subscriber and with one subscriber reading every event "
-          "(alternated, twice)", Tap, Dir, "tap"),
-    case os:getenv("TOROCO_BENCH_ONLY") of
-        "tap" -> halt(0);
-        _ -> ok
-    end,
+          "(alternated, twice)", Tap, Dir, "tap");
+section(raw, Quick, N, Dir) ->
     Intervals = [closed, 1, 2, 5, 10],
     TputN = case Quick of true -> 100000; false -> 500000 end,
+    %% A quick run paces fewer events: at 10 ms, 2,000 take 20 s a row.
+    NOf = fun(closed) -> N; (_) when Quick -> 500; (_) -> N end,
+    ExtN = case Quick of true -> 500; false -> N end,
     %% The raw references run before and after the runtime's tests; the
     %% "× raw" columns divide by the mean of the two.
-    RawBefore = [raw_internal(I, N, Dir) || I <- Intervals],
+    RawBefore = [raw_internal(I, NOf(I), Dir) || I <- Intervals],
     RawTputBefore = raw_throughput(1000, TputN),
-    RawExtBefore = external(raw, N, Dir),
-    Internal = [internal(I, N, Dir) || I <- Intervals],
+    RawExtBefore = external(raw, ExtN, Dir),
+    Internal = [internal(I, NOf(I), Dir) || I <- Intervals],
     Tput = [throughput(W, TputN) || W <- [1000]],
-    External = external(toroco, N, Dir),
-    RawAfter = [raw_internal(I, N, Dir) || I <- Intervals],
+    External = external(toroco, ExtN, Dir),
+    RawAfter = [raw_internal(I, NOf(I), Dir) || I <- Intervals],
     RawTputAfter = raw_throughput(1000, TputN),
-    RawExtAfter = external(raw, N, Dir),
+    RawExtAfter = external(raw, ExtN, Dir),
     Raw = mean_rows(RawBefore, RawAfter),
     RawExt = mean_rows(RawExtBefore, RawExtAfter),
-    table("Raw reference: five plain processes, source → … → sink, " ++ integer_to_list(N)
-          ++ " events (mean of a run before and a run after the runtime's)", Raw, Dir, "raw_internal"),
-    table("Internal test: behavior → router → behavior → router → actuator, " ++
-              integer_to_list(N) ++ " events", Internal, Dir, "internal", Raw),
+    Events = integer_to_list(N) ++ " events" ++ case Quick of
+                                                    true -> " (paced rows 500)";
+                                                    false -> ""
+                                                end,
+    table("Raw reference: five plain processes, source → … → sink, " ++ Events
+          ++ " (mean of a run before and a run after the runtime's)", Raw, Dir, "raw_internal"),
+    table("Internal test: behavior → router → behavior → router → actuator, " ++ Events,
+          Internal, Dir, "internal", Raw),
     RawTput = mean_rate(RawTputBefore, RawTputAfter),
     tput_table("Throughput, open loop with a bounded window", Tput, Dir, "throughput", RawTput),
     RawExt =/= [] andalso table("Raw reference: UDP sender → plain gen_udp echo → UDP receiver "
                                 "(mean of a run before and a run after)", RawExt, Dir, "raw_external"),
-    External =/= [] andalso table("External test: UDP sender → udp_link → behavior → udp_link → UDP receiver", External, Dir, "external", RawExt),
-    %% TOROCO_BENCH_ONLY=raw: the runtime against its raw references only.
-    os:getenv("TOROCO_BENCH_ONLY") =:= "raw" andalso halt(0),
+    External =/= [] andalso table("External test: UDP sender → udp_link → behavior → udp_link → UDP receiver", External, Dir, "external", RawExt);
+section(scaling, Quick, N, Dir) ->
     Sources = [sources_per_input(K, N, Dir) || K <- [1, 4, 16, 64]],
     table("Sources per input (the others holding latches below the measured source)", Sources, Dir, "sources"),
     Fanout = [fan_out(F, N div 2, Dir) || F <- [1, 8, 64]],
@@ -79,9 +90,10 @@ main([Dir]) ->
     Alive = [alive(B, N, Dir) || B <- case Quick of true -> [10, 1000]; false -> [10, 1000, 10000] end],
     table("Behaviors alive (each idle behavior has one wired input, so one router)", Alive, Dir, "alive"),
     io:format("~n| behaviors alive | memory per idle behavior with its router (bytes) |~n|---:|---:|~n"),
-    [io:format("| ~w | ~w |~n", [B, M]) || #{label := B, mem_per := M} <- Alive],
-    io:format("~nCSV files and latency CDFs (SVG) in ~s~n", [Dir]),
-    halt(0).
+    [io:format("| ~w | ~w |~n", [B, M]) || #{label := B, mem_per := M} <- Alive];
+section(Other, _Quick, _N, _Dir) ->
+    io:format(standard_error, "toroco_bench: no section ~s~n", [Other]),
+    halt(2).
 
 machine() ->
     Cpu = case file:read_file("/proc/cpuinfo") of

@@ -646,7 +646,7 @@ kill_receiver() ->
 restart(Reg, Ready) ->
     Old = whereis(Reg),
     exit(Old, kill),
-    case wait_until(fun() -> case whereis(Reg) of
+    case toroco_test_lib:poll(fun() -> case whereis(Reg) of
                                  P when is_pid(P), P =/= Old -> true;
                                  _ -> false
                              end
@@ -659,7 +659,7 @@ restart(Reg, Ready) ->
 %% nothing short any more and the router's winner has caught up.
 hold_expire(E, V, H) ->
     ok = toroco:inject(source(E), V, #{hold => H}),
-    Ret = wait_until(fun() -> short_holds_over() end, 3000 + H),
+    Ret = toroco_test_lib:poll(fun() -> short_holds_over() end, 3000 + H),
     {case Ret of ok -> ok; timeout -> short_hold_did_not_end end, observe()}.
 
 %% The gate answers first: what it forwarded is then at the router before
@@ -756,18 +756,3 @@ observe() ->
               catch exit:Reason -> {no_history, Reason}
               end,
     #{history => History, act => Act, emitters => Emitters}.
-
-wait_until(Fun, Timeout) ->
-    Deadline = erlang:monotonic_time(millisecond) + Timeout,
-    wait_loop(Fun, Deadline).
-
-wait_loop(Fun, Deadline) ->
-    case Fun() of
-        true -> ok;
-        false ->
-            case erlang:monotonic_time(millisecond) > Deadline of
-                true -> timeout;
-                false ->
-                    receive after 5 -> wait_loop(Fun, Deadline) end
-            end
-    end.

@@ -2,6 +2,7 @@
 %% `peer' on loopback, each running `toroco'; the cases spread emitters,
 %% gates, routers and receivers over two or three of them.
 -module(toroco_nodes_SUITE).
+-import(toroco_test_lib, [wait_until/2, wait_until/3]).
 -include_lib("common_test/include/ct.hrl").
 -compile([export_all, nowarn_export_all]).
 
@@ -73,7 +74,7 @@ nodes3() ->
 
 %% Until each node's wiring server knows the others'.
 await_peers(Nodes) ->
-    wait(fun() ->
+    wait_until(fun() ->
                  lists:all(fun(N) -> erpc:call(N, toroco_wiring, peers, []) =:= lists:sort(Nodes) end,
                            Nodes)
          end, 5000).
@@ -120,21 +121,8 @@ values(Node, A) ->
     [V || {_, V, _} <- erpc:call(Node, toroco_fake_actuator, history, [A])].
 
 await_values(Node, A, Expected) ->
-    wait(fun() -> values(Node, A) =:= Expected end, 3000, {expected, Expected}),
+    wait_until(fun() -> values(Node, A) =:= Expected end, 3000, {expected, Expected}),
     ok.
-
-wait(Fun, Timeout) -> wait(Fun, Timeout, condition).
-
-wait(Fun, Timeout, What) when Timeout =< 0 ->
-    case Fun() of
-        true -> ok;
-        _ -> ct:fail({not_met, What})
-    end;
-wait(Fun, Timeout, What) ->
-    case Fun() of
-        true -> ok;
-        _ -> timer:sleep(10), wait(Fun, Timeout - 10, What)
-    end.
 
 %%====================================================================
 %% Cases
@@ -240,7 +228,7 @@ remote_emitter_restart_caught_up(Config) ->
     Old = erpc:call(A, erlang, whereis, [toroco_names:process(hi)]),
     true = erpc:call(A, erlang, exit, [Old, kill]),
     await_values(B, act, [low, high, low]),
-    wait(fun() -> case erpc:call(A, erlang, whereis, [toroco_names:process(hi)]) of
+    wait_until(fun() -> case erpc:call(A, erlang, whereis, [toroco_names:process(hi)]) of
                       P when is_pid(P) -> P =/= Old;
                       _ -> false
                   end
@@ -297,16 +285,16 @@ clash_after_partition_reported(Config) ->
     %% Only A and B: the test node and C would carry the partition over.
     _ = [true = erpc:call(X, erlang, disconnect_node, [C]) || X <- [A, B]],
     true = erpc:call(A, erlang, disconnect_node, [B]),
-    wait(fun() -> erpc:call(A, toroco_wiring, peers, []) =:= [A] end, 3000),
+    wait_until(fun() -> erpc:call(A, toroco_wiring, peers, []) =:= [A] end, 3000),
     sensor(A, twin),
     sensor(B, twin),
     pong = erpc:call(A, net_adm, ping, [B]),
-    wait(fun() -> maps:get(name_clashes, t(A, inspect, []), []) =/= [] end, 3000),
+    wait_until(fun() -> maps:get(name_clashes, t(A, inspect, []), []) =/= [] end, 3000),
     #{name_clashes := Clashes} = t(B, inspect, []),
     true = lists:member({twin, A}, Clashes) orelse lists:member({twin, B}, Clashes),
     %% Resolved by removing one side's: no longer listed.
     ok = t(B, remove_device, [twin]),
-    wait(fun() -> maps:get(name_clashes, t(A, inspect, []), []) =:= [] end, 3000),
+    wait_until(fun() -> maps:get(name_clashes, t(A, inspect, []), []) =:= [] end, 3000),
     end_per_testcase(x, [{peers, Ps} | Config]).
 
 top_and_watch_cover_nodes() -> [{doc, "top on one node lists the whole robot with the node of each thing; the observer tap hears other nodes; watch/2 of a receiver on another node prints here"}].
@@ -429,7 +417,7 @@ over_tls(Config) ->
     [{B, _}] = peer:call(PA, erlang, system_info, [dist_ctrl]),
     {ok, [["inet_tls"]]} = peer:call(PA, init, get_argument, [proto_dist]),
     T = fun(P, F, Args) -> peer:call(P, toroco, F, Args) end,
-    wait(fun() -> peer:call(PA, toroco_wiring, peers, []) =:= lists:sort([A, B]) end, 5000),
+    wait_until(fun() -> peer:call(PA, toroco_wiring, peers, []) =:= lists:sort([A, B]) end, 5000),
     ok = T(PA, add_device, [hi, toroco_fake_sensor, #{outputs => [out]}]),
     ok = T(PB, add_device, [lo, toroco_fake_sensor, #{outputs => [out]}]),
     ok = T(PB, add_device, [act, toroco_fake_actuator, #{inputs => [in]}]),
@@ -438,7 +426,7 @@ over_tls(Config) ->
     ok = T(PA, inject, [{hi, out}, 2, #{hold => 300}]),
     ok = T(PB, inject, [{lo, out}, 3, #{latch => true}]),
     Values = fun() -> [V || {_, V, _} <- peer:call(PB, toroco_fake_actuator, history, [act])] end,
-    wait(fun() -> Values() =:= [1, 2, 3] end, 3000, {tls, Values()}),
+    wait_until(fun() -> Values() =:= [1, 2, 3] end, 3000, {tls, Values()}),
     end_per_testcase(x, Config1).
 
 repo_root() ->

@@ -242,7 +242,7 @@ batch_node_gone(Config) ->
                                                      Self ! {batch, torobot_sim:batch(
                                                                       Opts#{nodes => [A, B]})}
                                              end),
-                          ok = until(fun() -> has_worker(B) end, 30000),
+                          ok = toroco_test_lib:wait_until(fun() -> has_worker(B) end, 30000, {no_worker_on, B}),
                           [Peer] = [P || {P, N} <- get(lab_peers), N =:= B],
                           ok = peer:stop(Peer),
                           {ok, Cut} = receive {batch, Result} -> Result
@@ -324,18 +324,6 @@ has_worker(Node) ->
                       || Pid <- Pids])
     catch
         error:{erpc, _} -> false
-    end.
-
-%% Waits until Pred holds, checking every 20 ms, at most Ms.
-until(Pred, Ms) when Ms =< 0 ->
-    case Pred() of
-        true -> ok;
-        false -> {timeout, Pred}
-    end;
-until(Pred, Ms) ->
-    case Pred() of
-        true -> ok;
-        false -> receive after 20 -> until(Pred, Ms - 20) end
     end.
 
 %% Objects clear of every wall (the arena's too) and of each other; the

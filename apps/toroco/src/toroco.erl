@@ -343,10 +343,30 @@ unwatch() ->
 wiring_dot() ->
     toroco_dot:wiring().
 
-%% @doc Hot code reload of every behavior running `Module'.
--spec reload(module()) -> ok | {error, error_reason()}.
-reload(Module) ->
-    toroco_reload:reload(Module).
+%% @doc Hot code reload of every behavior running `Module'; or, for the
+%% name of a behavior whose module reloads its own code (a Lua behavior:
+%% its file, all or nothing), that behavior's.
+-spec reload(module() | name()) -> ok | {error, error_reason()}.
+reload(What) when is_atom(What) ->
+    case own_reload(What) of
+        {ok, M} -> on(What, fun() -> M:reload(What) end, fun() -> M:reload(What) end);
+        none -> toroco_reload:reload(What)
+    end;
+reload(What) ->
+    toroco_reload:reload(What).
+
+%% The module of behavior `Name' if it exports reload/1 (toroco_behavior's
+%% optional callback).
+own_reload(Name) ->
+    case at(Name, {node, Name}) of
+        {ok, #{kind := behavior, module := M}} ->
+            _ = code:ensure_loaded(M),
+            case erlang:function_exported(M, reload, 1) of
+                true -> {ok, M};
+                false -> none
+            end;
+        _ -> none
+    end.
 
 %%====================================================================
 %% Observing the event path

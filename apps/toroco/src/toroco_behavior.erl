@@ -60,7 +60,15 @@
     {ok, NewState :: term(), NewData :: term()}.
 -callback terminate(Reason :: term(), State :: term(), Data :: term()) ->
     {emit, actions()} | term().
--optional_callbacks([interface/0, interface/1, handle_event/4, code_change/4, terminate/3]).
+%% What `toroco:inspect(Name)' shows of the behavior's own workings, under
+%% `behavior' (a Lua behavior's pending waits and triggers), as a device's
+%% `info/2' under `device'. Called in the behavior's process.
+-callback info(State :: term(), Data :: term()) -> map().
+%% A behavior whose code is not the module's (a Lua file) re-reads it on
+%% `toroco:reload(Name)'; called from the caller's process.
+-callback reload(Name :: atom()) -> ok | {error, term()}.
+-optional_callbacks([interface/0, interface/1, handle_event/4, code_change/4, terminate/3,
+                     info/2, reload/1]).
 
 -type action() :: {send, #{atom() => term()}}
                 | {send, #{atom() => term()}, #{hold => non_neg_integer() | infinity}}
@@ -644,7 +652,7 @@ describe(S, #e{kind = Kind, module = M, layer = L, latches = Latches, suspended 
     Base = #{kind => Kind, module => M, layer => L, latches => Latches,
              status => case Susp of true -> suspended; false -> running end,
              state => S, mailbox => Q},
-    case Kind =:= device andalso erlang:function_exported(M, info, 2) of
-        true -> Base#{device => M:info(S, UD)};
+    case erlang:function_exported(M, info, 2) of
+        true -> Base#{Kind => M:info(S, UD)};
         false -> Base
     end.

@@ -94,10 +94,8 @@ node_map(Name, #{kind := Kind, module := M, layer := L, inputs := Ins, outputs :
              #{'$reset' := #{sources := Srcs}} -> Base#{reset => [S || {S, _} <- Srcs]};
              #{} -> Base
          end,
-    case Engine of
-        #{device := Counters} -> B1#{device => Counters};
-        #{} -> B1
-    end.
+    %% a device's counters, a behavior's own workings (the optional info/2)
+    maps:merge(B1, maps:with([device, behavior], Engine)).
 
 input(Name, I, Wired) ->
     case Wired of

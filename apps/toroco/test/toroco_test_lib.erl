@@ -1,7 +1,7 @@
 %% Helpers shared by the runtime's suites.
 -module(toroco_test_lib).
 -export([start/0, stop/0, values/1, await_values/2, await_values/3, settle/1,
-         sensor/2, actuator/2, wait_until/2]).
+         sensor/2, actuator/2, wait_until/2, wait_until/3, poll/2, poll/3]).
 
 start() ->
     {ok, _} = application:ensure_all_started(toroco_hw),
@@ -34,14 +34,36 @@ settle(A) ->
     _ = toroco_fake_actuator:history(A),
     ok.
 
-%% Polls a condition every 5 ms, at most Timeout ms.
-wait_until(Fun, Timeout) when Timeout =< 0 ->
+%% The one bounded wait of the suites: checks `Fun()' every 5 ms until it
+%% returns `true', for at most `Timeout' ms of real time. `poll/2' answers
+%% `ok' or `timeout'; `wait_until/2,3' fail the case with `{timeout, Ms,
+%% What}'. (A wait in simulated time ticks the lockstep clock instead: see
+%% torobot_examples_SUITE.)
+%% `poll/3' checks every `Every' ms, for a check that is costly (a shell
+%% command, a call to another node).
+-spec poll(fun(() -> term()), non_neg_integer()) -> ok | timeout.
+poll(Fun, Timeout) ->
+    poll(Fun, Timeout, 5).
+
+-spec poll(fun(() -> term()), non_neg_integer(), pos_integer()) -> ok | timeout.
+poll(Fun, Timeout, Every) ->
+    poll_until(Fun, erlang:monotonic_time(millisecond) + Timeout, Every).
+
+poll_until(Fun, Deadline, Every) ->
     case Fun() of
         true -> ok;
-        _ -> ct:fail(condition_not_met)
-    end;
+        _ ->
+            case erlang:monotonic_time(millisecond) >= Deadline of
+                true -> timeout;
+                false -> receive after Every -> poll_until(Fun, Deadline, Every) end
+            end
+    end.
+
 wait_until(Fun, Timeout) ->
-    case Fun() of
-        true -> ok;
-        _ -> timer:sleep(5), wait_until(Fun, Timeout - 5)
+    wait_until(Fun, Timeout, condition_not_met).
+
+wait_until(Fun, Timeout, What) ->
+    case poll(Fun, Timeout) of
+        ok -> ok;
+        timeout -> ct:fail({timeout, Timeout, What})
     end.

@@ -19,6 +19,11 @@
 %%
 %% `info/2': `polls', `emitted', `crashes', `last' (`{value, V}' | `none'),
 %% `every_ms'.
+%%
+%% The call `{toroco_poll, every_ms, Ms}' (`toroco_device:call/3') changes
+%% the period, the next poll `Ms' from now: a polled device's answer to the
+%% original Torocó's `configure_polling' (SPEC §16). Devices that emit by
+%% themselves answer it with the engine's `unknown_call'.
 -module(toroco_poll_sensor).
 -behaviour(toroco_device).
 
@@ -64,6 +69,11 @@ handle_input(_Input, _Value, _State, _D) ->
 
 -spec handle_event(gen_statem:event_type(), term(), polling, map()) ->
           toroco_behavior:result().
+handle_event({call, From}, {toroco_poll, every_ms, Ms}, _State, D) ->
+    case is_integer(Ms) andalso Ms >= 1 of
+        true -> {keep_state, D#{every_ms := Ms}, [{reply, From, ok}, {state_timeout, Ms, poll}]};
+        false -> {keep_state_and_data, [{reply, From, {error, {bad_option, {every_ms, Ms}}}}]}
+    end;
 handle_event(state_timeout, poll, _State, D = #{fn := Fn, every_ms := Every, polls := P}) ->
     Next = {state_timeout, Every, poll},
     D1 = D#{polls := P + 1},

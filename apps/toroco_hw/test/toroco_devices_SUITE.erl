@@ -3,6 +3,7 @@
 %% sysfs tree in the case's private directory), the camera over real UDP,
 %% the function adapters, and refused options.
 -module(toroco_devices_SUITE).
+-import(toroco_test_lib, [wait_until/2]).
 
 -include_lib("common_test/include/ct.hrl").
 -include_lib("stdlib/include/assert.hrl").
@@ -16,7 +17,7 @@
          neutral_on_remove/1, servo_device_while_port_connecting/1,
          button_edges/1,
          camera_datagrams/1, camera_allow_list/1,
-         poll_on_change/1, poll_crashes/1, fun_actuator_calls/1,
+         poll_on_change/1, poll_crashes/1, poll_period_changed/1, fun_actuator_calls/1,
          bad_options/1, missing_device_files/1,
          unknown_requests/1]).
 
@@ -38,7 +39,7 @@ groups() ->
                          neutral_on_remove, servo_device_while_port_connecting]},
      {button, [], [button_edges]},
      {camera, [], [camera_datagrams, camera_allow_list]},
-     {adapters, [], [poll_on_change, poll_crashes, fun_actuator_calls]},
+     {adapters, [], [poll_on_change, poll_crashes, poll_period_changed, fun_actuator_calls]},
      {options, [], [bad_options, missing_device_files]},
      {engine_defaults, [], [unknown_requests]}].
 
@@ -477,6 +478,19 @@ poll_crashes(_Config) ->
     await_input(rec, level, [1, 2]),
     ?assertEqual(Pid, whereis(toroco_names:process(gauge))).
 
+poll_period_changed(doc) ->
+    ["{toroco_poll, every_ms, Ms} re-times a polled sensor (the original Torocó's "
+     "configure_polling); a bad period is refused and changes nothing"];
+poll_period_changed(_Config) ->
+    ok = toroco:add_device(gauge, toroco_poll_sensor, #{fn => fun() -> 1 end, every_ms => 60000}),
+    ok = wait_until(fun() -> maps:get(polls, dev(gauge)) >= 1 end, ?WAIT),
+    ?assertEqual({error, {bad_option, {every_ms, 0}}},
+                 toroco_device:call(gauge, {toroco_poll, every_ms, 0}, 5000)),
+    #{every_ms := 60000, polls := 1} = dev(gauge),
+    ok = toroco_device:call(gauge, {toroco_poll, every_ms, 5}, 5000),
+    #{every_ms := 5} = dev(gauge),
+    ok = wait_until(fun() -> maps:get(polls, dev(gauge)) >= 5 end, ?WAIT).
+
 fun_actuator_calls(doc) ->
     ["A function actuator is called with each delivered value, in order; crashes are counted"];
 fun_actuator_calls(_Config) ->
@@ -651,17 +665,6 @@ send_udp(Port, Datagrams) ->
     {ok, S} = gen_udp:open(0, [binary, {ip, {127, 0, 0, 1}}]),
     [ok = gen_udp:send(S, {127, 0, 0, 1}, Port, D) || D <- Datagrams],
     gen_udp:close(S).
-
-wait_until(Fun, Timeout) when Timeout =< 0 ->
-    case Fun() of
-        true -> ok;
-        _ -> {error, timeout}
-    end;
-wait_until(Fun, Timeout) ->
-    case Fun() of
-        true -> ok;
-        _ -> timer:sleep(5), wait_until(Fun, Timeout - 5)
-    end.
 
 fake_pwm(Root, Chip, Ch) ->
     ChipDir = filename:join(Root, "class/pwm/pwmchip" ++ integer_to_list(Chip)),

@@ -1,6 +1,7 @@
 %% The UDP and TCP links over loopback: events out and in as JSON, the
 %% allow-lists, and what clients that misbehave can and cannot do.
 -module(toroco_links_SUITE).
+-import(toroco_test_lib, [wait_until/2]).
 
 -include_lib("common_test/include/ct.hrl").
 -include_lib("stdlib/include/assert.hrl").
@@ -430,13 +431,3 @@ await_input(A, Input, Expected) ->
 wait_until(Fun) ->
     wait_until(Fun, ?WAIT).
 
-wait_until(Fun, Timeout) when Timeout =< 0 ->
-    case Fun() of
-        true -> ok;
-        _ -> {error, timeout}
-    end;
-wait_until(Fun, Timeout) ->
-    case Fun() of
-        true -> ok;
-        _ -> timer:sleep(5), wait_until(Fun, Timeout - 5)
-    end.

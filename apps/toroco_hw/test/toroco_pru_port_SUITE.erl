@@ -1,6 +1,7 @@
 %% The pru_port program and its owner, through the sim backend, with the
 %% servos' PWM on a fake sysfs tree in the case's private directory.
 -module(toroco_pru_port_SUITE).
+-import(toroco_test_lib, [wait_until/2]).
 
 -include_lib("common_test/include/ct.hrl").
 -include_lib("stdlib/include/assert.hrl").
@@ -569,19 +570,6 @@ raw_recv(P) ->
         {P, {data, Bin}} -> binary_to_term(Bin);
         {P, {exit_status, S}} -> ct:fail({port_exited, S})
     after ?WAIT -> ct:fail(no_reply)
-    end.
-
-wait_until(Cond, Left) when Left =< 0 ->
-    case Cond() of
-        true -> ok;
-        false -> ct:fail(condition_not_reached)
-    end;
-wait_until(Cond, Left) ->
-    case Cond() of
-        true -> ok;
-        false ->
-            timer:sleep(10),
-            wait_until(Cond, Left - 10)
     end.
 
 %% A program that withholds its hello (sleeps 30 s, until killed) while

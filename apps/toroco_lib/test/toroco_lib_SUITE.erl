@@ -384,14 +384,12 @@ send(Out, V) ->
 %% Waits until behavior `B' has had `V' on input `In': events of different
 %% sources may arrive in any order (SPEC §4), so a case that needs one
 %% first waits for it.
-fed(B, In, V) -> fed(B, In, V, 200).
-
-fed(B, In, V, Tries) ->
-    case toroco:inspect(B) of
-        #{inputs := #{In := #{last := {value, V}}}} -> ok;
-        _ when Tries > 0 -> timer:sleep(10), fed(B, In, V, Tries - 1);
-        Other -> ct:fail({not_fed, B, In, V, Other})
-    end.
+fed(B, In, V) ->
+    toroco_test_lib:wait_until(fun() -> case toroco:inspect(B) of
+                                            #{inputs := #{In := #{last := {value, V}}}} -> true;
+                                            _ -> false
+                                        end
+                               end, 2000, {not_fed, B, In, V}).
 
 values() ->
     [V || {_, V, _} <- toroco_fake_actuator:history(motors)].

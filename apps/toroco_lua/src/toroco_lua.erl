@@ -5,18 +5,21 @@
 %% A Lua behavior is a behavior like any other: a gen_statem in its layer,
 %% with suppression, inhibition, latches, holds, suspend/resume/reset/remove,
 %% the tap and recordings. Each input it gets is one activation of its Lua
-%% state, run to completion inside `handle_input/4' through a bounded call
-%% to the port's owner, and what the Lua code emitted comes back as the
-%% callback's actions: `set_output{motors_setvel = {20, 20}}' becomes
+%% state, written to the program by this process; up to `window' are in
+%% flight (one at a time, inside `handle_input/4', in lockstep: see
+%% `activate/2'), and what the Lua code emitted comes back, in order, as the
+%% actions of the answer's message: `set_output{motors_setvel = {20, 20}}' becomes
 %% `{set, #{motors_setvel => {20, 20}}}'. Time is the runtime's: the state
 %% reads `toroco_clock:now_ms()' and its timers (`wait_for_input' timeouts,
 %% `sched.sleep') are this process's gen_statem timeouts, so Lua behaviors
 %% run in lockstep too.
 %%
 %% The behavior ends with `{lua_error, File, Line, Message}' or `{lua_limit,
-%% File, budget | memory}' and its layer restarts it; if the program dies,
-%% every Lua behavior of the node ends with `{lua_port_down, Why}' and is
-%% restarted the same way, while Erlang behaviors go on.
+%% File, budget | memory}' and its layer restarts it. If the program dies,
+%% every Lua behavior of the node starts its Lua code again in the new
+%% program without a supervisor restart (see {@link reattach/2}: a program
+%% crash is one fault, not one per behavior, so a layer of any number of Lua
+%% behaviors outlives it), while Erlang behaviors go on.
 %%
 %% <b>Adding</b>: `toroco:add_behavior(Name, toroco_lua, #{file => Path,
 %% params => P, layer => L})' as SPEC §16 writes it (this module declares its
@@ -31,7 +34,7 @@
 -include("toroco_lua_port.hrl").
 
 -export([add_behavior/2, load_main/2, waits/1, memory/1, reload/1]).
--export([interface/1, init/1, handle_input/4, handle_event/4]).
+-export([interface/1, init/1, handle_input/4, handle_event/4, info/2]).
 -export_type([opts/0, main_opts/0]).
 
 %% `file' (required) the behavior's Lua file; `root' the program's folder,
@@ -39,11 +42,13 @@
 %% folder; `load_main/2' gives the main file's, as the original ran from
 %% there); `params' its `toroco.params';
 %% `layer'; `budget' VM instructions per activation and `memory' bytes per
-%% state (defaults: the application's env); `inputs'/`outputs' ports added
-%% to those found in the file (for names built at run time).
+%% state (defaults: the application's env); `window' its activations in
+%% flight at most (env `window', default 32; 1: one at a time);
+%% `inputs'/`outputs' ports added to those found in the file (for names
+%% built at run time).
 -type opts() :: #{file := file:filename_all(), root => file:filename_all(), name => atom(),
                   params => map(), layer => non_neg_integer(),
-                  budget => pos_integer(), memory => pos_integer(),
+                  budget => pos_integer(), memory => pos_integer(), window => pos_integer(),
                   inputs => [atom()], outputs => [atom()]}.
 
 %% `layers' the layer of each behavior main.lua loads (default 0: the
@@ -54,6 +59,11 @@
                        budget => pos_integer(), memory => pos_integer()}.
 
 -define(LOG, #{domain => [toroco, lua]}).
+%% A behavior re-attaches to a new program at most this often in this
+%% window; one more program death in it stops the behavior, so a program that
+%% dies again and again is left to the layers' supervision.
+-define(REATTACH_MAX, 3).
+-define(REATTACH_WINDOW_MS, 10000).
 
 %%====================================================================
 %% API
@@ -86,7 +96,7 @@ load_main(Path, Opts) ->
     D = #{name => main, file => Path, args => #{}, id => none},
     case toroco_lua_port:open(filename:basename(Abs), filename:dirname(Abs),
                               maps:get(params, Opts, #{}), Limits, toroco_clock:now_ms()) of
-        {ok, Id, Actions} ->
+        {ok, Id, _Port, Actions} ->
             _ = toroco_lua_port:close(Id),
             _ = [print(Text, D) || {print, Text} <- Actions],
             Ctx = #{root => filename:dirname(Path), opts => Opts},
@@ -130,10 +140,32 @@ main_call(<<"set_inhibitors">>, [E, Outputs], _Ctx) ->
 main_call(<<"suspend_behavior">>, [B], _Ctx) -> toroco:suspend_behavior(binary_to_atom(B));
 main_call(<<"resume_behavior">>, [B], _Ctx) -> toroco:resume_behavior(binary_to_atom(B));
 main_call(<<"remove_behavior">>, [B], _Ctx) -> toroco:remove_behavior(binary_to_atom(B));
+main_call(<<"configure_polling">>, [D, E, Ms], _Ctx) ->
+    configure_polling(D, E, Ms);
 main_call(<<"run">>, _, _Ctx) -> ok;
 main_call(Op, Args, _Ctx) -> {error, {bad_main_call, {Op, Args}}}.
 
 sources(Ss) -> [{binary_to_atom(E), binary_to_atom(O)} || [E, O] <- Ss].
+
+%% configure_polling(device.D.E, seconds): D must be a device on the node
+%% with output E; one that can be polled (toroco_poll_sensor) is asked to
+%% poll every Ms, one that emits by itself answers unknown_call and is left
+%% as it is.
+configure_polling(D, E, Ms) ->
+    Dev = binary_to_atom(D),
+    Out = binary_to_atom(E),
+    case toroco:inspect(Dev) of
+        #{kind := device, outputs := #{Out := _}} ->
+            try toroco_device:call(Dev, {toroco_poll, every_ms, Ms}, 5000) of
+                ok -> ok;
+                {error, {unknown_call, _}} -> ok;
+                {error, _} = Error -> Error
+            catch exit:Why -> {error, {Dev, Why}}
+            end;
+        #{kind := device} -> {error, {unknown_output, {Dev, Out}}};
+        #{} -> {error, {not_a_device, Dev}};
+        {error, _} = Error -> Error
+    end.
 
 %% An empty Lua table crosses as [] (SPEC §16); as a set of keys it is #{}.
 table([]) -> #{};
@@ -215,12 +247,19 @@ init(Args = #{file := File}) ->
             %% a reset runs init/1 again in this process: its last state goes
             ok = toroco_lua_port:close_all(),
             D = #{name => Name, file => File, args => Args,
-                  owner => erlang:monitor(process, Owner), id => none},
+                  owner => erlang:monitor(process, Owner), id => none, port => none,
+                  reattached => [], out => queue:new(), seq => 1, batch => [],
+                  window => window(maps:get(window, Args, env(window)))},
             case open(D) of
-                {ok, Id, Actions} -> {ok, running, D#{id := Id}, actions(Actions, D#{id := Id})};
+                {ok, D1, Actions} -> {ok, running, D1, actions(Actions, D1)};
                 {error, _} = Error -> Error
             end
     end.
+
+%% At least one in flight, and fewer than the 65,535 sequence numbers a
+%% state's requests are told apart by.
+window(W) when is_integer(W) -> min(max(W, 1), 1024);
+window(_) -> 32.
 
 %% The name the log gives a behavior added without `name' in its options.
 registered_name() ->
@@ -230,38 +269,64 @@ registered_name() ->
     end.
 
 -spec handle_input(atom(), term(), running, map()) -> toroco_behavior:result().
-handle_input(Input, Value, _S, D = #{id := Id}) ->
-    activation(toroco_lua_port:input(Id, Input, Value, toroco_clock:now_ms()), D).
+handle_input(Input, Value, _S, D) ->
+    activate({input, toroco_clock:now_ms(), Input, Value}, D).
+
+%% @doc What `toroco:inspect(Name)' shows under `behavior': `waits' as
+%% {@link waits/1} gives them, `memory' the bytes of the Lua state.
+-spec info(running, map()) -> #{waits := [map()] | {error, term()},
+                                memory := non_neg_integer() | {error, term()}}.
+info(_S, D) ->
+    #{waits => case waits_of(D) of {ok, Ws} -> Ws; Error -> Error end,
+      memory => case toroco_lua_port:memory(conn(D)) of {ok, M} -> M; Error -> Error end}.
 
 -spec handle_event(gen_statem:event_type(), term(), running, map()) -> toroco_behavior:result().
 handle_event({timeout, {lua, Task}}, {lua_timer, Id, Task, Seq}, _S, D = #{id := Id}) ->
-    activation(toroco_lua_port:timer(Id, Task, Seq, toroco_clock:now_ms()), D);
+    activate({timer, toroco_clock:now_ms(), Task, Seq}, D);
 handle_event({timeout, {lua, _}}, {lua_timer, _OldId, _, _}, _S, _D) ->
     keep_state_and_data;                      % a timer of the state before a reload
+handle_event(info, {toroco_lua_port, reply, Ref, Bin}, _S, D = #{out := Out}) ->
+    case queue:peek(Out) of
+        {value, Ref} -> activation(toroco_lua_port:answer(Ref, Bin), D#{out := queue:drop(Out)});
+        _ -> keep_state_and_data              % of a state it no longer has
+    end;
+handle_event(info, {?MODULE, flush, Id}, _S, D = #{id := Id}) ->
+    flushed(D);
+handle_event(info, {?MODULE, flush, _OldId}, _S, _D) ->
+    keep_state_and_data;
+handle_event(info, {timeout, _, {lua_stuck, Ref}}, _S, #{out := Out, port := Port}) ->
+    _ = case queue:peek(Out) of
+            {value, Ref} -> toroco_lua_port:stuck(Port);
+            {value, Newer} -> watchdog(Newer);
+            empty -> ok
+        end,
+    keep_state_and_data;
 handle_event(info, {'DOWN', MRef, process, _, Why}, _S, #{owner := MRef}) ->
     {stop, {lua_port_down, Why}};
-handle_event(info, ?LUA_PORT_DOWN(Why), _S, _D) ->
-    {stop, {lua_port_down, Why}};
-handle_event({call, From}, {?MODULE, waits}, _S, #{id := Id}) ->
-    Reply = case toroco_lua_port:waits(Id) of
-                {ok, Ws} -> {ok, [#{task => T, kind => binary_to_atom(K), input => waited(I),
-                                    timer => Timer}
-                                  || [T, K, I, Timer] <- Ws]};
-                Error -> Error
-            end,
-    {keep_state_and_data, [{reply, From, Reply}]};
-handle_event({call, From}, {?MODULE, memory}, _S, #{id := Id}) ->
-    {keep_state_and_data, [{reply, From, toroco_lua_port:memory(Id)}]};
-handle_event({call, From}, {?MODULE, reload}, _S, D = #{id := Old, name := Name}) ->
-    case open(D) of
-        {ok, Id, Actions} ->
-            _ = toroco_lua_port:close(Old),
-            logger:notice("toroco_lua: ~p reloaded ~ts", [Name, maps:get(file, D)],
-                          ?LOG#{name => Name}),
-            D1 = D#{id := Id},
-            {keep_state, D1, [{reply, From, ok} | actions(Actions, D1)]};
-        {error, _} = Error ->
-            {keep_state_and_data, [{reply, From, Error}]}
+handle_event(info, ?LUA_PORT_DOWN(Ids, Why), _S, D = #{id := Id}) ->
+    case lists:member(Id, Ids) of
+        true -> reattach(Why, D);
+        false -> keep_state_and_data          % a state it already re-opened
+    end;
+handle_event({call, From}, {?MODULE, waits}, _S, D) ->
+    {keep_state_and_data, [{reply, From, waits_of(D)}]};
+handle_event({call, From}, {?MODULE, memory}, _S, D) ->
+    {keep_state_and_data, [{reply, From, toroco_lua_port:memory(conn(D))}]};
+handle_event({call, From}, {?MODULE, reload}, _S, D0) ->
+    %% the events sent to the old code are answered by it first
+    case drain(D0) of
+        {keep_state, D = #{id := Old, name := Name}, Drained} ->
+            case open(D) of
+                {ok, D1, Actions} ->
+                    _ = toroco_lua_port:close(Old),
+                    logger:notice("toroco_lua: ~p reloaded ~ts", [Name, maps:get(file, D)],
+                                  ?LOG#{name => Name}),
+                    {keep_state, D1, Drained ++ [{reply, From, ok} | actions(Actions, D1)]};
+                {error, _} = Error ->
+                    {keep_state, D, Drained ++ [{reply, From, Error}]}
+            end;
+        Stop ->
+            Stop
     end;
 %% The engine's default for what nobody handles: this module's handle_event
 %% is called through each behavior's own callback module, so it cannot fall
@@ -283,7 +348,7 @@ open(D = #{file := File, args := Args}) ->
                memory => maps:get(memory, Args, env(memory))},
     case toroco_lua_port:open(Rel, Root, maps:get(params, Args, #{}), Limits,
                               toroco_clock:now_ms()) of
-        {ok, Id, Actions} -> {ok, Id, Actions};
+        {ok, Id, Port, Actions} -> {ok, D#{id := Id, port := Port}, Actions};
         {stopped, Reason, Actions} ->
             _ = actions(Actions, D),
             {error, reason(Reason, D)};
@@ -294,23 +359,153 @@ env(Key) ->
     {ok, V} = application:get_env(toroco_lua, Key),
     V.
 
+%% An activation. In real time up to `window' (app env, default 32) of a
+%% behavior's activations are in flight: the request is written to the
+%% program and the callback returns, the answer comes as a message and its
+%% emissions are the actions of that event, in the order the inputs came
+%% (the program answers in order). The program then reads the requests
+%% that queued up in one go and the answers come back in one go, instead of
+%% one round trip through the pipe each: an event stream is not paced by the
+%% round trip. At the window's end the oldest answer is awaited. In
+%% lockstep, one at a time and inside the callback, so that a step holds
+%% its emissions.
+activate(Req, D) ->
+    case toroco_clock:lockstep_server() of
+        none -> pipeline(Req, D);
+        _ ->
+            case drain(D) of
+                {keep_state, D1, Drained} ->
+                    then(Drained, activation(call(D1, Req), D1));
+                Stop -> Stop
+            end
+    end.
+
+call(D, Req) ->
+    case toroco_lua_port:request(conn(D), 0, Req) of
+        {ok, Ref} -> toroco_lua_port:await(conn(D), Ref);
+        Error -> Error
+    end.
+
+%% While more messages wait in the mailbox, the requests are kept and
+%% written together when the `flush' this sends itself comes, after them:
+%% one write for a burst of inputs.
+pipeline(Req, D = #{id := Id, out := Out, seq := Seq, window := Window, batch := Batch}) ->
+    case toroco_lua_port:encode(conn(D), Seq, Req) of
+        {ok, Ref, Frame} ->
+            _ = queue:is_empty(Out) andalso watchdog(Ref),
+            Out1 = queue:in(Ref, Out),
+            D1 = D#{out := Out1, seq := Seq rem 65535 + 1, batch := [Frame | Batch]},
+            case queue:len(Out1) >= Window of
+                true -> oldest(D1);
+                false when Batch =/= [] ->
+                    {keep_state, D1, []};     % its flush is on its way
+                false ->
+                    case process_info(self(), message_queue_len) of
+                        {message_queue_len, 0} -> flushed(D1);
+                        _ ->
+                            self() ! {?MODULE, flush, Id},
+                            {keep_state, D1, []}
+                    end
+            end;
+        Error ->
+            activation(Error, D)
+    end.
+
+%% The requests kept, written.
+flush(D = #{batch := []}) ->
+    {ok, D};
+flush(D = #{batch := Batch}) ->
+    case toroco_lua_port:write(conn(D), lists:reverse(Batch)) of
+        ok -> {ok, D#{batch := []}};
+        Error -> {Error, D#{batch := []}}
+    end.
+
+flushed(D) ->
+    case flush(D) of
+        {ok, D1} -> {keep_state, D1, []};
+        {Error, D1} -> activation(Error, D1)
+    end.
+
+%% The window is full: the oldest answer, awaited.
+oldest(D) ->
+    case flush(D) of
+        {ok, D1 = #{out := Out}} ->
+            {{value, Oldest}, Out1} = queue:out(Out),
+            activation(toroco_lua_port:await(conn(D1), Oldest), D1#{out := Out1});
+        {Error, D1} ->
+            activation(Error, D1)
+    end.
+
+%% The answers in flight, awaited in order: their actions, or the end.
+drain(D) ->
+    case flush(D) of
+        {ok, D1} -> drain(D1, []);
+        {Error, D1} -> activation(Error, D1)
+    end.
+
+drain(D = #{out := Out}, Acc) ->
+    case queue:out(Out) of
+        {empty, _} -> {keep_state, D, lists:append(lists:reverse(Acc))};
+        {{value, Ref}, Out1} ->
+            case activation(toroco_lua_port:await(conn(D), Ref), D#{out := Out1}) of
+                {keep_state, D1, Actions} -> drain(D1, [Actions | Acc]);
+                Stop -> Stop
+            end
+    end.
+
+then(Actions, {keep_state, D, More}) -> {keep_state, D, Actions ++ More};
+then(_Actions, Stop) -> Stop.
+
+%% A request unanswered for stuck_ms gets the program killed (the owner
+%% checks it is still the one running); checked for the oldest in flight.
+watchdog(Ref) ->
+    erlang:start_timer(toroco_lua_port:stuck_ms(), self(), {lua_stuck, Ref}).
+
 activation({ok, Actions}, D) ->
-    {keep_state_and_data, actions(Actions, D)};
+    {keep_state, D, actions(Actions, D)};
 activation({stopped, Reason, Actions}, D = #{name := Name}) ->
     _ = actions(Actions, D),                  % its prints; emissions die with it
     Why = reason(Reason, D),
     logger:error("toroco_lua: ~p stopped: ~p", [Name, Why], ?LOG#{name => Name}),
     {stop, Why};
-activation({error, {Bad, Why}}, #{name := Name}) when Bad =:= bad_frame; Bad =:= bad_value ->
+activation({error, {Bad, Why}}, D = #{name := Name}) when Bad =:= bad_frame; Bad =:= bad_value ->
     %% a value the port cannot take (a pid, a fun, too many values): this
     %% event only
     logger:warning("toroco_lua: ~p got a value that cannot cross to Lua (~p); dropped",
                    [Name, {Bad, Why}], ?LOG#{name => Name}),
-    keep_state_and_data;
-activation({error, {lua_port_down, Why}}, _D) ->
-    {stop, {lua_port_down, Why}};
+    {keep_state, D, []};
+activation({error, {lua_port_down, Why}}, D) ->
+    reattach(Why, D);
 activation({error, Why}, _D) ->
     {stop, {lua_port, Why}}.
+
+%% The program died (killed, crashed, or hung and killed by its owner, who
+%% has started a new one by now): the behavior's process stays and its Lua
+%% code starts again in a new state, as a Brooks reset does: its outputs are
+%% unset (latches and holds end), the new state's emissions follow, and the
+%% old state's timers, named with the old id, do nothing. No supervisor sees
+%% it, so one program death is not one restart per Lua behavior of a layer.
+%% A program that dies more than ?REATTACH_MAX times in ?REATTACH_WINDOW_MS
+%% stops the behavior with `{lua_port_down, Why}'.
+reattach(Why, D = #{name := Name, reattached := Times}) ->
+    Now = erlang:monotonic_time(millisecond),
+    Recent = [T || T <- Times, Now - T < ?REATTACH_WINDOW_MS],
+    case length(Recent) >= ?REATTACH_MAX of
+        true ->
+            logger:error("toroco_lua: ~p: lua_port died again (~p), ~b times in ~b ms; stopping",
+                         [Name, Why, length(Recent) + 1, ?REATTACH_WINDOW_MS], ?LOG#{name => Name}),
+            {stop, {lua_port_down, Why}};
+        false ->
+            case open(D) of
+                {ok, D1, Actions} ->
+                    logger:warning("toroco_lua: ~p: lua_port died (~p); its Lua code starts "
+                                   "again in the new program", [Name, Why], ?LOG#{name => Name}),
+                    D2 = D1#{reattached := [Now | Recent], out := queue:new(), batch := []},
+                    {keep_state, D2, [unset | actions(Actions, D2)]};
+                {error, Reason} ->
+                    {stop, Reason}
+            end
+    end.
 
 %% {lua_error, File, Line, Message}: File as the user named it for the
 %% behavior's own file, else the module's path in the program's folder.
@@ -336,6 +531,17 @@ root(File, Args) ->
                 unsafe -> {filename:dirname(Abs), filename:basename(Abs)};
                 Safe -> {Root, Safe}
             end
+    end.
+
+%% The behavior's state as its process reaches it (toroco_lua_port:conn()).
+conn(#{id := Id, port := Port, owner := Owner}) ->
+    {Id, Port, Owner}.
+
+waits_of(D) ->
+    case toroco_lua_port:waits(conn(D)) of
+        {ok, Ws} -> {ok, [#{task => T, kind => binary_to_atom(K), input => waited(I), timer => Timer}
+                          || [T, K, I, Timer] <- Ws]};
+        Error -> Error
     end.
 
 waited(false) -> none;

@@ -1,49 +1,77 @@
 %% @doc The owner of the `lua_port' program (c_src/lua_port): one per node,
 %% registered as `toroco_lua_port', under {@link toroco_lua_sup}.
 %%
-%% It spawns `priv/lua_port' as an Erlang port (`{packet, 4}', terms; the
-%% frames are in c_src/lua_port/PROTOCOL.md), hands out state ids, and
-%% matches the program's answers to the callers. It never waits in a
-%% callback: a request goes to the program and its caller is answered when
-%% the program replies. The program answers every frame, in order, so the
-%% callers wait in a FIFO queue (a frame the program could not read, a
-%% `bad_frame', answers the oldest).
+%% It spawns `priv/lua_port' as an Erlang port (in stream mode, frames of
+%% `{packet, 4}''s layout cut here, terms; the frames are in
+%% c_src/lua_port/PROTOCOL.md), hands out state ids, and
+%% passes the program's answers on. It never waits in a callback.
+%%
+%% <b>The event path skips it one way.</b> A Lua behavior writes its
+%% activations (`input/4', `timer/4') and its `waits/1', `memory/1' to the
+%% port itself (any process may write to a port), with its state's id as
+%% the frame's `Ref', and waits for the answer in its own process. Answers
+%% can only come to the port's owner: it reads the `Ref' from the answer's
+%% first bytes (no decoding) and forwards the bytes to the state's process,
+%% which decodes them. This saves the hop through this process on the way
+%% in and the decoding in it on the way out; what the program answers is
+%% what the behavior reads, in order, so nothing else is matched.
+%%
+%% Its own requests (`open', `close', `ping', `raw') carry negative refs and
+%% wait in a FIFO queue (a frame the program could not read, a `bad_frame',
+%% answers the oldest: a behavior checks that its values can cross before it
+%% writes, so a bad frame is only ever one of `raw/1''s).
 %%
 %% The budget of a Lua activation counts VM instructions, so one long C call
-%% (a pathological string pattern) would hang the program with it. The
-%% owner watches the request at the head of the queue: one unanswered after
-%% `stuck_ms' (app env, default 2000) gets the program killed, and it is
-%% handled as any death of the program.
+%% (a pathological string pattern) would hang the program with it. A
+%% behavior waits `stuck_ms' (app env, default 2000) for its answer and then
+%% asks this process to kill the program (`stuck/1'), which is handled as any
+%% death of the program; the owner watches the head of its own queue the
+%% same way.
 %%
 %% If the program dies, every caller waiting gets `{error, {lua_port_down,
-%% Why}}', every Lua behavior that opened a state is told (below) and stops,
-%% so its layer restarts it, and a new program is started at once.
+%% Why}}', every Lua behavior that opened a state is told (below) and a new
+%% program is started at once, where the behaviors open their states again.
 %%
 %% <table>
 %% <tr><th>message</th><th>from → to</th><th>when</th><th>answer</th></tr>
-%% <tr><td>call `{request, Req, Now}'</td><td>a Lua behavior → owner</td>
-%%     <td>`open', `input', `timer', `waits', `memory', `close'</td>
+%% <tr><td>call `{request, Req}', `{open, ...}'</td><td>a Lua behavior → owner</td>
+%%     <td>`open', `close', `ping'</td>
 %%     <td>the program's result for that request</td></tr>
-%% <tr><td>`{toroco_lua_port, down, Why}'</td><td>owner → each behavior with a state</td>
-%%     <td>the program died</td><td>none: the behavior stops</td></tr>
+%% <tr><td>frame `{Op, Id, Id, ...}'</td><td>a Lua behavior → the program</td>
+%%     <td>`input', `timer', `waits', `memory'</td>
+%%     <td>`{toroco_lua_port, reply, Id, Bytes}' forwarded by the owner</td></tr>
+%% <tr><td>cast `{stuck, Port, Op}'</td><td>a Lua behavior → owner</td>
+%%     <td>no answer in `stuck_ms'</td><td>none: the program is killed</td></tr>
+%% <tr><td>`{toroco_lua_port, down, Ids, Why}'</td><td>owner → each behavior with a state</td>
+%%     <td>the program died, with the behavior's states `Ids'</td><td>none: the
+%%     behavior opens a new state (toroco_lua)</td></tr>
 %% <tr><td>monitor `DOWN' of a behavior</td><td>runtime → owner</td>
 %%     <td>a behavior with states stopped</td><td>the owner closes its states</td></tr>
 %% </table>
 %%
-%% Functions: life `start_link/0', `os_pid/0', `states/0'; requests
-%% `open/5', `input/4', `timer/4', `waits/1', `memory/1', `close/1',
-%% `close_all/0', `ping/0'; tests `raw/1'.
+%% Functions: life `start_link/0', `os_pid/0', `states/0'; through the owner
+%% `open/5', `close/1', `close_all/0', `ping/0'; straight to the program,
+%% from the state's process, `input/4', `timer/4', `waits/1', `memory/1';
+%% tests `raw/1'.
 -module(toroco_lua_port).
 -behaviour(gen_statem).
 
 -include("toroco_lua_port.hrl").
 
 -export([start_link/0, os_pid/0, ping/0, raw/1, states/0,
-         open/5, input/4, timer/4, waits/1, memory/1, close/1, close_all/0]).
+         open/5, input/4, timer/4, waits/1, memory/1, close/1, close_all/0, crossable/1,
+         request/3, encode/3, write/2, answer/2, await/2, stuck/1, stuck_ms/0]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3]).
--export_type([id/0, action/0, result/0, limits/0]).
+-export_type([id/0, conn/0, ref/0, request/0, action/0, result/0, limits/0]).
 
 -type id() :: pos_integer().
+%% A state as its process reaches it: its id, the port it lives in, and
+%% that process's monitor of the owner.
+-type conn() :: {id(), port(), reference()}.
+%% A state's request's ref: its id, shifted, and its sequence number.
+-type ref() :: pos_integer().
+-type request() :: {input, integer(), atom(), term()} | {timer, integer(), pos_integer(), pos_integer()}
+                 | waits | memory.
 %% What a Lua activation asks for (PROTOCOL.md, "Actions").
 -type action() :: {send, binary(), term(), default | non_neg_integer() | infinity}
                 | {set, binary(), term()}
@@ -59,16 +87,23 @@
 
 -define(CALL_TIMEOUT, 5000).
 -define(STUCK_MS, 2000).
+-define(FRAME_MAX, 1 bsl 20).                  % PROTOCOL.md
+-define(DEPTH_MAX, 32).
 -define(LOG, #{domain => [toroco, lua]}).
 
 -record(d, {port :: port(),
             os_pid :: integer() | undefined,
-            next_ref = 1 :: pos_integer(),
+            %% the owner's own refs count down from -1; a state's id is its ref
+            next_ref = -1 :: neg_integer(),
             next_id = 1 :: pos_integer(),
             %% callers in the order their frames went out: {Ref, From | none, Op}
-            pending = queue:new() :: queue:queue({pos_integer(), gen_statem:from() | none, term()}),
+            pending = queue:new() :: queue:queue({neg_integer(), gen_statem:from() | none, term()}),
             %% behavior pid -> its monitor and state ids
-            clients = #{} :: #{pid() => {reference(), [id()]}}}).
+            clients = #{} :: #{pid() => {reference(), [id()]}},
+            %% state id -> the process its answers go to
+            routes = #{} :: #{id() => pid()},
+            %% the bytes of a frame not read whole yet
+            rest = <<>> :: binary()}).
 
 %%====================================================================
 %% API
@@ -95,30 +130,157 @@ raw(Bin) when is_binary(Bin) ->
 
 %% @doc A new state running `File' (relative to `Dir') for the calling
 %% process, which is then told if the program dies; its states are closed
-%% when it stops.
+%% when it stops. `{ok, Id, Port, Actions}': the port the state lives in,
+%% which the process writes its requests to.
 -spec open(file:filename_all(), file:filename_all(), term(), limits(), integer()) ->
-          {ok, id(), [action()]} | {stopped, stop_reason(), [action()]} | {error, term()}.
+          {ok, id(), port(), [action()]} | {stopped, stop_reason(), [action()]} | {error, term()}.
 open(File, Dir, Params, #{budget := B, memory := M}, Now) ->
     gen_statem:call(?MODULE, {open, self(), {unicode:characters_to_binary(File),
                                              unicode:characters_to_binary(Dir),
                                              Params, B, M}, Now}, ?CALL_TIMEOUT).
 
--spec input(id(), atom(), term(), integer()) -> result().
-input(Id, Input, Value, Now) ->
-    request({input, Id, Now, Input, Value}).
+%% @doc An activation: `Input' arrived with `Value'. In the state's process,
+%% which waits for the answer.
+-spec input(conn(), atom(), term(), integer()) -> result().
+input(C, Input, Value, Now) ->
+    call(C, {input, Now, Input, Value}).
 
--spec timer(id(), pos_integer(), pos_integer(), integer()) -> result().
-timer(Id, Task, Seq, Now) ->
-    request({timer, Id, Now, Task, Seq}).
+%% @doc An activation: the state's timer `{Task, Seq}' fired.
+-spec timer(conn(), pos_integer(), pos_integer(), integer()) -> result().
+timer(C, Task, Seq, Now) ->
+    call(C, {timer, Now, Task, Seq}).
 
 %% @doc What each task of the state waits for: `[[Task, Kind, Input | false, TimerPending]]'.
--spec waits(id()) -> {ok, list()} | {error, term()}.
-waits(Id) ->
-    request({waits, Id}).
+-spec waits(conn()) -> {ok, list()} | {error, term()}.
+waits(C) ->
+    call(C, waits).
 
--spec memory(id()) -> {ok, non_neg_integer()} | {error, term()}.
-memory(Id) ->
-    request({memory, Id}).
+-spec memory(conn()) -> {ok, non_neg_integer()} | {error, term()}.
+memory(C) ->
+    call(C, memory).
+
+%% @doc Writes a request of the state to the program without waiting:
+%% `{ok, Ref}', and its answer comes to the calling process as
+%% `{toroco_lua_port, reply, Ref, Bytes}' (read it with `answer/2', or
+%% wait for it with `await/2'). `Seq' (1..65535) tells apart the requests
+%% of one state in flight together; 0 is `call/2''s.
+-spec request(conn(), 0..65535, request()) -> {ok, ref()} | {error, term()}.
+request(C, Seq, Req) ->
+    case encode(C, Seq, Req) of
+        {ok, Ref, Frame} ->
+            case write(C, Frame) of
+                ok -> {ok, Ref};
+                Error -> Error
+            end;
+        {error, _} = Error -> Error
+    end.
+
+%% @doc `request/3' in two steps, so that a process can write several
+%% requests at once: the frame (with its length) and its ref...
+-spec encode(conn(), 0..65535, request()) -> {ok, ref(), iodata()} | {error, term()}.
+encode({Id, _, _}, Seq, Req) ->
+    Ref = Id bsl 16 bor Seq,
+    case frame(Req, Ref, Id) of
+        {ok, Frame} -> {ok, Ref, [<<(byte_size(Frame)):32>>, Frame]};
+        {error, _} = Error -> Error
+    end.
+
+%% @doc ...and frames written to the program in one go.
+-spec write(conn(), iodata()) -> ok | {error, {lua_port_down, closed}}.
+write({_, Port, _}, Frames) ->
+    try port_command(Port, Frames) of
+        true -> ok
+    catch error:badarg -> {error, {lua_port_down, closed}}
+    end.
+
+%% @doc The result in an answer `request/3''s caller got: an activation's
+%% `result()', or `waits''s and `memory''s.
+-spec answer(ref(), binary()) -> term().
+answer(Ref, Bin) ->
+    case decode(Bin) of
+        {reply, Ref, Result} -> Result;
+        Other -> {error, {lua_port_answer, Other}}
+    end.
+
+%% @doc Waits for the answer to request `Ref' of state `C', skipping any
+%% other in the mailbox. While it waits: the program's death (the owner's
+%% word, naming the state), the owner's, or no answer in stuck_ms, when the
+%% owner is asked to kill the program and its word is awaited.
+-spec await(conn(), ref()) -> term().
+await({Id, Port, OwnerMon}, Ref) ->
+    await(Id, Ref, Port, OwnerMon, stuck_ms()).
+
+%% One request, its answer awaited.
+call(C, Req) ->
+    case request(C, 0, Req) of
+        {ok, Ref} -> await(C, Ref);
+        {error, _} = Error -> Error
+    end.
+
+frame({input, Now, Input, Value}, Ref, Id) ->
+    case crossable(Value) of
+        true -> sized(term_to_binary({input, Ref, Id, Now, Input, Value}), Id);
+        false -> {error, {bad_value, Id}}
+    end;
+frame({timer, Now, Task, Seq}, Ref, Id) -> {ok, term_to_binary({timer, Ref, Id, Now, Task, Seq})};
+frame(waits, Ref, Id) -> {ok, term_to_binary({waits, Ref, Id})};
+frame(memory, Ref, Id) -> {ok, term_to_binary({memory, Ref, Id})}.
+
+sized(Frame, Id) when byte_size(Frame) > ?FRAME_MAX -> {error, {bad_value, Id}};
+sized(Frame, _Id) -> {ok, Frame}.
+
+%% @doc Whether the program can read `Value' (PROTOCOL.md): numbers (whole
+%% ones of up to 64 bits), atoms, binaries, proper lists, tuples and maps,
+%% nested at most 31 deep inside a frame. Anything else would be a frame the
+%% program cannot read, answered with no ref to route it by.
+-spec crossable(term()) -> boolean().
+crossable(Value) ->
+    crossable(Value, 1).
+
+crossable(_, D) when D > ?DEPTH_MAX -> false;
+crossable(V, _) when is_integer(V) -> V > -(1 bsl 64) andalso V < 1 bsl 64;
+crossable(V, _) when is_float(V); is_atom(V); is_binary(V) -> true;
+crossable(V, D) when is_list(V) -> list_crossable(V, D + 1);
+crossable(V, D) when is_tuple(V) -> list_crossable(tuple_to_list(V), D + 1);
+crossable(V, D) when is_map(V) ->
+    list_crossable(maps:keys(V), D + 1) andalso list_crossable(maps:values(V), D + 1);
+crossable(_, _) -> false.
+
+list_crossable([], _D) -> true;
+list_crossable([H | T], D) -> crossable(H, D) andalso list_crossable(T, D);
+list_crossable(_Improper, _D) -> false.
+
+await(Id, Ref, Port, OwnerMon, Wait) ->
+    receive
+        {?MODULE, reply, Ref, Bin} ->
+            answer(Ref, Bin);
+        ?LUA_PORT_DOWN(Ids, Why) ->
+            case lists:member(Id, Ids) of
+                true -> {error, {lua_port_down, Why}};
+                false -> await(Id, Ref, Port, OwnerMon, Wait)  % about a state it had before
+            end;
+        {'DOWN', OwnerMon, process, _, Why} ->
+            {error, {lua_port_owner_down, Why}}
+    after Wait ->
+            case Wait of
+                ?CALL_TIMEOUT -> {error, {lua_port_timeout, Ref}};
+                _ ->
+                    stuck(Port),
+                    await(Id, Ref, Port, OwnerMon, ?CALL_TIMEOUT)
+            end
+    end.
+
+%% @doc A state's request written to `Port' had no answer in stuck_ms: the
+%% owner kills the program if it is still the one running.
+-spec stuck(port()) -> ok.
+stuck(Port) ->
+    gen_statem:cast(?MODULE, {stuck, Port}).
+
+%% @doc How long a state's request may wait for its answer (app env
+%% `stuck_ms').
+-spec stuck_ms() -> pos_integer().
+stuck_ms() ->
+    application:get_env(toroco_lua, stuck_ms, ?STUCK_MS).
 
 -spec close(id()) -> ok | {error, term()}.
 close(Id) ->
@@ -158,13 +320,22 @@ init([]) ->
         {error, Reason} -> {stop, Reason}
     end.
 
+%% The program: priv/lua_port, or app env `executable' (the release suite
+%% runs the board's armhf build through qemu).
 start_port() ->
-    Exe = filename:join(code:priv_dir(toroco_lua), "lua_port"),
+    Exe = application:get_env(toroco_lua, executable,
+                              filename:join(code:priv_dir(toroco_lua), "lua_port")),
     case filelib:is_regular(Exe) of
         false -> {error, {lua_port_missing, Exe}};
         true ->
+            %% spin_us: how long the program polls for the next request
+            %% before it sleeps in read(2) (0: it sleeps at once)
+            Spin = application:get_env(toroco_lua, spin_us, 0),
+            %% frames of {packet, 4}'s layout, cut here: a process writes
+            %% several at once (one port_command is one packet in packet mode)
             Port = open_port({spawn_executable, Exe},
-                             [{packet, 4}, binary, exit_status, use_stdio]),
+                             [stream, binary, exit_status, use_stdio,
+                              {args, [integer_to_list(Spin)]}]),
             {os_pid, OsPid} = erlang:port_info(Port, os_pid),
             {ok, #d{port = Port, os_pid = OsPid}}
     end.
@@ -178,8 +349,8 @@ handle_event({call, From}, {open, Pid, {File, Dir, Params, B, M}, Now}, _S,
     D1 = add_client(Pid, Id, D#d{next_id = Id + 1}),
     keep(D, send({open, Id, Now, File, Dir, Params, B, M}, From, D1));
 handle_event({call, From}, {raw, Bin}, _S, D = #d{port = Port, pending = Q, next_ref = Ref}) ->
-    true = port_command(Port, Bin),
-    keep(D, D#d{pending = queue:in({Ref, From, raw}, Q), next_ref = Ref + 1});
+    true = port_command(Port, [<<(byte_size(Bin)):32>>, Bin]),
+    keep(D, D#d{pending = queue:in({Ref, From, raw}, Q), next_ref = Ref - 1});
 handle_event({call, From}, os_pid, _S, #d{os_pid = OsPid}) ->
     {keep_state_and_data, [{reply, From, OsPid}]};
 handle_event({call, From}, states, _S, #d{clients = Cs}) ->
@@ -189,13 +360,21 @@ handle_event({call, From}, {close_all, Pid}, _S, D = #d{clients = Cs}) ->
         {{MRef, Ids}, Cs1} ->
             erlang:demonitor(MRef, [flush]),
             D1 = lists:foldl(fun(Id, Acc) -> send({close, Id}, none, Acc) end,
-                             D#d{clients = Cs1}, Ids),
+                             D#d{clients = Cs1, routes = maps:without(Ids, D#d.routes)}, Ids),
             {keep_state, D1, [{reply, From, ok} | watch(D, D1)]};
         error ->
             {keep_state_and_data, [{reply, From, ok}]}
     end;
-handle_event(info, {Port, {data, Bin}}, _S, D = #d{port = Port}) ->
-    keep(D, answer(decode(Bin), D));
+handle_event(info, {Port, {data, Bytes}}, _S, D = #d{port = Port, rest = Rest}) ->
+    {Frames, Rest1} = cut(case Rest of <<>> -> Bytes; _ -> <<Rest/binary, Bytes/binary>> end, []),
+    keep(D, lists:foldl(fun frame_in/2, D#d{rest = Rest1}, Frames));
+handle_event(cast, {stuck, Port}, _S, #d{port = Port, os_pid = OsPid}) ->
+    logger:error("toroco_lua_port: lua_port has not answered a Lua behavior in ~b ms; "
+                 "killing it", [stuck_ms()], ?LOG),
+    kill(OsPid),
+    keep_state_and_data;
+handle_event(cast, {stuck, _OldPort}, _S, _D) ->
+    keep_state_and_data;                      % that program is gone already
 handle_event(info, {Port, {exit_status, Status}}, _S, D = #d{port = Port}) ->
     restart({exit_status, Status}, D);
 handle_event({timeout, stuck}, Ref, _S, #d{pending = Q, os_pid = OsPid}) ->
@@ -203,9 +382,7 @@ handle_event({timeout, stuck}, Ref, _S, #d{pending = Q, os_pid = OsPid}) ->
         {value, {Ref, _, Req}} ->
             logger:error("toroco_lua_port: lua_port has not answered ~p in ~b ms; killing it",
                          [element(1, Req), stuck_ms()], ?LOG),
-            %% kill(1) as a port of its own: nothing here waits for it
-            _ = open_port({spawn_executable, os:find_executable("kill")},
-                          [{args, ["-9", integer_to_list(OsPid)]}, exit_status]),
+            kill(OsPid),
             keep_state_and_data;
         _ -> keep_state_and_data
     end;
@@ -217,7 +394,7 @@ handle_event(info, {'DOWN', _MRef, process, Pid, _Why}, _S, D = #d{clients = Cs}
     case maps:take(Pid, Cs) of
         {{_, Ids}, Cs1} ->
             D1 = lists:foldl(fun(Id, Acc) -> send({close, Id}, none, Acc) end,
-                             D#d{clients = Cs1}, Ids),
+                             D#d{clients = Cs1, routes = maps:without(Ids, D#d.routes)}, Ids),
             {keep_state, D1};
         error -> keep_state_and_data
     end;
@@ -246,14 +423,55 @@ watch(#d{pending = Q0}, #d{pending = Q}) ->
         {_, {value, {Ref, _, _}}} -> [{{timeout, stuck}, stuck_ms(), Ref}]
     end.
 
-stuck_ms() ->
-    application:get_env(toroco_lua, stuck_ms, ?STUCK_MS).
+%% The whole frames in the bytes read, and what is left of the next one.
+cut(<<Len:32, Frame:Len/binary, Rest/binary>>, Acc) -> cut(Rest, [Frame | Acc]);
+cut(Rest, Acc) -> {lists:reverse(Acc), binary:copy(Rest)}.
+
+frame_in(Bin, D = #d{routes = Routes}) ->
+    case ref(Bin) of
+        Ref when is_integer(Ref), is_map_key(Ref bsr 16, Routes) ->
+            %% a state's answer, to its process as it came
+            map_get(Ref bsr 16, Routes) ! {?MODULE, reply, Ref, Bin},
+            D;
+        Ref when is_integer(Ref), Ref > 0 ->
+            %% a closed state's (its process died with a request out), or raw/1's
+            case queue:peek(D#d.pending) of
+                {value, {_, _, raw}} -> answered(decode(Bin), D);
+                _ -> D
+            end;
+        _ ->
+            answered(decode(Bin), D)
+    end.
+
+%% kill(1) as a port of its own: nothing here waits for it.
+kill(OsPid) ->
+    _ = open_port({spawn_executable, os:find_executable("kill")},
+                  [{args, ["-9", integer_to_list(OsPid)]}, exit_status]),
+    ok.
+
+%% The ref of an answer `{reply, Ref, _}', read from its first bytes as the
+%% program writes them (ei: version, small tuple, the atom, an integer of
+%% one byte, four, or a small big); an answer written otherwise (an ei that
+%% encodes atoms another way) is decoded whole; anything else is not a
+%% state's answer.
+ref(<<131, 104, 3, 119, 5, "reply", Int/binary>>) ->
+    case Int of
+        <<97, Ref, _/binary>> -> Ref;
+        <<98, Ref:32/signed, _/binary>> -> Ref;
+        <<110, N, 0, Ref:N/little-unit:8, _/binary>> -> Ref;
+        _ -> none
+    end;
+ref(Bin) ->
+    case decode(Bin) of
+        {reply, Ref, _} when is_integer(Ref) -> Ref;
+        _ -> none
+    end.
 
 %% Sends {Op, Ref, Args...}; the caller waits in the queue.
 send(Req, From, D = #d{port = Port, next_ref = Ref, pending = Q}) ->
-    Frame = erlang:insert_element(2, Req, Ref),
-    true = port_command(Port, term_to_binary(Frame)),
-    D#d{next_ref = Ref + 1, pending = queue:in({Ref, From, Req}, Q)}.
+    Frame = term_to_binary(erlang:insert_element(2, Req, Ref)),
+    true = port_command(Port, [<<(byte_size(Frame)):32>>, Frame]),
+    D#d{next_ref = Ref - 1, pending = queue:in({Ref, From, Req}, Q)}.
 
 %% The program's atoms are all known here, so nothing it sends makes atoms.
 decode(Bin) ->
@@ -261,22 +479,23 @@ decode(Bin) ->
     catch error:badarg -> {undecodable, Bin}
     end.
 
-answer(Answer, D = #d{pending = Q}) ->
+answered(Answer, D = #d{pending = Q}) ->
     case queue:out(Q) of
         {{value, {Ref, From, Req}}, Q1} ->
-            reply(From, result(Answer, Ref, Req)),
+            reply(From, result(Answer, Ref, Req, D#d.port)),
             forget(Answer, Req, D#d{pending = Q1});
         {empty, _} ->
             logger:error("toroco_lua_port: an answer nobody asked for: ~p", [Answer], ?LOG),
             D
     end.
 
-result({reply, Ref, {ok, Actions}}, Ref, {open, Id, _, _, _, _, _, _}) -> {ok, Id, Actions};
-result({reply, Ref, Result}, Ref, _Req) -> Result;
-result({reply, _, Result}, _Ref, raw) -> Result;
-result({bad_frame, Why}, _Ref, raw) -> {bad_frame, Why};
-result({bad_frame, Why}, _Ref, _Req) -> {error, {bad_frame, Why}};
-result(Other, _Ref, _Req) -> {error, {lua_port_answer, Other}}.
+result({reply, Ref, {ok, Actions}}, Ref, {open, Id, _, _, _, _, _, _}, Port) ->
+    {ok, Id, Port, Actions};
+result({reply, Ref, Result}, Ref, _Req, _Port) -> Result;
+result({reply, _, Result}, _Ref, raw, _Port) -> Result;
+result({bad_frame, Why}, _Ref, raw, _Port) -> {bad_frame, Why};
+result({bad_frame, Why}, _Ref, _Req, _Port) -> {error, {bad_frame, Why}};
+result(Other, _Ref, _Req, _Port) -> {error, {lua_port_answer, Other}}.
 
 %% A state that stopped, was closed or could not open is no client's any more.
 forget({reply, _, {stopped, _, _}}, Req, D) -> drop_id(element(2, Req), D);
@@ -288,13 +507,15 @@ forget(_, _, D) -> D.
 reply(none, _) -> ok;
 reply(From, Result) -> gen_statem:reply(From, Result).
 
-add_client(Pid, Id, D = #d{clients = Cs}) ->
+add_client(Pid, Id, D = #d{clients = Cs, routes = Rs}) ->
     case Cs of
-        #{Pid := {MRef, Ids}} -> D#d{clients = Cs#{Pid := {MRef, [Id | Ids]}}};
-        #{} -> D#d{clients = Cs#{Pid => {erlang:monitor(process, Pid), [Id]}}}
+        #{Pid := {MRef, Ids}} -> D#d{clients = Cs#{Pid := {MRef, [Id | Ids]}}, routes = Rs#{Id => Pid}};
+        #{} -> D#d{clients = Cs#{Pid => {erlang:monitor(process, Pid), [Id]}}, routes = Rs#{Id => Pid}}
     end.
 
-drop_id(Id, D = #d{clients = Cs}) ->
+drop_id(Id, D0 = #d{routes = Rs}) ->
+    D = D0#d{routes = maps:remove(Id, Rs)},
+    Cs = D#d.clients,
     Cs1 = maps:filtermap(fun(_Pid, {MRef, Ids}) ->
                                  case lists:delete(Id, Ids) of
                                      [] -> erlang:demonitor(MRef, [flush]), false;
@@ -309,9 +530,9 @@ restart(Why, D = #d{pending = Q, clients = Cs}) ->
     logger:error("toroco_lua_port: lua_port died (~p); ~b Lua behaviors restart",
                  [Why, map_size(Cs)], ?LOG),
     [reply(From, {error, {lua_port_down, Why}}) || {_, From, _} <- queue:to_list(Q)],
-    maps:foreach(fun(Pid, {MRef, _}) ->
+    maps:foreach(fun(Pid, {MRef, Ids}) ->
                          erlang:demonitor(MRef, [flush]),
-                         Pid ! ?LUA_PORT_DOWN(Why)
+                         Pid ! ?LUA_PORT_DOWN(Ids, Why)
                  end, Cs),
     case start_port() of
         {ok, D1} -> {keep_state, D1#d{next_id = D#d.next_id, next_ref = D#d.next_ref},

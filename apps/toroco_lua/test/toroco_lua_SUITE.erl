@@ -10,15 +10,16 @@
 
 -export([all/0, groups/0, suite/0, init_per_testcase/2, end_per_testcase/2]).
 -export([log/2]).
--export([interface_from_the_file/1, values_cross_both_ways/1,
+-export([interface_from_the_file/1, values_cross_both_ways/1, a_burst_arrives_whole_and_in_order/1,
          wait_for_input_with_and_without_timeout/1, sleep_on_the_runtime_clock/1,
          latches_reach_the_actuator/1, print_goes_to_the_logger/1,
          lua_error_names_file_and_line/1, endless_loop_hits_the_budget/1,
          endless_allocation_hits_the_memory_cap/1, hung_port_is_killed/1,
          lua_faults_leave_erlang_layers_flowing/1, reset_starts_a_fresh_state/1,
          port_killed_every_lua_behavior_back/1, bad_frames_are_answered/1,
+         port_dying_again_and_again_is_left_to_supervision/1,
          reload_all_or_nothing/1, reload_under_1khz_input/1,
-         load_main_errors_name_the_line/1, load_main_from_the_program_folder/1, lockstep_timers_at_simulated_deadlines/1]).
+         load_main_errors_name_the_line/1, configure_polling_sets_the_period/1, load_main_from_the_program_folder/1, lockstep_timers_at_simulated_deadlines/1]).
 
 -define(WAIT, 3000).
 
@@ -29,14 +30,16 @@ all() ->
     [{group, api}, {group, faults}, {group, reload}, {group, lockstep}].
 
 groups() ->
-    [{api, [], [interface_from_the_file, values_cross_both_ways,
+    [{api, [], [interface_from_the_file, values_cross_both_ways, a_burst_arrives_whole_and_in_order,
                 wait_for_input_with_and_without_timeout, sleep_on_the_runtime_clock,
                 latches_reach_the_actuator, print_goes_to_the_logger, reset_starts_a_fresh_state,
-                load_main_errors_name_the_line, load_main_from_the_program_folder]},
+                load_main_errors_name_the_line, load_main_from_the_program_folder,
+                configure_polling_sets_the_period]},
      {faults, [], [lua_error_names_file_and_line, endless_loop_hits_the_budget,
                    endless_allocation_hits_the_memory_cap, hung_port_is_killed,
                    lua_faults_leave_erlang_layers_flowing,
-                   port_killed_every_lua_behavior_back, bad_frames_are_answered]},
+                   port_killed_every_lua_behavior_back,
+                   port_dying_again_and_again_is_left_to_supervision, bad_frames_are_answered]},
      {reload, [], [reload_all_or_nothing, reload_under_1khz_input]},
      {lockstep, [], [lockstep_timers_at_simulated_deadlines]}].
 
@@ -108,9 +111,29 @@ values_cross_both_ways(Config) ->
     [Made | _] = values(a, made),
     ?assertEqual({1, 2.5, <<"text">>, true, [1, 2], #{<<"k">> => <<"v">>}}, Made).
 
+a_burst_arrives_whole_and_in_order(doc) ->
+    ["2,000 events injected at once through two Lua relays in a row, their activations "
+     "in flight together (window 32, and 1): all reach the actuator once, in order, and "
+     "inspect answers in the middle of it"];
+a_burst_arrives_whole_and_in_order(Config) ->
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [value]}),
+    actuator(a, [echo]),
+    N = 2000,
+    [begin
+         ok = toroco_lua:add_behavior(B, #{file => data(Config, "echo.lua"), window => W}),
+         ok = toroco:set_inputs(B, #{value => [Src]})
+     end || {B, W, Src} <- [{r1, 32, {s, value}}, {r2, 1, {r1, echo}}]],
+    ok = toroco:set_inputs(a, #{echo => [{r2, echo}]}),
+    [begin
+         ok = toroco:inject({s, value}, K),
+         _ = K =:= N div 2 andalso ?assertMatch(#{behavior := #{waits := [_]}}, toroco:inspect(r1))
+     end || K <- lists:seq(1, N)],
+    ok = toroco_fake_actuator:await(a, fun(H) -> length(H) >= N end, 20000),
+    ?assertEqual(lists:seq(1, N), values(a, echo)).
+
 wait_for_input_with_and_without_timeout(doc) ->
     ["wait_for_input pauses the coroutine until its input; with a timeout it gives nil "
-     "after it, and an input in time cancels the timer"];
+     "after it, and an input in time cancels the timer; toroco:inspect/1 shows the waits"];
 wait_for_input_with_and_without_timeout(Config) ->
     ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [go, more]}),
     actuator(a, [got, more, timeout]),
@@ -128,6 +151,10 @@ wait_for_input_with_and_without_timeout(Config) ->
     ok = toroco:inject({s, go}, 2),
     await(a, got, [1, 2]),
     ?assertMatch({ok, [#{input := more, timer := true}]}, toroco_lua:waits(w)),
+    %% toroco:inspect/1 shows them too, under `behavior'
+    #{behavior := #{waits := [#{kind := coroutine, input := more, timer := true}],
+                    memory := Mem}} = toroco:inspect(w),
+    ?assert(is_integer(Mem) andalso Mem > 0),
     ok = toroco:inject({s, more}, 3),
     await(a, more, [3]),
     ?assertMatch({ok, [#{input := go, timer := false}]}, toroco_lua:waits(w)),
@@ -210,6 +237,37 @@ load_main_from_the_program_folder(Config) ->
     ok = toroco:inject({s, value}, 21),
     await(a, twice, [42]).
 
+configure_polling_sets_the_period(doc) ->
+    ["configure_polling(device.D.E, s) has a device that can be polled poll every s "
+     "and leaves one that emits by itself as it is; a converter, or an output the "
+     "device has not, is refused with the main file's line"];
+configure_polling_sets_the_period(Config) ->
+    ok = toroco:add_device(p, toroco_poll_sensor, #{fn => fun() -> 1 end, every_ms => 60000}),
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [value]}),
+    #{device := #{every_ms := 60000}} = toroco:inspect(p),
+    ?assertEqual({ok, #{behaviors => []}},
+                 toroco_lua:load_main(data(Config, "polling/main.lua"), #{})),
+    #{device := #{every_ms := 20}} = toroco:inspect(p),
+    %% polled again and again: at 60 s a period, the first poll would be the only one
+    Deadline = erlang:monotonic_time(millisecond) + ?WAIT,
+    polled(p, 5, Deadline),
+    Conv = data(Config, "polling/converter.lua"),
+    {error, {Conv, 2, Msg}} = toroco_lua:load_main(Conv, #{}),
+    ?assertMatch({_, _}, binary:match(Msg, <<"converters are not supported">>)),
+    Unknown = data(Config, "polling/unknown.lua"),
+    ?assertEqual({error, {Unknown, 3, {unknown_output, {p, nope}}}},
+                 toroco_lua:load_main(Unknown, #{})).
+
+polled(Name, N, Deadline) ->
+    case toroco:inspect(Name) of
+        #{device := #{polls := P}} when P >= N -> ok;
+        _ ->
+            case erlang:monotonic_time(millisecond) < Deadline of
+                true -> receive after 10 -> ok end, polled(Name, N, Deadline);
+                false -> ct:fail({not_polled, Name, N})
+            end
+    end.
+
 load_main_errors_name_the_line(doc) ->
     ["load_main/2 stops at the first refused call with the main file's line, and "
      "at a main file that does not compile"];
@@ -266,20 +324,22 @@ endless_allocation_hits_the_memory_cap(Config) ->
 
 hung_port_is_killed(doc) ->
     ["A C call the budget cannot see into (a pattern that backtracks for ages) hangs "
-     "the program: its owner kills it after stuck_ms and every Lua behavior restarts"];
+     "the program: its owner kills it after stuck_ms and the Lua behavior starts again "
+     "in the new program, in the same process"];
 hung_port_is_killed(Config) ->
     faulty(data(Config, "faulty.lua")),
     OsPid = toroco_lua_port:os_pid(),
-    ?assertMatch({lua_port_down, _}, fault(f, <<"pattern">>)),
-    back(f),
-    ?assertNotEqual(OsPid, toroco_lua_port:os_pid()),
+    Pid = whereis(toroco_names:process(f)),
+    ok = toroco:inject({s, kind}, <<"pattern">>),
+    reattached([f], OsPid),
+    ?assertEqual(Pid, whereis(toroco_names:process(f))),
     ok = toroco:inject({s, kind}, <<"again">>),
     await(a, alive, [<<"ok">>, <<"again">>]).
 
 lua_faults_leave_erlang_layers_flowing(doc) ->
     ["Under 1 kHz input to an Erlang behavior, a Lua behavior beside it errs, loops, "
-     "hoards memory and loses its port, restarting each time: the Erlang path loses "
-     "no event and keeps its order"];
+     "hoards memory (restarting each time) and loses its port (starting again in the "
+     "new one): the Erlang path loses no event and keeps its order"];
 lua_faults_leave_erlang_layers_flowing(Config) ->
     faulty(data(Config, "faulty.lua")),
     ok = toroco:add_device(m, toroco_fake_sensor, #{outputs => [left, right]}),
@@ -294,51 +354,66 @@ lua_faults_leave_erlang_layers_flowing(Config) ->
                || Kind <- [<<"error">>, <<"loop">>, <<"memory">>]],
     ?assertMatch([{lua_error, _, 7, _}, {lua_limit, _, budget}, {lua_limit, _, memory}], Reasons),
     OsPid = toroco_lua_port:os_pid(),
-    Ref = erlang:monitor(process, whereis(toroco_names:process(f))),
     _ = os:cmd("kill -9 " ++ integer_to_list(OsPid)),
-    receive {'DOWN', Ref, process, _, {lua_port_down, _}} -> ok
-    after ?WAIT -> ct:fail(not_stopped)
-    end,
-    back(f),
+    reattached([f], OsPid),
     ok = toroco_fake_actuator:await(b, fun(H) -> length(H) >= N end, 20000),
     ?assertEqual([{left, K} || K <- lists:seq(1, N)], values(b, signal)),
     ok = toroco:inject({s, kind}, <<"again">>),
     await(a, alive, [<<"ok">>, <<"again">>]).
 
 port_killed_every_lua_behavior_back(doc) ->
-    ["kill -9 of the port program: every Lua behavior stops with lua_port_down and is "
-     "back, answering, within 1 s; the Erlang path goes on in the same processes"];
+    ["kill -9 of the port program: every Lua behavior, 8 of them in one layer (more "
+     "than its restart intensity), answers again within 1 s in the same process, and "
+     "the layer is not taken out; the Erlang path goes on in the same processes"];
 port_killed_every_lua_behavior_back(Config) ->
     ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [value]}),
-    Names = [l0, l1, l2],
-    actuator(a, [echo_l0, echo_l1, echo_l2, erl]),
+    Names = [list_to_atom("l" ++ integer_to_list(K)) || K <- lists:seq(0, 7)],
+    Echo = fun(N) -> list_to_atom("echo_" ++ atom_to_list(N)) end,
+    actuator(a, [erl | [Echo(N) || N <- Names]]),
     [begin
-         ok = toroco_lua:add_behavior(N, #{file => data(Config, "echo.lua"), layer => L}),
+         ok = toroco_lua:add_behavior(N, #{file => data(Config, "echo.lua"), layer => 1}),
          ok = toroco:set_inputs(N, #{value => [{s, value}]})
-     end || {N, L} <- lists:zip(Names, [0, 1, 2])],
-    ok = toroco:set_inputs(a, maps:from_list([{list_to_atom("echo_" ++ atom_to_list(N)), [{N, echo}]}
-                                              || N <- Names] ++ [{erl, [{s, value}]}])),
+     end || N <- Names],
+    ok = toroco:set_inputs(a, maps:from_list([{Echo(N), [{N, echo}]} || N <- Names]
+                                             ++ [{erl, [{s, value}]}])),
     ok = toroco:inject({s, value}, 1),
-    [await(a, list_to_atom("echo_" ++ atom_to_list(N)), [1]) || N <- Names],
+    [await(a, Echo(N), [1]) || N <- Names],
     Sensor = whereis(toroco_names:process(s)),
     Owner = whereis(toroco_lua_port),
-    Refs = [{erlang:monitor(process, whereis(toroco_names:process(N))), N} || N <- Names],
+    Pids = [whereis(toroco_names:process(N)) || N <- Names],
     OsPid = toroco_lua_port:os_pid(),
     T0 = erlang:monotonic_time(millisecond),
     _ = os:cmd("kill -9 " ++ integer_to_list(OsPid)),
-    [receive {'DOWN', R, process, _, Why} -> ?assertMatch({lua_port_down, _}, Why)
-     after ?WAIT -> ct:fail({not_stopped, N})
-     end || {R, N} <- Refs],
-    [back(N) || N <- Names],
+    reattached(Names, OsPid),
     ok = toroco:inject({s, value}, 2),
-    [await(a, list_to_atom("echo_" ++ atom_to_list(N)), [1, 2]) || N <- Names],
+    [await(a, Echo(N), [1, 2]) || N <- Names],
     Back = erlang:monotonic_time(millisecond) - T0,
     ct:pal("every Lua behavior back and answering ~b ms after kill -9", [Back]),
     ?assert(Back < 1000),
-    ?assertNotEqual(OsPid, toroco_lua_port:os_pid()),
+    ?assertEqual(Pids, [whereis(toroco_names:process(N)) || N <- Names]),
     ?assertEqual(Owner, whereis(toroco_lua_port)),
     ?assertEqual(Sensor, whereis(toroco_names:process(s))),
+    ?assertEqual([1], maps:keys(maps:get(layers, toroco:inspect())) -- [0]),
     await(a, erl, [1, 2]).
+
+port_dying_again_and_again_is_left_to_supervision(doc) ->
+    ["A program that dies more than 3 times in 10 s under a Lua behavior stops it "
+     "with lua_port_down, and its layer restarts it"];
+port_dying_again_and_again_is_left_to_supervision(Config) ->
+    faulty(data(Config, "faulty.lua")),
+    Ref = erlang:monitor(process, whereis(toroco_names:process(f))),
+    [begin
+         OsPid = toroco_lua_port:os_pid(),
+         _ = os:cmd("kill -9 " ++ integer_to_list(OsPid)),
+         reattached([f], OsPid)
+     end || _ <- lists:seq(1, 3)],
+    _ = os:cmd("kill -9 " ++ integer_to_list(toroco_lua_port:os_pid())),
+    receive {'DOWN', Ref, process, _, Why} -> ?assertMatch({lua_port_down, _}, Why)
+    after ?WAIT -> ct:fail(not_stopped)
+    end,
+    back(f),
+    ok = toroco:inject({s, kind}, <<"again">>),
+    await(a, alive, [<<"ok">>, <<"again">>]).
 
 bad_frames_are_answered(doc) ->
     ["A frame the program cannot read is answered with bad_frame, never a crash; a "
@@ -386,17 +461,18 @@ versioned(Config, Name) ->
     {File, V1}.
 
 reload_all_or_nothing(doc) ->
-    ["reload re-reads the file: the new code answers; a file that does not compile "
-     "leaves the old one running and says why"];
+    ["toroco:reload(Name) (and toroco_lua:reload/1) re-reads the file: the new code "
+     "answers; a file that does not compile leaves the old one running and says why"];
 reload_all_or_nothing(Config) ->
     {File, V1} = versioned(Config, "versioned.lua"),
     ok = toroco:inject({s, ask}, 1),
     await(a, answer, [{<<"v1">>, 1}]),
     ok = file:write_file(File, binary:replace(V1, <<"'v1'">>, <<"'v2'">>)),
-    ok = toroco_lua:reload(v),
+    ok = toroco:reload(v),                    % the runtime's reload, by name
     ok = toroco:inject({s, ask}, 2),
     await(a, answer, [{<<"v1">>, 1}, {<<"v2">>, 2}]),
     ok = file:write_file(File, <<"local x = = 1\n">>),
+    ?assertMatch({error, {lua_error, File, 1, _}}, toroco:reload(v)),
     ?assertMatch({error, {lua_error, File, 1, _}}, toroco_lua:reload(v)),
     ok = toroco:inject({s, ask}, 3),
     await(a, answer, [{<<"v1">>, 1}, {<<"v2">>, 2}, {<<"v2">>, 3}]).
@@ -501,6 +577,24 @@ fault(Name, Kind) ->
     ok = toroco:inject({s, kind}, Kind),
     receive {'DOWN', Ref, process, _, Why} -> Why
     after 2 * ?WAIT -> ct:fail({not_stopped, Name, Kind})
+    end.
+
+%% Waits (bounded) for a new program (not OsPid) with every behavior of Names
+%% answering in it.
+reattached(Names, OsPid) ->
+    Deadline = erlang:monotonic_time(millisecond) + ?WAIT,
+    wait_new_program(OsPid, Deadline),
+    [back(N, Deadline) || N <- Names],
+    ok.
+
+wait_new_program(OsPid, Deadline) ->
+    case toroco_lua_port:os_pid() of
+        New when is_integer(New), New =/= OsPid -> ok;
+        _ ->
+            case erlang:monotonic_time(millisecond) < Deadline of
+                true -> receive after 5 -> ok end, wait_new_program(OsPid, Deadline);
+                false -> ct:fail({no_new_program, OsPid})
+            end
     end.
 
 %% Waits (bounded) for behavior Name to be registered and running again.

@@ -91,31 +91,77 @@ enum frame_status frame_reader_next(struct frame_reader *r, const unsigned char 
     return FRAME_READY;
 }
 
-int frame_write(int fd, const char *payload, size_t len)
+static void put_len(unsigned char head[4], size_t len)
 {
-    unsigned char head[4];
-    const char *parts[2] = {(const char *)head, payload};
-    size_t sizes[2] = {4, len};
-
-    if (len > 0xffffffffu) {
-        errno = EMSGSIZE;
-        return -1;
-    }
     head[0] = (unsigned char)(len >> 24);
     head[1] = (unsigned char)(len >> 16);
     head[2] = (unsigned char)(len >> 8);
     head[3] = (unsigned char)len;
-    for (int k = 0; k < 2; k++) {
-        size_t done = 0;
-        while (done < sizes[k]) {
-            ssize_t w = write(fd, parts[k] + done, sizes[k] - done);
-            if (w < 0) {
-                if (errno == EINTR)
-                    continue;
-                return -1;
-            }
-            done += (size_t)w;
+}
+
+/* Writes all of buf, across partial writes and signals. */
+static int write_all(int fd, const char *buf, size_t len)
+{
+    size_t done = 0;
+
+    while (done < len) {
+        ssize_t w = write(fd, buf + done, len - done);
+        if (w < 0) {
+            if (errno == EINTR)
+                continue;
+            return -1;
         }
+        done += (size_t)w;
     }
     return 0;
+}
+
+int frame_write(int fd, const char *payload, size_t len)
+{
+    struct frame_out o = {0};
+    int rc;
+
+    if (frame_out_add(&o, payload, len) != 0)
+        return -1;
+    rc = frame_out_flush(&o, fd);
+    frame_out_free(&o);
+    return rc;
+}
+
+int frame_out_add(struct frame_out *o, const char *payload, size_t len)
+{
+    if (len > 0xffffffffu) {
+        errno = EMSGSIZE;
+        return -1;
+    }
+    if (o->cap - o->len < len + 4) {
+        size_t cap = o->cap ? o->cap : 4096;
+        while (cap - o->len < len + 4)
+            cap *= 2;
+        char *grown = realloc(o->buf, cap);
+        if (grown == NULL) {
+            errno = ENOMEM;
+            return -1;
+        }
+        o->buf = grown;
+        o->cap = cap;
+    }
+    put_len((unsigned char *)o->buf + o->len, len);
+    memcpy(o->buf + o->len + 4, payload, len);
+    o->len += len + 4;
+    return 0;
+}
+
+int frame_out_flush(struct frame_out *o, int fd)
+{
+    int rc = write_all(fd, o->buf, o->len);
+    o->len = 0;
+    return rc;
+}
+
+void frame_out_free(struct frame_out *o)
+{
+    free(o->buf);
+    o->buf = NULL;
+    o->len = o->cap = 0;
 }

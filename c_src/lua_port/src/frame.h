@@ -33,7 +33,21 @@ size_t frame_reader_push(struct frame_reader *r, const void *data, size_t len);
  * dropped (*len is its announced length). */
 enum frame_status frame_reader_next(struct frame_reader *r, const unsigned char **frame,
                                     size_t *len);
-/* Writes one frame. 0 or -1 (errno set). */
+/* Writes one frame, in one write(2) when the pipe takes it. 0 or -1 (errno set). */
 int frame_write(int fd, const char *payload, size_t len);
+
+/* Frames gathered to be written together: the answers to the requests one
+ * read(2) brought go back in one write(2), so that a reader woken by the
+ * first finds them all (and never a length without its payload). */
+struct frame_out {
+    char *buf;
+    size_t len, cap;
+};
+
+/* Appends one frame. 0 or -1 (errno set: EMSGSIZE, ENOMEM). */
+int frame_out_add(struct frame_out *o, const char *payload, size_t len);
+/* Writes every frame gathered and empties o. 0 or -1 (errno set). */
+int frame_out_flush(struct frame_out *o, int fd);
+void frame_out_free(struct frame_out *o);
 
 #endif

@@ -2,7 +2,9 @@
 #include "port.h"
 
 #include <errno.h>
+#include <poll.h>
 #include <signal.h>
+#include <time.h>
 #include <stdbool.h>
 #include <stdlib.h>
 #include <string.h>
@@ -278,10 +280,43 @@ void port_handle(struct port *p, const unsigned char *frame, size_t len, ei_x_bu
 
 /* ---- the loop ---------------------------------------------------------- */
 
+#define OUT_FLUSH (64u << 10)        /* answers gathered past this go out at once */
+#define OUT_HOLD_US 500              /* nor, after an activation, held longer than this */
+
+static long long now_us(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (long long)t.tv_sec * 1000000 + t.tv_nsec / 1000;
+}
+
+/* Waits up to spin_us for input without sleeping: the next request of an
+ * event stream comes within microseconds of the last answer, and a program
+ * asleep in read(2) takes a wake-up to get it. */
+static void spin(int fd, long spin_us)
+{
+    struct pollfd pfd = {.fd = fd, .events = POLLIN};
+    long long until;
+
+    if (spin_us <= 0)
+        return;
+    until = now_us() + spin_us;
+    do {
+        if (poll(&pfd, 1, 0) != 0)
+            return;
+    } while (now_us() < until);
+}
+
 int port_run(int in_fd, int out_fd)
+{
+    return port_run_spin(in_fd, out_fd, 0);
+}
+
+int port_run_spin(int in_fd, int out_fd, long spin_us)
 {
     struct port *p = port_new();
     struct frame_reader in;
+    struct frame_out out = {0};
     int rc = 0;
 
     if (p == NULL || frame_reader_init(&in) != 0) {
@@ -290,6 +325,7 @@ int port_run(int in_fd, int out_fd)
     }
     signal(SIGPIPE, SIG_IGN);        /* a dead owner shows as EPIPE on write */
     for (;;) {
+        spin(in_fd, spin_us);
         ssize_t n = frame_reader_fill(&in, in_fd);
         const unsigned char *frame;
         size_t len;
@@ -303,21 +339,40 @@ int port_run(int in_fd, int out_fd)
             rc = 1;
             break;
         }
+        /* the answers to what this read brought, written together; those
+         * held longer than OUT_HOLD_US go out after the activation that made
+         * them wait, so that a batch of slow activations answers as it goes
+         * (an answer before a long one still waits for that one, at most
+         * its budget) */
+        long long held_since = 0;
         while ((st = frame_reader_next(&in, &frame, &len)) != FRAME_NONE) {
             ei_x_buff x;
             if (st == FRAME_TOO_BIG)
                 port_too_big(&x, len);
             else
                 port_handle(p, frame, len, &x);
-            int w = frame_write(out_fd, x.buff, (size_t)x.index);
+            if (out.len > 0 && now_us() - held_since > OUT_HOLD_US &&
+                frame_out_flush(&out, out_fd) != 0) {
+                ei_x_free(&x);
+                rc = 1;
+                goto out;
+            }
+            if (out.len == 0)
+                held_since = now_us();
+            int w = frame_out_add(&out, x.buff, (size_t)x.index);
             ei_x_free(&x);
-            if (w != 0) {
+            if (w != 0 || (out.len >= OUT_FLUSH && frame_out_flush(&out, out_fd) != 0)) {
                 rc = 1;
                 goto out;
             }
         }
+        if (out.len > 0 && frame_out_flush(&out, out_fd) != 0) {
+            rc = 1;
+            break;
+        }
     }
 out:
+    frame_out_free(&out);
     frame_reader_free(&in);
     port_free(p);
     return rc;

@@ -26,5 +26,7 @@ void port_too_big(ei_x_buff *x, size_t len);
 int port_states(const struct port *p);
 /* Runs the loop on in_fd/out_fd until end of input; the exit code. */
 int port_run(int in_fd, int out_fd);
+/* The same, polling for input up to spin_us before each blocking read. */
+int port_run_spin(int in_fd, int out_fd, long spin_us);
 
 #endif

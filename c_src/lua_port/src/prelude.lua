@@ -231,8 +231,20 @@ function M.run() main('run', {}) end
 function M.add_behavior()
   error('add_behavior: functions cannot cross to Erlang; put them in a file and use load_behavior', 2)
 end
-function M.configure_polling()
-  error('configure_polling is not supported yet', 2)
+-- The source's device polled every `seconds' when it can be (Erlang asks
+-- it; one that emits by itself is left as it is). A converter would have
+-- to run where the device's values are made, in Erlang: refused.
+function M.configure_polling(s, seconds, converter)
+  if type(s) ~= 'table' or s.kind ~= 'source' or s.emitter_kind ~= 'device' then
+    error('configure_polling: device.D.E expected, got ' .. tostring(s), 2)
+  end
+  if type(seconds) ~= 'number' or seconds <= 0 then
+    error('configure_polling: a period in seconds expected, got ' .. tostring(seconds), 2)
+  end
+  if converter ~= nil then
+    error('configure_polling: converters are not supported (convert in the behavior)', 2)
+  end
+  main('configure_polling', {s.emitter, s.name, math.max(1, math.floor(seconds * 1000 + 0.5))})
 end
 
 local sched = {}

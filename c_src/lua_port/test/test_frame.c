@@ -98,7 +98,40 @@ static void written_frames_read_back(void)
     frame_reader_free(&r);
 }
 
+/* Answers gathered go out in one write: one read takes them all, whole. */
+static void gathered_frames_go_out_in_one_write(void)
+{
+    int fds[2];
+    struct frame_reader r;
+    struct frame_out o = {0};
+    const unsigned char *f;
+    size_t len;
+    char big[10000];
+
+    memset(big, 'x', sizeof big);
+    CHECK(pipe(fds) == 0);
+    CHECK(frame_out_add(&o, "one", 3) == 0);
+    CHECK(frame_out_add(&o, big, sizeof big) == 0);    /* past the first allocation */
+    CHECK(frame_out_add(&o, "three", 5) == 0);
+    CHECK(frame_out_flush(&o, fds[1]) == 0);
+    CHECK_LL(o.len, 0);
+    CHECK(frame_reader_init(&r) == 0);
+    CHECK_LL(frame_reader_fill(&r, fds[0]), 3 * 4 + 3 + sizeof big + 5);
+    CHECK(frame_reader_next(&r, &f, &len) == FRAME_READY);
+    CHECK(len == 3 && memcmp(f, "one", 3) == 0);
+    CHECK(frame_reader_next(&r, &f, &len) == FRAME_READY);
+    CHECK(len == sizeof big && memcmp(f, big, sizeof big) == 0);
+    CHECK(frame_reader_next(&r, &f, &len) == FRAME_READY);
+    CHECK(len == 5 && memcmp(f, "three", 5) == 0);
+    CHECK(frame_reader_next(&r, &f, &len) == FRAME_NONE);
+    frame_out_free(&o);
+    close(fds[0]);
+    close(fds[1]);
+    frame_reader_free(&r);
+}
+
 const struct test_case frame_tests[] = {
+    TEST_CASE(gathered_frames_go_out_in_one_write),
     TEST_CASE(frames_are_reassembled_across_reads),
     TEST_CASE(an_oversized_frame_is_reported_and_skipped),
     TEST_CASE(the_largest_frame_fits),
