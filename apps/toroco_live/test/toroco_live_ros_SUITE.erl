@@ -1,0 +1,124 @@
+%% The robot as ROS 2 messages (toroco_live_ros), pure: the wheel geometry
+%% both ways, every message complete for its type, the topics of a wiring.
+-module(toroco_live_ros_SUITE).
+-include_lib("common_test/include/ct.hrl").
+-compile([export_all, nowarn_export_all]).
+
+all() ->
+    [twist_wheels_round_trip, twist_checked_against_its_type, messages_have_every_field,
+     topics_of_a_wiring, geometry_from_env, stamps].
+
+twist_wheels_round_trip() ->
+    [{doc, "Wheels -> Twist -> wheels gives the same servo units; forward is +x, left wheel "
+      "slower turns left (+z); out-of-range commands clamp to -100..100"}].
+twist_wheels_round_trip(_Config) ->
+    G = toroco_live_ros:geometry(),
+    #{wheel_base := 0.2, max_wheel_speed := 0.25} = G,
+    [{ok, W} = toroco_live_ros:twist_to_wheels(toroco_live_ros:wheels_to_twist(W, G), G)
+     || W <- [{0, 0}, {100, 100}, {-100, -100}, {50, -50}, {-30, 70}, {1, 0}, {100, -100}]],
+    #{linear := #{x := 0.25}, angular := #{z := +0.0}} = toroco_live_ros:wheels_to_twist({100, 100}, G),
+    #{linear := #{x := X}, angular := #{z := Z}} = toroco_live_ros:wheels_to_twist({20, 60}, G),
+    true = X > 0 andalso Z > 0,
+    {ok, {100, 100}} = toroco_live_ros:twist_to_wheels(
+                         #{<<"linear">> => #{<<"x">> => 5.0}}, G),
+    {ok, {-40, 40}} = toroco_live_ros:twist_to_wheels(
+                        #{<<"angular">> => #{<<"z">> => 1.0}}, G),
+    {ok, {-100, 100}} = toroco_live_ros:twist_to_wheels(#{angular => #{z => 50}}, G),
+    ok.
+
+twist_checked_against_its_type() ->
+    [{doc, "A message that does not fit geometry_msgs/msg/Twist is an error naming the field"}].
+twist_checked_against_its_type(_Config) ->
+    G = toroco_live_ros:geometry(),
+    {error, {bad_field, <<"linear.x">>}} =
+        toroco_live_ros:twist_to_wheels(#{<<"linear">> => #{<<"x">> => <<"fast">>}}, G),
+    {error, {bad_field, <<"linear.w">>}} =
+        toroco_live_ros:twist_to_wheels(#{<<"linear">> => #{<<"w">> => 1}}, G),
+    {error, {bad_field, <<"speed">>}} = toroco_live_ros:twist_to_wheels(#{<<"speed">> => 1}, G),
+    {error, {bad_field, <<"angular">>}} = toroco_live_ros:twist_to_wheels(#{<<"angular">> => 3}, G),
+    {error, not_a_message} = toroco_live_ros:twist_to_wheels([1, 2], G),
+    {error, {unknown_type, <<"foo/msg/Bar">>}} = toroco_live_ros:normalise({<<"foo/msg/Bar">>, #{}}),
+    ok.
+
+messages_have_every_field() ->
+    [{doc, "Every message made (Twist, Odometry, Range, String) has exactly the fields of its "
+      "ROS 2 type, each of the field's type (36 covariances, Range's limits, ...)"}].
+messages_have_every_field(_Config) ->
+    T = 1700000000123456789,
+    Msgs = toroco_live_ros:of_event({emit, T, {motors, applied}, send, {40, 60}})
+        ++ toroco_live_ros:of_event({emit, T, {range, front}, send, 0.42})
+        ++ toroco_live_ros:of_event({emit, T, {cruise, motors}, set, {80, 80}})
+        ++ toroco_live_ros:of_world(#{robots => [#{name => torobot, pose => {1.0, 2.0, 90.0}}]}, T),
+    [<<"geometry_msgs/msg/Twist">>, <<"sensor_msgs/msg/Range">>, <<"std_msgs/msg/String">>,
+     <<"nav_msgs/msg/Odometry">>] = [Type || {_, Type, _} <- Msgs],
+    [complete(Type, Msg) || {_, Type, Msg} <- Msgs],
+    [{<<"/toroco/motors/applied">>, _, _}, {<<"/range/front">>, _, Range},
+     {<<"/toroco/out/cruise/motors">>, _, #{data := Data}}, {<<"/odom">>, _, Odom}] = Msgs,
+    #{range := 0.42, radiation_type := 1, max_range := 1.5,
+      header := #{stamp := #{sec := 1700000000, nanosec := 123456789},
+                  frame_id := <<"range_front">>}} = Range,
+    #{<<"kind">> := <<"set">>, <<"value">> := [80, 80], <<"term">> := <<"{80,80}">>} =
+        jiffy:decode(Data, [return_maps]),
+    #{header := #{frame_id := <<"odom">>}, child_frame_id := <<"base_link">>,
+      pose := #{pose := #{position := #{x := 1.0, y := 2.0}, orientation := #{z := Qz, w := Qw}}}} = Odom,
+    true = abs(Qz - math:sqrt(0.5)) < 1.0e-9 andalso abs(Qw - math:sqrt(0.5)) < 1.0e-9,
+    %% the same map is what rosbridge sends
+    _ = [jiffy:encode(M) || {_, _, M} <- Msgs],
+    [] = toroco_live_ros:of_event({emit, T, {ros, cmd_vel}, send, {1, 1}}),
+    [] = toroco_live_ros:of_event({emit, T, {range, front}, unset, none}),
+    [] = toroco_live_ros:of_event({deliver, T, {motors, setvel}, {1, 1}}),
+    ok.
+
+%% Msg has every field of Type and nothing else, each of its field's type.
+complete(Type, Msg) ->
+    Fields = toroco_live_ros:fields(Type),
+    Names = lists:sort([N || {N, _} <- Fields]),
+    Names = lists:sort(maps:keys(Msg)),
+    [ok = fits(FT, maps:get(N, Msg)) || {N, FT} <- Fields],
+    {ok, Msg} = toroco_live_ros:normalise({Type, Msg}),
+    ok.
+
+fits(T, V) when T =:= float64; T =:= float32 -> true = is_float(V), ok;
+fits(string, V) -> true = is_binary(V), ok;
+fits({array, E, N}, L) -> N = length(L), [ok = fits(E, X) || X <- L], ok;
+fits(T, V) when is_binary(T) -> complete(T, V);
+fits(_, V) -> true = is_integer(V), ok.
+
+topics_of_a_wiring() ->
+    [{doc, "A wiring's outputs become topics with their ROS 2 types; /cmd_vel is inbound; "
+      "/odom only while a world runs"}].
+topics_of_a_wiring(_Config) ->
+    Outs = [{cruise, motors}, {motors, applied}, {range, front}, {range, left}, {ros, cmd_vel},
+            {bumper, contact}],
+    Topics = toroco_live_ros:topics(#{outputs => Outs, world => true}),
+    #{<<"/cmd_vel">> := {<<"geometry_msgs/msg/Twist">>, in},
+      <<"/odom">> := {<<"nav_msgs/msg/Odometry">>, out},
+      <<"/toroco/motors/applied">> := {<<"geometry_msgs/msg/Twist">>, out},
+      <<"/range/front">> := {<<"sensor_msgs/msg/Range">>, out},
+      <<"/range/left">> := {<<"sensor_msgs/msg/Range">>, out},
+      <<"/toroco/out/cruise/motors">> := {<<"std_msgs/msg/String">>, out},
+      <<"/toroco/out/bumper/contact">> := {<<"std_msgs/msg/String">>, out}} = Map =
+        maps:from_list([{T, {Ty, D}} || #{topic := T, type := Ty, dir := D} <- Topics]),
+    7 = map_size(Map),
+    false = lists:member(<<"/odom">>, [T || #{topic := T} <- toroco_live_ros:topics(
+                                                                #{outputs => Outs, world => false})]),
+    ok.
+
+geometry_from_env() ->
+    [{doc, "ros_geometry in the app env overrides the Torobot's wheel geometry; bad values are ignored"}].
+geometry_from_env(_Config) ->
+    application:set_env(toroco_live, ros_geometry, #{wheel_base => 0.5, max_wheel_speed => -1}),
+    try
+        #{wheel_base := 0.5, max_wheel_speed := 0.25} = toroco_live_ros:geometry()
+    after
+        application:unset_env(toroco_live, ros_geometry)
+    end,
+    ok.
+
+stamps() ->
+    [{doc, "Times in ns become sec and nanosec with nanosec in 0..1e9-1, before 1970 too"}].
+stamps(_Config) ->
+    #{sec := 1, nanosec := 5} = toroco_live_ros:stamp(1000000005),
+    #{sec := -1, nanosec := 999999999} = toroco_live_ros:stamp(-1),
+    #{sec := 0, nanosec := 0} = toroco_live_ros:stamp(0),
+    ok.
