@@ -103,17 +103,23 @@ url() ->
 %%====================================================================
 
 %% @doc Records the events of `kinds' (default all) about `names' (default
-%% all) to an MCAP file with the Foxglove bridge's channels and schemas.
+%% all) to an MCAP file. `profile' `foxglove' (the default): the Foxglove
+%% bridge's channels and JSON Schemas; `ros2' (SPEC §15): the MCAP profile
+%% `ros2', the robot's ROS 2 topics with `ros2msg' schemas and `cdr'
+%% messages, `std_msgs/msg/String' for the rest (`toroco_live_recorder').
 %% Writing never holds up the robot: past a bounded buffer events are
-%% dropped and counted.
+%% dropped and counted. `{error, {bad_option, {profile, V}}}' for another
+%% profile.
 -spec record(file:filename_all(), #{kinds => [emit | deliver | router | lifecycle],
-                                    names => all | [atom()]}) -> ok | {error, term()}.
+                                    names => all | [atom()],
+                                    profile => foxglove | ros2}) -> ok | {error, term()}.
 record(Path, Opts) ->
     toroco_live_flight:record(Path, Opts).
 
 %% @doc Ends the recording and completes the file.
 -spec stop_recording() -> {ok, #{path := file:filename_all(), messages := non_neg_integer(),
-                                 dropped := non_neg_integer()}} | {error, term()}.
+                                 dropped := non_neg_integer(),
+                                 unencodable => non_neg_integer()}} | {error, term()}.
 stop_recording() ->
     toroco_live_flight:stop_recording().
 
