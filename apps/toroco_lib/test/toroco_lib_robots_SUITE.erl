@@ -18,7 +18,7 @@
 -compile([export_all, nowarn_export_all]).
 
 -define(ROBOTS, [wanderer, wall_follower, bump_and_escape, colour_seeker, docker,
-                 braitenberg_love, braitenberg_fear]).
+                 braitenberg_love, braitenberg_fear, teleop]).
 
 suite() ->
     [{timetrap, {minutes, 2}}].
@@ -56,6 +56,17 @@ every_robot_is_tested(Config) ->
               {ok, Terms} = file:consult(F),
               [?assert(lists:member(M, Library), {F, M}) || {behavior, _, M, _} <- Terms]
       end, Files).
+
+teleop() ->
+    [{doc, "Nobody driving, the teleop robot stands still in its room: the motors' idle "
+      "holds it (driven from ROS 2 in toroco_live_rosbridge_SUITE)."}].
+teleop(Config) ->
+    World = filename:join(?config(priv_dir, Config), "teleop.world"),
+    {ok, Text} = file:read_file(world(teleop, Config)),
+    ok = file:write_file(World, re:replace(Text, "\\{duration_s, *[0-9]+\\}", "{duration_s, 20}")),
+    S = run(teleop, World, Config),
+    ?assert(maps:get(distance_m, S) < 0.01),
+    ?assertEqual({0, 0}, {maps:get(wall_contacts, S), maps:get(blue_contacts, S)}).
 
 wanderer() ->
     [{doc, "The wanderer covers at least 25% of its room in 45 s and touches nothing."}].

@@ -5,8 +5,9 @@
 %% supervisor (`toroco_live_dashboard_sup': the hub that feeds the pages and
 %% the HTTP listener), and then the Foxglove bridge when it is asked for and
 %% its module (`toroco_live_foxglove') is part of the node: see {@link
-%% foxglove/2}, the one place the bridge is started from. {@link stop/0}
-%% takes both away again. The application `toroco_live' calls {@link
+%% foxglove/2}, the one place the bridge is started from, and the rosbridge
+%% server (SPEC §15, `toroco_live_rosbridge') when asked for. {@link stop/0}
+%% takes them all away again. The application `toroco_live' calls {@link
 %% start/1} with its app env (the same keys).
 %%
 %% <b>Client mode</b> (SPEC §15): {@link rosbridge_connect/2} dials a
@@ -22,7 +23,9 @@
 %%
 %% Options (SPEC §11): `ip' (default `{127,0,0,1}'), `http' (default 8080,
 %% 0 = any free port), `foxglove' (default 8765, 0 = any free port, or
-%% `off'), `token' (a binary, or `auto', the default: a random one). Two
+%% `off'), `rosbridge' (the rosbridge v2 server's port, 0 = any free port,
+%% or `off', the default), `token' (a binary, or `auto', the default: a
+%% random one; publishing through rosbridge needs it too). Two
 %% more keys of this implementation: `max_clients' (WebSocket clients at
 %% once, default 64) and `max_body' (bytes of a control request or frame,
 %% default 16384). The bounds on strangers, for each of the two ports
@@ -42,6 +45,7 @@
 -type opts() :: #{ip => inet:ip_address(),
                   http => inet:port_number(),
                   foxglove => inet:port_number() | off,
+                  rosbridge => inet:port_number() | off,
                   token => binary() | auto,
                   max_clients => pos_integer(),
                   max_body => pos_integer(),
@@ -51,12 +55,14 @@
                   max_per_peer => pos_integer(),
                   min_age => non_neg_integer()}.
 -type info() :: #{http := inet:port_number(), foxglove := inet:port_number() | off,
-                  token := binary()}.
+                  rosbridge := inet:port_number() | off, token := binary()}.
 
--define(DEFAULTS, #{ip => {127, 0, 0, 1}, http => 8080, foxglove => 8765, token => auto,
+-define(DEFAULTS, #{ip => {127, 0, 0, 1}, http => 8080, foxglove => 8765, rosbridge => off,
+                    token => auto,
                     max_clients => 64, max_body => 16384}).
 -define(DASHBOARD, toroco_live_dashboard_sup).
 -define(FOXGLOVE, toroco_live_foxglove).
+-define(ROSBRIDGE, toroco_live_rosbridge).
 
 %% @doc Starts the dashboard (and the Foxglove bridge, if present and not
 %% `off') and returns the ports it listens on and the token controls need.
@@ -80,7 +86,7 @@ stop() ->
     _ = [begin
              _ = supervisor:terminate_child(toroco_live_sup, Id),
              supervisor:delete_child(toroco_live_sup, Id)
-         end || Id <- [?FOXGLOVE, ?DASHBOARD]],
+         end || Id <- [?ROSBRIDGE, ?FOXGLOVE, ?DASHBOARD]],
     toroco_live_config:clear(),
     ok.
 
@@ -89,8 +95,9 @@ stop() ->
 info() ->
     case toroco_live_config:current() of
         undefined -> not_running;
-        #{http := Http, foxglove := Fox, token := Token} ->
-            #{http => Http, foxglove => Fox, token => Token}
+        #{http := Http, foxglove := Fox, token := Token} = Config ->
+            #{http => Http, foxglove => Fox, rosbridge => maps:get(rosbridge, Config, off),
+              token => Token}
     end.
 
 %% @doc The page's address with the token, for a person to open.
@@ -197,14 +204,19 @@ start_dashboard(Config0) ->
     case supervisor:start_child(toroco_live_sup, Spec) of
         {ok, _} ->
             Http = toroco_live_http:port(),
-            case foxglove(maps:get(foxglove, Config), Config) of
-                {ok, Fox} ->
-                    Info = #{http => Http, foxglove => Fox, token => maps:get(token, Config)},
+            case {foxglove(maps:get(foxglove, Config), Config),
+                  rosbridge(maps:get(rosbridge, Config), Config)} of
+                {{ok, Fox}, {ok, Ros}} ->
+                    Info = #{http => Http, foxglove => Fox, rosbridge => Ros,
+                             token => maps:get(token, Config)},
                     toroco_live_config:set(maps:merge(Config, Info)),
                     {ok, Info};
-                {error, Reason} ->
+                {{error, Reason}, _} ->
                     stop(),
-                    {error, {foxglove, Reason}}
+                    {error, {foxglove, Reason}};
+                {_, {error, Reason}} ->
+                    stop(),
+                    {error, {rosbridge, listen_reason(Reason)}}
             end;
         {error, {already_started, _}} ->
             {error, already_started};
@@ -239,6 +251,15 @@ foxglove(_Port, Config) ->
             {ok, off}
     end.
 
+%% The rosbridge server (SPEC §15), its own child of `toroco_live_sup'.
+rosbridge(off, _Config) ->
+    {ok, off};
+rosbridge(_Port, Config) ->
+    case supervisor:start_child(toroco_live_sup, toroco_live_rosbridge:child_spec(Config)) of
+        {ok, _} -> {ok, toroco_live_rosbridge:port()};
+        {error, Reason} -> {error, Reason}
+    end.
+
 %% Named at run time: a node built without the bridge is a normal case.
 bridge() -> ?FOXGLOVE.
 
@@ -265,6 +286,8 @@ option(ip, Ip) -> is_tuple(Ip) andalso inet:ntoa(Ip) =/= {error, einval};
 option(http, P) -> is_port_number(P);
 option(foxglove, off) -> true;
 option(foxglove, P) -> is_port_number(P);
+option(rosbridge, off) -> true;
+option(rosbridge, P) -> is_port_number(P);
 option(token, auto) -> true;
 option(token, T) -> is_binary(T) andalso byte_size(T) >= 8 andalso byte_size(T) =< 256
                         andalso url_safe(T);

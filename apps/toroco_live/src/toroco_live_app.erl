@@ -11,7 +11,7 @@ start(_Type, _Args) ->
         {ok, Sup} ->
             Env = maps:from_list(application:get_all_env(toroco_live)),
             case maps:get(enabled, Env, true) of
-                true -> start_dashboard(maps:with([ip, http, foxglove, token, max_clients,
+                true -> start_dashboard(maps:with([ip, http, foxglove, rosbridge, token, max_clients,
                                                    max_body, request_timeout, idle_timeout,
                                                    max_connections, max_per_peer, min_age],
                                                   Env));

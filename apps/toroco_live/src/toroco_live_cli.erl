@@ -1,7 +1,7 @@
 %% @doc The dashboard for `scripts/run' (`make run'): started before the
 %% simulated run, from the command line (`erl -s toroco_live_cli start'),
 %% with its address and token printed on stdout before anything else, and
-%% the Foxglove bridge's address after it.
+%% the Foxglove bridge's and the rosbridge server's addresses after it.
 %% When the configured port is taken (another run, another program), it
 %% takes any free port instead and says so.
 -module(toroco_live_cli).
@@ -21,8 +21,9 @@ print() ->
         not_running ->
             %% The app env's port is taken: any free one will do for a run.
             Env = maps:from_list(application:get_all_env(toroco_live)),
-            Opts = (maps:with([ip, token, foxglove], Env))#{http => 0},
-            case toroco_live:start(Opts#{foxglove => free(maps:get(foxglove, Opts, off))}) of
+            Opts = (maps:with([ip, token, foxglove, rosbridge], Env))#{http => 0},
+            case toroco_live:start(Opts#{foxglove => free(maps:get(foxglove, Opts, off)),
+                                         rosbridge => free(maps:get(rosbridge, Opts, off))}) of
                 {ok, _} -> print();
                 {error, Reason} -> io:format(standard_error, "dashboard: not started: ~0p~n", [Reason])
             end;
@@ -31,6 +32,11 @@ print() ->
             case toroco_live:info() of
                 #{foxglove := Port} when is_integer(Port) ->
                     io:format("foxglove: ws://localhost:~b~n", [Port]);
+                _ -> ok
+            end,
+            case toroco_live:info() of
+                #{rosbridge := Ros} when is_integer(Ros) ->
+                    io:format("rosbridge: ws://127.0.0.1:~b~n", [Ros]);
                 _ -> ok
             end
     end.

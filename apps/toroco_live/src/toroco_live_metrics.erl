@@ -13,7 +13,9 @@
 %% <tr><td>`toroco_live_clients'</td><td>gauge</td><td>dashboard WebSocket clients</td></tr>
 %% <tr><td>`toroco_live_skipped_total'</td><td>counter</td><td>states a slow client did not get (coalesced)</td></tr>
 %% <tr><td>`toroco_live_tap_dropped_total'</td><td>counter</td><td>tap events the dashboard fell behind on</td></tr>
-%% <tr><td>`toroco_live_connections'</td><td>gauge</td><td>`listener' (`dashboard', `foxglove'): TCP connections holding a slot (`toroco_live_listener')</td></tr>
+%% <tr><td>`toroco_live_rosbridge_clients'</td><td>gauge</td><td>rosbridge clients connected</td></tr>
+%% <tr><td>`toroco_live_rosbridge_total'</td><td>counter</td><td>`counter': the rosbridge server's totals (`toroco_live_rosbridge:stats/0': `connections', `messages', `dropped', `published', `publish_dropped', `refused_unauthorized', `faults', `disconnected', `fragments_expired')</td></tr>
+%% <tr><td>`toroco_live_connections'</td><td>gauge</td><td>`listener' (`dashboard', `foxglove', `rosbridge'): TCP connections holding a slot (`toroco_live_listener')</td></tr>
 %% <tr><td>`toroco_live_connections_accepted_total'</td><td>counter</td><td>`listener': connections given a slot</td></tr>
 %% <tr><td>`toroco_live_connections_closed_total'</td><td>counter</td><td>`listener', `reason': `request_timeout', `idle_timeout', `shed' (for a newcomer), `too_many_from_peer', `too_many_clients' (refused), `ended'</td></tr>
 %% <tr><td>`toroco_live_rosclient_connected'</td><td>gauge</td><td>`url': a rosbridge client (SPEC §15, client mode), 1 connected, 0 dialling or waiting to</td></tr>
@@ -58,7 +60,21 @@ text() ->
             [{[], maps:get(skipped, Stats, 0)}]),
      family(toroco_live_tap_dropped_total, counter, "Tap events the dashboard fell behind on.",
             [{[], maps:get(tap_dropped, Stats, 0)}])
-     | listeners() ++ rosclients()].
+     | rosbridge() ++ listeners() ++ rosclients()].
+
+%% The rosbridge server's counters, when it runs.
+rosbridge() ->
+    case whereis(toroco_live_rosbridge) of
+        undefined -> [];
+        _ ->
+            Stats = toroco_live_rosbridge:stats(),
+            Totals = [connections, messages, dropped, published, publish_dropped,
+                      refused_unauthorized, faults, disconnected, fragments_expired],
+            [family(toroco_live_rosbridge_clients, gauge, "rosbridge clients connected.",
+                    [{[], maps:get(clients, Stats, 0)}]),
+             family(toroco_live_rosbridge_total, counter, "The rosbridge server's totals.",
+                    [{[{counter, K}], maps:get(K, Stats, 0)} || K <- Totals])]
+    end.
 
 %% The rosbridge clients (toroco_live_rosclient).
 rosclients() ->
@@ -81,7 +97,8 @@ rosclients() ->
 %% The bounded ports (`toroco_live_listener'), those that run.
 listeners() ->
     Ports = [{L, S} || {L, Name} <- [{dashboard, toroco_live_http},
-                                     {foxglove, toroco_live_foxglove_listener}],
+                                     {foxglove, toroco_live_foxglove_listener},
+                                     {rosbridge, toroco_live_rosbridge_listener}],
                        S <- listener_stats(Name)],
     [family(toroco_live_connections, gauge, "TCP connections holding a slot, per port.",
             [{[{listener, L}], N} || {L, #{connections := N}} <- Ports]),

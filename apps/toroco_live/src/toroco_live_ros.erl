@@ -39,7 +39,7 @@
 -module(toroco_live_ros).
 
 -export([geometry/0, wheels_to_twist/2, twist_to_wheels/2]).
--export([topics/0, topics/1, of_event/1, of_world/1, of_world/2]).
+-export([topics/0, topics/1, of_event/1, event_topic/1, of_world/1, of_world/2]).
 -export([types/0, type_of/1, fields/1, normalise/1, stamp/1]).
 
 -export_type([geometry/0, topic/0, message/0]).
@@ -286,6 +286,13 @@ of_event({emit, _, {E, O}, _, _} = Event) ->
     [{topic_of(E, O), ?STRING, #{data => Json}}];
 of_event(_) ->
     [].
+
+%% @doc The topic of a tap event's messages without making them (cheap):
+%% `none' for events that make none.
+-spec event_topic(tuple()) -> binary() | none.
+event_topic({emit, _, {?ROS_DEVICE, _}, _, _}) -> none;
+event_topic({emit, _, {E, O}, _, _}) -> topic_of(E, O);
+event_topic(_) -> none.
 
 range_limits() ->
     Defaults = #{field_of_view => 0.05, min_range => 0.02, max_range => 1.5},

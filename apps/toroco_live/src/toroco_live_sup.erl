@@ -8,9 +8,10 @@
 %%                                (toroco_live:rosbridge_connect/2)
 %%   toroco_live_dashboard_sup    the dashboard, added by toroco_live:start/1
 %%   toroco_live_foxglove         the Foxglove bridge, added by toroco_live:start/1
+%%   toroco_live_rosbridge        the rosbridge v2 server, added by toroco_live:start/1
 %% '''
 %%
-%% one_for_one: the dashboard, the bridge, the rosbridge clients and the
+%% one_for_one: the dashboard, the bridges, the rosbridge clients and the
 %% recorders are independent views of the robot; one crashing takes none
 %% of the others with it.
 -module(toroco_live_sup).

@@ -38,8 +38,10 @@
 -type message() :: {text | binary | ping | pong, binary()} | {close, non_neg_integer() | none, binary()}.
 
 %% @doc Answers a WebSocket upgrade that asks for `Subprotocol' (mochiweb
-%% request in, 101 written); `{error, Why}' when the request is not one.
--spec accept(mochiweb_request:request(), binary()) -> ok | {error, term()}.
+%% request in, 101 written), or with `none' one that may ask for any or none
+%% (rosbridge clients name none: the answer names none either);
+%% `{error, Why}' when the request is not one.
+-spec accept(mochiweb_request:request(), binary() | none) -> ok | {error, term()}.
 accept(Req, Subprotocol) ->
     Header = fun(H) -> case mochiweb_request:get_header_value(H, Req) of
                            undefined -> <<>>;
@@ -53,14 +55,15 @@ accept(Req, Subprotocol) ->
         Upgrade =/= <<"websocket">> -> {error, not_websocket};
         Key =:= <<>> -> {error, no_key};
         true ->
-            case lists:member(Subprotocol, Protocols) of
+            case Subprotocol =:= none orelse lists:member(Subprotocol, Protocols) of
                 false -> {error, {subprotocol, Protocols}};
                 true ->
                     Accept = accept_key(Key),
+                    Named = [{"Sec-WebSocket-Protocol", binary_to_list(Subprotocol)}
+                             || Subprotocol =/= none],
                     _ = mochiweb_request:respond(
                       {101, [{"Upgrade", "websocket"}, {"Connection", "Upgrade"},
-                             {"Sec-WebSocket-Accept", binary_to_list(Accept)},
-                             {"Sec-WebSocket-Protocol", binary_to_list(Subprotocol)}], ""}, Req),
+                             {"Sec-WebSocket-Accept", binary_to_list(Accept)} | Named], ""}, Req),
                     ok
             end
     end.

@@ -1,0 +1,292 @@
+%% @doc The rosbridge v2 server (SPEC §15): a WebSocket server speaking
+%% the rosbridge protocol with JSON (RobotWebTools `ROSBRIDGE_PROTOCOL.md'),
+%% so `roslib' clients and Foxglove's Rosbridge connection see the robot as
+%% ROS 2 topics (`toroco_live_ros') and may drive it through `/cmd_vel'.
+%%
+%% This process is the server's hub, a child of `toroco_live_sup' like the
+%% Foxglove bridge. It owns the listener (`toroco_live_listener', registered
+%% as `toroco_live_rosbridge_listener', the same bounds as the dashboard's
+%% port), the observer tap subscription (SPEC §10; taken only while a client
+%% is connected), the world subscription (for `/odom'), who subscribed to
+%% which topic, the robot's topics (read again at most every `?TOPICS_MS'
+%% and on lifecycle events) and the counters `/metrics' shows. Each client
+%% is its own process (`toroco_live_rosbridge_conn', the mochiweb
+%% connection process that took the upgrade), so a slow or hostile client
+%% stalls only itself. A message is made (`toroco_live_ros') and encoded
+%% once, here, and only when someone subscribed to its topic.
+%%
+%% Messages between the hub and a connection, built and matched only here:
+%% | from | to   | message                              | when                    | answer |
+%% |------|------|--------------------------------------|-------------------------|--------|
+%% | conn | hub  | `{join, Conn}' (call)                | after the handshake     | `ok' |
+%% | conn | hub  | `topics' (call)                      | a subscribe, a service  | `[topic()]' |
+%% | conn | hub  | `{subscribe, Conn, Topic}'           | first subscription to a topic | none |
+%% | conn | hub  | `{unsubscribe, Conn, Topic}'         | its last one went       | none |
+%% | conn | hub  | `{count, Counter}'                   | a fault, a publish, ... | none |
+%% | hub  | conn | `{rosbridge, message, Topic, Json}'  | a message on a subscribed topic | none |
+%% | hub  | conn | `{rosbridge, dropped, N}'            | N messages were not sent to it | none |
+%% A connection whose mailbox holds more than `?CONN_QUEUE' messages gets no
+%% more until it drains; the hub counts what it skipped and tells it.
+-module(toroco_live_rosbridge).
+-behaviour(gen_server).
+
+-export([child_spec/1, port/0, stats/0]).
+-export([join/0, topics/0, subscribe/2, unsubscribe/2, count/1, receive_hub/1]).
+-export([start_link/1]).
+-export([init/1, handle_call/3, handle_cast/2, handle_info/2, terminate/2]).
+
+-define(LISTENER, toroco_live_rosbridge_listener).
+-define(CONN_QUEUE, 1000).
+-define(TAP_BUFFER, 1000).
+-define(TOPICS_MS, 1000).
+-define(RETAP_MS, 2000).
+
+-record(hub, {listener :: pid(),
+              port :: inet:port_number(),
+              conns = #{} :: #{pid() => reference()},
+              subs = #{} :: #{binary() => [pid()]},
+              dropped = #{} :: #{pid() => pos_integer()},
+              topics = {[], -1} :: {[toroco_live_ros:topic()], integer()},
+              tap = none :: none | reference(),
+              tap_monitor = none :: none | reference(),
+              counters = #{} :: #{atom() => non_neg_integer()}}).
+
+%%====================================================================
+%% API
+%%====================================================================
+
+%% @doc The server as a child of `toroco_live_sup', for
+%% `toroco_live:start/1' (`ip', and `rosbridge', the port, 0 for any free
+%% one; the listener's bounds as the dashboard's).
+-spec child_spec(#{rosbridge := inet:port_number(), atom() => term()}) -> supervisor:child_spec().
+child_spec(Config) ->
+    #{id => ?MODULE, start => {?MODULE, start_link, [Config]}, restart => permanent}.
+
+%% @doc The port the server listens on, `off' when it does not run.
+-spec port() -> inet:port_number() | off.
+port() ->
+    try gen_server:call(?MODULE, port)
+    catch exit:_ -> off
+    end.
+
+%% @doc The counters (`/metrics'): `clients' now, and totals: `connections',
+%% `messages' sent to clients, `dropped' (not sent to a client behind),
+%% `published' (handed to the `ros' device), `refused_unauthorized',
+%% `faults' (status errors for bad input), `disconnected' (clients closed
+%% for misbehaving), `fragments_expired'. Empty when the server does not run.
+-spec stats() -> #{atom() => non_neg_integer()}.
+stats() ->
+    try gen_server:call(?MODULE, stats, 2000)
+    catch exit:_ -> #{}
+    end.
+
+%%====================================================================
+%% The connections' side
+%%====================================================================
+
+-spec join() -> ok | {error, server_down}.
+join() ->
+    try gen_server:call(?MODULE, {join, self()}, 15000)
+    catch exit:_ -> {error, server_down}
+    end.
+
+%% @doc The robot's topics now (cached for `?TOPICS_MS').
+-spec topics() -> [toroco_live_ros:topic()].
+topics() ->
+    try gen_server:call(?MODULE, topics, 15000)
+    catch exit:_ -> []
+    end.
+
+-spec subscribe(pid(), binary()) -> ok.
+subscribe(Conn, Topic) -> gen_server:cast(?MODULE, {subscribe, Conn, Topic}).
+
+-spec unsubscribe(pid(), binary()) -> ok.
+unsubscribe(Conn, Topic) -> gen_server:cast(?MODULE, {unsubscribe, Conn, Topic}).
+
+%% @doc Counts one of {@link stats/0}'s totals.
+-spec count(atom()) -> ok.
+count(Counter) -> gen_server:cast(?MODULE, {count, Counter}).
+
+%% @doc What a hub message says, for the connection's `handle_info'.
+-spec receive_hub(term()) -> {ok, {message, binary(), binary()} | {dropped, pos_integer()}} | error.
+receive_hub({rosbridge, message, Topic, Json}) -> {ok, {message, Topic, Json}};
+receive_hub({rosbridge, dropped, N}) -> {ok, {dropped, N}};
+receive_hub(_) -> error.
+
+%%====================================================================
+%% gen_server
+%%====================================================================
+
+-spec start_link(map()) -> {ok, pid()} | {error, term()}.
+start_link(Opts) ->
+    gen_server:start_link({local, ?MODULE}, ?MODULE, Opts, []).
+
+-spec init(map()) -> {ok, #hub{}} | {stop, term()}.
+init(Opts) ->
+    process_flag(trap_exit, true),
+    Ip = maps:get(ip, Opts, {127, 0, 0, 1}),
+    ConnOpts = maps:with([max_message], Opts),
+    Loop = fun(Req) -> toroco_live_rosbridge_conn:serve(Req, ConnOpts) end,
+    Bounds = maps:with([request_timeout, idle_timeout, max_connections, max_per_peer, min_age],
+                       Opts),
+    case toroco_live_listener:start_link(?LISTENER, Bounds#{ip => Ip, port => maps:get(rosbridge, Opts),
+                                                            loop => Loop}) of
+        {ok, Listener} ->
+            {ok, #hub{listener = Listener, port = toroco_live_listener:port(Listener)}};
+        {error, Why} ->
+            {stop, {listen, Why}}
+    end.
+
+-spec handle_call(term(), gen_server:from(), #hub{}) -> {reply, term(), #hub{}}.
+handle_call(port, _From, H) ->
+    {reply, H#hub.port, H};
+handle_call(stats, _From, H = #hub{conns = Conns, counters = Cs}) ->
+    {reply, Cs#{clients => map_size(Conns)}, H};
+handle_call({join, Conn}, _From, H0) ->
+    H = tap_on(H0#hub{conns = (H0#hub.conns)#{Conn => monitor(process, Conn)}}),
+    {reply, ok, bump(connections, H)};
+handle_call(topics, _From, H0) ->
+    H = fresh_topics(H0),
+    {Topics, _} = H#hub.topics,
+    {reply, Topics, H};
+handle_call(_, _From, H) ->
+    {reply, {error, unknown_call}, H}.
+
+-spec handle_cast(term(), #hub{}) -> {noreply, #hub{}}.
+handle_cast({subscribe, Conn, Topic}, H = #hub{subs = Subs, conns = Conns}) when is_map_key(Conn, Conns) ->
+    {noreply, H#hub{subs = maps:update_with(Topic, fun(L) -> lists:usort([Conn | L]) end, [Conn], Subs)}};
+handle_cast({unsubscribe, Conn, Topic}, H) ->
+    {noreply, unsubscribe_all(Conn, [Topic], H)};
+handle_cast({count, Counter}, H) when is_atom(Counter) ->
+    {noreply, bump(Counter, H)};
+handle_cast(_, H) ->
+    {noreply, H}.
+
+-spec handle_info(term(), #hub{}) -> {noreply, #hub{}} | {stop, term(), #hub{}}.
+handle_info({toroco_event, Ref, Event}, H = #hub{tap = Ref}) ->
+    {noreply, event(Event, H)};
+handle_info({toroco_event, _, _}, H) ->
+    {noreply, H};
+handle_info({toroco_live_world, changed}, H = #hub{subs = Subs}) ->
+    %% Reading re-arms the notification: read even with nobody on /odom.
+    Snapshot = toroco_live_world:latest(),
+    case maps:is_key(<<"/odom">>, Subs) of
+        true -> {noreply, lists:foldl(fun deliver/2, H, toroco_live_ros:of_world(Snapshot))};
+        false -> {noreply, H}
+    end;
+handle_info({'DOWN', M, process, _, _}, H = #hub{tap_monitor = M}) ->
+    erlang:send_after(?RETAP_MS, self(), retap),
+    {noreply, H#hub{tap = none, tap_monitor = none}};
+handle_info(retap, H = #hub{tap = none, conns = Conns}) when map_size(Conns) > 0 ->
+    {noreply, tap_on(H)};
+handle_info({'DOWN', _, process, Conn, _}, H = #hub{conns = Conns, subs = Subs}) ->
+    H1 = unsubscribe_all(Conn, maps:keys(Subs),
+                         H#hub{conns = maps:remove(Conn, Conns),
+                               dropped = maps:remove(Conn, H#hub.dropped)}),
+    {noreply, tap_off(H1)};
+handle_info({'EXIT', L, Why}, H = #hub{listener = L}) ->
+    {stop, {listener, Why}, H};
+handle_info(_, H) ->
+    {noreply, H}.
+
+-spec terminate(term(), #hub{}) -> ok.
+terminate(_, #hub{listener = L, tap = Tap}) ->
+    Tap =:= none orelse toroco:unsubscribe_events(Tap),
+    toroco_live_listener:stop(L).
+
+%%====================================================================
+%% Inside
+%%====================================================================
+
+bump(Counter, H = #hub{counters = Cs}) ->
+    H#hub{counters = maps:update_with(Counter, fun(N) -> N + 1 end, 1, Cs)}.
+
+fresh_topics(H = #hub{topics = {_, At}}) ->
+    Now = erlang:monotonic_time(millisecond),
+    case At >= 0 andalso Now - At < ?TOPICS_MS of
+        true -> H;
+        false ->
+            Topics = try toroco_live_ros:topics()
+                     catch _:_ -> element(1, H#hub.topics)
+                     end,
+            H#hub{topics = {Topics, Now}}
+    end.
+
+tap_on(H = #hub{tap = none}) ->
+    try toroco:subscribe_events(#{kinds => [emit, lifecycle], buffer => ?TAP_BUFFER}) of
+        {ok, Ref} ->
+            world(subscribe),
+            H#hub{tap = Ref, tap_monitor = monitor(process, toroco_tap)};
+        {error, Why} ->
+            no_tap(Why, H)
+    catch exit:Why ->
+            no_tap(Why, H)
+    end;
+tap_on(H) -> H.
+
+no_tap(Why, H) ->
+    logger:warning("rosbridge: no events from the runtime yet: ~0p", [Why],
+                   #{domain => [toroco, live, ros]}),
+    erlang:send_after(?RETAP_MS, self(), retap),
+    H.
+
+tap_off(H = #hub{tap = Ref, conns = Conns}) when Ref =/= none, map_size(Conns) =:= 0 ->
+    toroco:unsubscribe_events(Ref),
+    world(unsubscribe),
+    demonitor(H#hub.tap_monitor, [flush]),
+    H#hub{tap = none, tap_monitor = none, subs = #{}};
+tap_off(H) -> H.
+
+world(How) ->
+    case whereis(toroco_live_world) of
+        undefined -> ok;
+        _ -> catch toroco_live_world:How()
+    end.
+
+event({lifecycle, _, _, _}, H = #hub{topics = {Topics, _}}) ->
+    %% The wiring may have changed: read the topics again when next asked.
+    H#hub{topics = {Topics, -1}};
+event({dropped, N}, H = #hub{conns = Conns}) ->
+    _ = [C ! {rosbridge, dropped, N} || C <- maps:keys(Conns)],
+    H;
+event(Event, H = #hub{subs = Subs}) ->
+    case toroco_live_ros:event_topic(Event) of
+        none -> H;
+        Topic when is_map_key(Topic, Subs) ->
+            lists:foldl(fun deliver/2, H, toroco_live_ros:of_event(Event));
+        _ -> H
+    end.
+
+deliver({Topic, _Type, Msg}, H = #hub{subs = Subs}) ->
+    case maps:get(Topic, Subs, []) of
+        [] -> H;
+        Conns ->
+            Json = iolist_to_binary(jiffy:encode(Msg)),
+            lists:foldl(fun(C, Acc) -> send_to(C, {rosbridge, message, Topic, Json}, Acc) end,
+                        H, Conns)
+    end.
+
+%% A connection behind by more than ?CONN_QUEUE messages misses this one;
+%% it hears how many it missed once it has caught up.
+send_to(C, Msg, H = #hub{dropped = D}) ->
+    case erlang:process_info(C, message_queue_len) of
+        {message_queue_len, N} when N > ?CONN_QUEUE ->
+            bump(dropped, H#hub{dropped = maps:update_with(C, fun(K) -> K + 1 end, 1, D)});
+        {message_queue_len, _} ->
+            _ = case D of
+                    #{C := Missed} -> C ! {rosbridge, dropped, Missed};
+                    #{} -> ok
+                end,
+            C ! Msg,
+            bump(messages, H#hub{dropped = maps:remove(C, D)});
+        undefined -> H
+    end.
+
+unsubscribe_all(Conn, Topics, H = #hub{subs = Subs}) ->
+    Subs1 = lists:foldl(fun(T, S) ->
+                                case maps:get(T, S, []) -- [Conn] of
+                                    [] -> maps:remove(T, S);
+                                    L -> S#{T => L}
+                                end
+                        end, Subs, Topics),
+    H#hub{subs = Subs1}.

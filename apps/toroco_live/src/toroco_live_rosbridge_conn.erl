@@ -1,0 +1,672 @@
+%% @doc One rosbridge client of the server (`toroco_live_rosbridge'): the
+%% mochiweb connection process that answered the WebSocket upgrade becomes
+%% this gen_server and owns the socket. JSON text frames, one rosbridge v2
+%% operation each.
+%%
+%% <ul>
+%% <li>`subscribe' (`topic', `id', `type', `throttle_rate' ms,
+%%     `queue_length', `fragment_size', `compression') / `unsubscribe'
+%%     (`topic', `id'): one subscription per topic with the ids on it; the
+%%     topic gets the smallest throttle, the longest queue and the smallest
+%%     fragment size of its ids. A throttled topic sends at most one
+%%     message per `throttle_rate' and keeps the newest `queue_length'
+%%     (at least 1) meanwhile. A message longer than `fragment_size' goes
+%%     out as `fragment' operations (`id', `data', `num' from 0, `total').</li>
+%% <li>`advertise' / `unadvertise' / `publish': on the inbound topics only
+%%     (`/cmd_vel'), checked against the topic's type
+%%     (`toroco_live_ros:normalise/1') and handed to the `ros' device
+%%     (`toroco_live_ros_device:publish/3'). Publishing needs the
+%%     dashboard's token.</li>
+%% <li>`call_service' (`service', `args', `id'): `/rosapi/topics',
+%%     `/rosapi/topic_type', `/rosapi/services', `/toroco/inspect' (`args'
+%%     `{}' or `{"name": N}'), answered with `service_response'. None of
+%%     them changes the robot, so none needs the token.</li>
+%% <li>`auth' (`mac' or `token': the dashboard's token; `?token=T' on the
+%%     URL does the same), `set_level' (`none', `error', `warning', `info':
+%%     the least severe `status' sent; `error' at first), `fragment' (a
+%%     message in pieces, reassembled: at most `?MAX_PENDING' messages at
+%%     once, `?MAX_FRAGMENTS' pieces each, their bytes within the message
+%%     limit, each completed within the app env `rosbridge_fragment_ms'
+%%     [10000] or dropped), `status' (ignored), `service_response' (refused:
+%%     this server calls no client services).</li>
+%% </ul>
+%% Topic and service names are taken with or without the leading slash.
+%% `compression' other than `none' is refused (JSON only), naming it.
+%%
+%% Bad input gets a `status' of level `error' naming the fault and the
+%% operation's `id', and changes nothing. Messages are at most the app env
+%% `rosbridge_max_message' [1048576] bytes (a longer one is answered, then
+%% the connection closes: its rest cannot be read); at most
+%% `?MAX_SUB_CHANGES' subscribe and unsubscribe operations a second and
+%% `?MAX_SUBS' subscriptions. A client that keeps sending faults
+%% (`?MAX_FAULTS') or stops reading (a send blocked `?SEND_TIMEOUT_MS') is
+%% disconnected; one that reads slowly loses messages (the hub counts them
+%% and tells it, a `warning').
+-module(toroco_live_rosbridge_conn).
+-behaviour(gen_server).
+
+-export([serve/2]).
+-export([init/1, handle_call/3, handle_cast/2, handle_info/2, terminate/2]).
+
+-define(MAX_MESSAGE, 1048576).
+-define(MAX_FAULTS, 20).
+-define(MAX_SUBS, 256).
+-define(MAX_SUB_CHANGES, 100).
+-define(MAX_PENDING, 8).
+-define(MAX_FRAGMENTS, 10000).
+-define(FRAGMENT_MS, 10000).
+-define(SEND_TIMEOUT_MS, 5000).
+-define(CLOSING_MS, 2000).
+-define(LOG, #{domain => [toroco, live, ros]}).
+-define(UNAUTHORIZED, "publishing needs the dashboard's token: connect with ?token=T on "
+        "the URL or send {\"op\": \"auth\", \"mac\": T}; without it this connection may only "
+        "subscribe and call the read-only services").
+
+-record(sub, {ids = #{} :: #{term() => #{throttle := non_neg_integer(), queue := pos_integer(),
+                                          fragment := pos_integer() | none}},
+              last = none :: none | integer(),
+              queue = [] :: [binary()],
+              timer = none :: none | reference()}).
+
+-record(conn, {socket :: mochiweb_socket:socket(),
+               decoder :: toroco_live_ws_frame:decoder(),
+               max :: pos_integer(),
+               authorized :: boolean(),
+               level = 3 :: 1..4,
+               subs = #{} :: #{binary() => #sub{}},
+               advertised = #{} :: #{binary() => binary()},
+               fragments = #{} :: #{term() => {pos_integer(), #{non_neg_integer() => binary()},
+                                               non_neg_integer(), reference()}},
+               out_id = 0 :: non_neg_integer(),
+               window = {0, 0} :: {integer(), non_neg_integer()},
+               faults = 0 :: non_neg_integer(),
+               closing = false :: boolean()}).
+
+%% @doc The mochiweb loop of the server's port: a WebSocket upgrade becomes
+%% a connection (authorized when the URL has the token), anything else a 400.
+-spec serve(mochiweb_request:request(), map()) -> ok.
+serve(Req, Opts) ->
+    case toroco_live_ws_frame:accept(Req, none) of
+        ok ->
+            Socket = mochiweb_request:get(socket, Req),
+            case toroco_live_rosbridge:join() of
+                ok ->
+                    Max = maps:get(max_message, Opts,
+                                   application:get_env(toroco_live, rosbridge_max_message, ?MAX_MESSAGE)),
+                    C = #conn{socket = Socket, decoder = toroco_live_ws_frame:decoder(Max), max = Max,
+                              authorized = toroco_live_config:authorized(toroco_live_http:token(Req))},
+                    ok = mochiweb_socket:setopts(Socket, [{packet, raw}, {active, once},
+                                                           {send_timeout, ?SEND_TIMEOUT_MS},
+                                                           {send_timeout_close, true}]),
+                    gen_server:enter_loop(?MODULE, [], C);
+                {error, _} ->
+                    _ = mochiweb_socket:send(Socket, toroco_live_ws_frame:close_frame(1011, <<"server down">>)),
+                    exit(normal)
+            end;
+        {error, Why} ->
+            Text = io_lib:format("a rosbridge v2 WebSocket endpoint: ~0p~n", [Why]),
+            _ = mochiweb_request:respond({400, [{"Content-Type", "text/plain"}], Text}, Req),
+            ok
+    end.
+
+%%====================================================================
+%% gen_server
+%%====================================================================
+
+-spec init(term()) -> {stop, not_started_this_way}.
+init(_) ->
+    {stop, not_started_this_way}.
+
+-spec handle_call(term(), gen_server:from(), #conn{}) -> {reply, term(), #conn{}}.
+handle_call(_, _From, C) ->
+    {reply, {error, unknown_call}, C}.
+
+-spec handle_cast(term(), #conn{}) -> {noreply, #conn{}}.
+handle_cast(_, C) ->
+    {noreply, C}.
+
+-spec handle_info(term(), #conn{}) -> {noreply, #conn{}} | {noreply, #conn{}, timeout()}
+                                          | {stop, term(), #conn{}}.
+handle_info({Tcp, _, _}, C = #conn{socket = S, closing = true}) when Tcp =:= tcp; Tcp =:= ssl ->
+    ok = mochiweb_socket:setopts(S, [{active, once}]),
+    {noreply, C, ?CLOSING_MS};
+handle_info(timeout, C = #conn{closing = true}) ->
+    {stop, normal, C};
+handle_info(_, C = #conn{closing = true}) ->
+    {noreply, C, ?CLOSING_MS};
+handle_info({Tcp, _, Bytes}, C = #conn{socket = S, decoder = D}) when Tcp =:= tcp; Tcp =:= ssl ->
+    case toroco_live_ws_frame:decode(Bytes, D) of
+        {ok, Messages, D1} ->
+            case lists:foldl(fun client_message/2, {ok, C#conn{decoder = D1}}, Messages) of
+                {ok, C1} ->
+                    ok = mochiweb_socket:setopts(S, [{active, once}]),
+                    {noreply, C1};
+                Stop ->
+                    Stop
+            end;
+        {error, too_big} ->
+            C1 = status(C, error, null,
+                        io_lib:format("a message over the limit of ~b bytes: closing, the rest of "
+                                      "it cannot be read", [C#conn.max])),
+            toroco_live_rosbridge:count(faults),
+            close(C1, 1009, too_big);
+        {error, Why} ->
+            close(C, 1002, Why)
+    end;
+handle_info({Closed, _}, C) when Closed =:= tcp_closed; Closed =:= ssl_closed ->
+    {stop, normal, C};
+handle_info({Err, _, _}, C) when Err =:= tcp_error; Err =:= ssl_error ->
+    {stop, normal, C};
+handle_info({flush, Topic}, C) ->
+    {noreply, flush(Topic, C)};
+handle_info({fragments_expired, Id, Ref}, C = #conn{fragments = F}) ->
+    case F of
+        #{Id := {Total, Got, _, Ref}} ->
+            toroco_live_rosbridge:count(fragments_expired),
+            Ms = application:get_env(toroco_live, rosbridge_fragment_ms, ?FRAGMENT_MS),
+            reply(fault(C#conn{fragments = maps:remove(Id, F)}, Id,
+                        io_lib:format("fragments of message ~ts never completed: ~b of ~b "
+                                      "came in ~b ms; dropped", [text(Id), map_size(Got), Total, Ms])));
+        #{} -> {noreply, C}
+    end;
+handle_info(Msg, C) ->
+    case toroco_live_rosbridge:receive_hub(Msg) of
+        {ok, {message, Topic, Json}} -> {noreply, message(Topic, Json, C)};
+        {ok, {dropped, N}} ->
+            {noreply, status(C, warning, null,
+                             io_lib:format("~b messages were dropped: this client reads more "
+                                           "slowly than the robot emits", [N]))};
+        error -> {noreply, C}
+    end.
+
+-spec terminate(term(), #conn{}) -> ok.
+terminate(_, #conn{socket = S}) ->
+    mochiweb_socket:close(S).
+
+reply({ok, C}) -> {noreply, C};
+reply(Stop) -> Stop.
+
+%%====================================================================
+%% From the hub: messages on subscribed topics
+%%====================================================================
+
+message(Topic, Json, C = #conn{subs = Subs}) ->
+    case Subs of
+        #{Topic := Sub} ->
+            Throttle = throttle(Sub),
+            Now = erlang:monotonic_time(millisecond),
+            case Sub#sub.last of
+                Last when Throttle =:= 0; Last =:= none; Now - Last >= Throttle ->
+                    publish_out(Topic, Json, C#conn{subs = Subs#{Topic := Sub#sub{last = Now}}});
+                Last ->
+                    Queue0 = Sub#sub.queue ++ [Json],
+                    Queue = lists:nthtail(max(0, length(Queue0) - queue_length(Sub)), Queue0),
+                    Timer = case Sub#sub.timer of
+                                none -> erlang:send_after(Last + Throttle - Now, self(), {flush, Topic});
+                                T -> T
+                            end,
+                    C#conn{subs = Subs#{Topic := Sub#sub{queue = Queue, timer = Timer}}}
+            end;
+        #{} -> C
+    end.
+
+flush(Topic, C = #conn{subs = Subs}) ->
+    case Subs of
+        #{Topic := Sub = #sub{queue = [Json | Rest]}} ->
+            Timer = case Rest of
+                        [] -> none;
+                        _ -> erlang:send_after(throttle(Sub), self(), {flush, Topic})
+                    end,
+            publish_out(Topic, Json,
+                        C#conn{subs = Subs#{Topic := Sub#sub{queue = Rest, timer = Timer,
+                                                             last = erlang:monotonic_time(millisecond)}}});
+        #{Topic := Sub} -> C#conn{subs = Subs#{Topic := Sub#sub{timer = none}}};
+        #{} -> C
+    end.
+
+throttle(#sub{ids = Ids}) -> lists:min([T || #{throttle := T} <- maps:values(Ids)]).
+queue_length(#sub{ids = Ids}) -> lists:max([Q || #{queue := Q} <- maps:values(Ids)]).
+fragment_size(#sub{ids = Ids}) ->
+    case [F || #{fragment := F} <- maps:values(Ids), F =/= none] of
+        [] -> none;
+        Fs -> lists:min(Fs)
+    end.
+
+publish_out(Topic, Json, C = #conn{subs = Subs}) ->
+    Text = iolist_to_binary([<<"{\"op\":\"publish\",\"topic\":">>, jiffy:encode(Topic),
+                             <<",\"msg\":">>, Json, $}]),
+    case fragment_size(maps:get(Topic, Subs)) of
+        Size when is_integer(Size), byte_size(Text) > Size -> send_fragments(Text, Size, C);
+        _ -> send_text(C, Text)
+    end.
+
+%% Pieces cut at character boundaries, so each is a JSON string.
+send_fragments(Text, Size, C = #conn{out_id = N}) ->
+    Pieces = pieces(Text, Size, []),
+    Id = <<"toroco_fragment_", (integer_to_binary(N))/binary>>,
+    Total = length(Pieces),
+    lists:foldl(fun({Num, P}, Acc) ->
+                        send_json(Acc, #{op => fragment, id => Id, data => P, num => Num,
+                                         total => Total})
+                end, C#conn{out_id = N + 1}, lists:zip(lists:seq(0, Total - 1), Pieces)).
+
+pieces(<<>>, _Size, Acc) -> lists:reverse(Acc);
+pieces(Text, Size, Acc) when byte_size(Text) =< Size -> lists:reverse([Text | Acc]);
+pieces(Text, Size, Acc) ->
+    Cut = boundary(Text, Size),
+    <<P:Cut/binary, Rest/binary>> = Text,
+    pieces(Rest, Size, [P | Acc]).
+
+%% The largest cut at or below Size not inside a UTF-8 sequence (at least
+%% one character, even if longer than Size).
+boundary(Text, Size) when Size > 0 ->
+    case binary:at(Text, Size) band 16#C0 of
+        16#80 -> boundary(Text, Size - 1);
+        _ -> Size
+    end;
+boundary(Text, 0) ->
+    <<Char/utf8, _/binary>> = Text,
+    byte_size(<<Char/utf8>>).
+
+%%====================================================================
+%% From the client
+%%====================================================================
+
+client_message(_, Stop = {stop, _, _}) ->
+    Stop;
+client_message(_, Closing = {noreply, #conn{closing = true}, _}) ->
+    Closing;
+client_message({text, Text}, {ok, C}) ->
+    text_message(Text, C);
+client_message({binary, _}, {ok, C}) ->
+    fault(C, null, <<"binary messages are not taken: JSON text only (no CBOR, no BSON)">>);
+client_message({ping, P}, {ok, C}) ->
+    case send(C, toroco_live_ws_frame:frame(pong, P)) of
+        {noreply, C1} -> {ok, C1};
+        Stop -> Stop
+    end;
+client_message({pong, _}, Acc) ->
+    Acc;
+client_message({close, _, _}, {ok, C}) ->
+    close(C, 1000, normal).
+
+text_message(Text, C) ->
+    try jiffy:decode(Text, [return_maps]) of
+        #{<<"op">> := Op} = M when is_binary(Op) -> op(Op, M, C);
+        _ -> fault(C, null, <<"a JSON object with an \"op\" field was expected">>)
+    catch _:_ -> fault(C, null, <<"not JSON">>)
+    end.
+
+op(Op, M, C) ->
+    Id = maps:get(<<"id">>, M, null),
+    case maps:get(<<"compression">>, M, <<"none">>) of
+        Comp when Comp =:= <<"none">>; Comp =:= null; Op =:= <<"fragment">> -> op(Op, Id, M, C);
+        Comp -> fault(C, Id, [<<"compression ">>, text(Comp),
+                              <<" is not supported: this server speaks JSON only (compression none)">>])
+    end.
+
+op(<<"subscribe">>, Id, M, C) ->
+    rate(Id, C, fun(C1) -> subscribe(Id, M, C1) end);
+op(<<"unsubscribe">>, Id, M, C) ->
+    rate(Id, C, fun(C1) -> unsubscribe(Id, M, C1) end);
+op(<<"advertise">>, Id, M, C) ->
+    with_topic(Id, M, C, fun(Topic) -> advertise(Id, Topic, M, C) end);
+op(<<"unadvertise">>, Id, M, C = #conn{advertised = A}) ->
+    with_topic(Id, M, C, fun(Topic) -> {ok, C#conn{advertised = maps:remove(Topic, A)}} end);
+op(<<"publish">>, Id, M, C) ->
+    with_topic(Id, M, C, fun(Topic) -> publish(Id, Topic, M, C) end);
+op(<<"call_service">>, Id, M, C) ->
+    case maps:get(<<"service">>, M, null) of
+        S when is_binary(S), S =/= <<>> -> call_service(Id, slash(S), maps:get(<<"args">>, M, #{}), C);
+        _ -> fault(C, Id, <<"call_service needs a \"service\" name">>)
+    end;
+op(<<"service_response">>, Id, _M, C) ->
+    fault(C, Id, [<<"no service call of this server waits for id ">>, text(Id),
+                  <<": it calls no client services">>]);
+op(<<"set_level">>, Id, M, C) ->
+    case level(maps:get(<<"level">>, M, null)) of
+        {ok, L} -> {ok, C#conn{level = L}};
+        error -> fault(C, Id, [<<"set_level: unknown level ">>, text(maps:get(<<"level">>, M, null)),
+                               <<" (none, error, warning, info)">>])
+    end;
+op(<<"status">>, _Id, _M, C) ->
+    {ok, C};
+op(<<"auth">>, Id, M, C) ->
+    Token = case M of
+                #{<<"token">> := T} when is_binary(T) -> T;
+                #{<<"mac">> := T} when is_binary(T) -> T;
+                _ -> none
+            end,
+    case toroco_live_config:authorized(Token) of
+        true -> {ok, status(C#conn{authorized = true}, info, Id, <<"authorized: this connection may publish">>)};
+        false -> fault(C, Id, <<"auth: not the dashboard's token">>)
+    end;
+op(<<"fragment">>, Id, M, C) ->
+    fragment(Id, M, C);
+op(Op, Id, _M, C) when Op =:= <<"advertise_service">>; Op =:= <<"unadvertise_service">>;
+                       Op =:= <<"send_action_goal">>; Op =:= <<"advertise_action">> ->
+    fault(C, Id, [<<"op ">>, Op, <<" is not supported: this server takes no services or "
+                                  "actions from clients">>]);
+op(Op, Id, _M, C) ->
+    fault(C, Id, [<<"unknown op ">>, text(Op)]).
+
+level(<<"info">>) -> {ok, 1};
+level(<<"warning">>) -> {ok, 2};
+level(<<"error">>) -> {ok, 3};
+level(<<"none">>) -> {ok, 4};
+level(_) -> error.
+
+with_topic(Id, M, C, Fun) ->
+    case maps:get(<<"topic">>, M, null) of
+        T when is_binary(T), T =/= <<>>, byte_size(T) =< 256 -> Fun(slash(T));
+        _ -> fault(C, Id, <<"a \"topic\" name is needed">>)
+    end.
+
+slash(<<$/, _/binary>> = Name) -> Name;
+slash(Name) -> <<$/, Name/binary>>.
+
+%% Subscription changes: at most ?MAX_SUB_CHANGES a second.
+rate(Id, C = #conn{window = {Start, N}}, Fun) ->
+    Now = erlang:monotonic_time(millisecond),
+    case Now - Start >= 1000 of
+        true -> Fun(C#conn{window = {Now, 1}});
+        false when N < ?MAX_SUB_CHANGES -> Fun(C#conn{window = {Start, N + 1}});
+        false -> fault(C, Id, io_lib:format("too many subscribe and unsubscribe operations: at "
+                                            "most ~b a second; this one was ignored",
+                                            [?MAX_SUB_CHANGES]))
+    end.
+
+%%--------------------------------------------------------------------
+%% subscribe / unsubscribe
+%%--------------------------------------------------------------------
+
+subscribe(Id, M, C = #conn{subs = Subs}) ->
+    with_topic(Id, M, C, fun(Topic) ->
+        Opts = #{throttle => int(maps:get(<<"throttle_rate">>, M, 0), 0),
+                 queue => max(1, int(maps:get(<<"queue_length">>, M, 1), 1)),
+                 fragment => case int(maps:get(<<"fragment_size">>, M, 0), 0) of
+                                 0 -> none;
+                                 F -> F
+                             end},
+        Count = lists:sum([map_size(S#sub.ids) || S <- maps:values(Subs)]),
+        case {known_type(Topic), maps:get(<<"type">>, M, null)} of
+            _ when Count >= ?MAX_SUBS ->
+                fault(C, Id, io_lib:format("at most ~b subscriptions per connection", [?MAX_SUBS]));
+            {error, _} ->
+                fault(C, Id, [<<"unknown topic ">>, Topic, <<" (the robot's topics: call /rosapi/topics)">>]);
+            {{ok, Type}, Asked} when Asked =/= null, Asked =/= <<>> ->
+                case same_type(Asked, Type) of
+                    true -> {ok, add_sub(Topic, Id, Opts, C)};
+                    false -> fault(C, Id, [<<"topic ">>, Topic, <<" is of type ">>, Type,
+                                           <<", not ">>, text(Asked)])
+                end;
+            {{ok, _}, _} ->
+                {ok, add_sub(Topic, Id, Opts, C)}
+        end
+    end).
+
+int(N, _) when is_integer(N), N >= 0, N =< 1 bsl 31 -> N;
+int(F, _) when is_float(F), F >= 0, F =< 1 bsl 31 -> round(F);
+int(_, Default) -> Default.
+
+add_sub(Topic, Id, Opts, C = #conn{subs = Subs}) ->
+    Sub = case Subs of
+              #{Topic := S} -> S;
+              #{} -> toroco_live_rosbridge:subscribe(self(), Topic), #sub{}
+          end,
+    C#conn{subs = Subs#{Topic => Sub#sub{ids = (Sub#sub.ids)#{Id => Opts}}}}.
+
+unsubscribe(Id, M, C = #conn{subs = Subs}) ->
+    with_topic(Id, M, C, fun(Topic) ->
+        case {Subs, Id} of
+            {#{Topic := Sub}, _} when Id =:= null; is_map_key(Id, Sub#sub.ids) ->
+                Ids = case Id of
+                          null -> #{};
+                          _ -> maps:remove(Id, Sub#sub.ids)
+                      end,
+                case map_size(Ids) of
+                    0 ->
+                        toroco_live_rosbridge:unsubscribe(self(), Topic),
+                        Sub#sub.timer =:= none orelse erlang:cancel_timer(Sub#sub.timer),
+                        {ok, C#conn{subs = maps:remove(Topic, Subs)}};
+                    _ ->
+                        {ok, C#conn{subs = Subs#{Topic := Sub#sub{ids = Ids}}}}
+                end;
+            _ ->
+                {ok, status(C, warning, Id, [<<"unsubscribe: no subscription to ">>, Topic,
+                                             <<" with id ">>, text(Id)])}
+        end
+    end).
+
+known_type(Topic) ->
+    case [Ty || #{topic := T, type := Ty} <- toroco_live_rosbridge:topics(), T =:= Topic] of
+        [Type | _] -> {ok, Type};
+        [] -> {error, unknown_topic}
+    end.
+
+%% `pkg/Type' (as ROS 1 and many clients write it) is `pkg/msg/Type'.
+same_type(Asked, Type) when is_binary(Asked) ->
+    case binary:split(Asked, <<"/">>, [global]) of
+        [Pkg, Name] -> <<Pkg/binary, "/msg/", Name/binary>> =:= Type;
+        _ -> Asked =:= Type
+    end;
+same_type(_, _) -> false.
+
+%%--------------------------------------------------------------------
+%% advertise / publish
+%%--------------------------------------------------------------------
+
+inbound(Topic) ->
+    case [Ty || #{topic := T, type := Ty, dir := in} <- toroco_live_rosbridge:topics(), T =:= Topic] of
+        [Type | _] -> {ok, Type};
+        [] -> error
+    end.
+
+not_inbound(C, Id, Topic) ->
+    Inbound = [T || #{topic := T, dir := in} <- toroco_live_rosbridge:topics()],
+    fault(C, Id, [<<"cannot publish on ">>, Topic, <<": the robot takes ">>,
+                  lists:join(<<", ">>, Inbound)]).
+
+unauthorized(C, Id) ->
+    toroco_live_rosbridge:count(refused_unauthorized),
+    fault(C, Id, <<?UNAUTHORIZED>>).
+
+advertise(Id, _Topic, _M, C = #conn{authorized = false}) ->
+    unauthorized(C, Id);
+advertise(Id, Topic, M, C = #conn{advertised = A}) ->
+    case {inbound(Topic), maps:get(<<"type">>, M, null)} of
+        {error, _} -> not_inbound(C, Id, Topic);
+        {{ok, Type}, Asked} ->
+            case same_type(Asked, Type) of
+                true -> {ok, C#conn{advertised = A#{Topic => Type}}};
+                false -> fault(C, Id, [<<"topic ">>, Topic, <<" is of type ">>, Type, <<", not ">>,
+                                       text(Asked)])
+            end
+    end.
+
+publish(Id, _Topic, _M, C = #conn{authorized = false}) ->
+    unauthorized(C, Id);
+publish(Id, Topic, M, C) ->
+    case inbound(Topic) of
+        error -> not_inbound(C, Id, Topic);
+        {ok, Type} ->
+            case toroco_live_ros:normalise({Type, maps:get(<<"msg">>, M, null)}) of
+                {ok, Msg} -> hand_over(Id, Topic, Msg, C);
+                {error, {bad_field, Path}} ->
+                    fault(C, Id, [<<"publish on ">>, Topic, <<": not a ">>, Type, <<": field ">>,
+                                  Path, <<" does not fit">>]);
+                {error, _} ->
+                    fault(C, Id, [<<"publish on ">>, Topic, <<": \"msg\" must be a ">>, Type,
+                                  <<" object">>])
+            end
+    end.
+
+hand_over(Id, <<$/, Name/binary>> = Topic, Msg, C) ->
+    Output = binary_to_existing_atom(Name),
+    case toroco_live_ros_device:publish(ros, Output, Msg) of
+        ok ->
+            toroco_live_rosbridge:count(published),
+            {ok, C};
+        {error, busy} ->
+            toroco_live_rosbridge:count(publish_dropped),
+            {ok, status(C, warning, Id, [<<"publish on ">>, Topic, <<" dropped: the robot is behind">>])};
+        {error, {not_running, _}} ->
+            fault(C, Id, [<<"publish on ">>, Topic, <<": no ros device runs; the wiring needs ">>,
+                          <<"{device, ros, toroco_live_ros_device, #{}}">>])
+    end.
+
+%%--------------------------------------------------------------------
+%% Services
+%%--------------------------------------------------------------------
+
+-define(SERVICES, [<<"/rosapi/topics">>, <<"/rosapi/topic_type">>, <<"/rosapi/services">>,
+                   <<"/toroco/inspect">>]).
+
+call_service(Id, Service, Args, C) ->
+    case service(Service, Args) of
+        {ok, Values} ->
+            {ok, send_json(C, #{op => service_response, id => Id, service => Service,
+                                values => Values, result => true})};
+        {error, Why} ->
+            C1 = send_json(C, #{op => service_response, id => Id, service => Service,
+                                values => iolist_to_binary(Why), result => false}),
+            fault(C1, Id, Why)
+    end.
+
+service(<<"/rosapi/topics">>, _) ->
+    Topics = toroco_live_rosbridge:topics(),
+    {ok, #{topics => [T || #{topic := T} <- Topics], types => [Ty || #{type := Ty} <- Topics]}};
+service(<<"/rosapi/topic_type">>, #{<<"topic">> := T}) when is_binary(T) ->
+    case known_type(slash(T)) of
+        {ok, Type} -> {ok, #{type => Type}};
+        {error, _} -> {ok, #{type => <<>>}}
+    end;
+service(<<"/rosapi/topic_type">>, _) ->
+    {error, <<"/rosapi/topic_type needs {\"topic\": T}">>};
+service(<<"/rosapi/services">>, _) ->
+    {ok, #{services => ?SERVICES}};
+service(<<"/toroco/inspect">>, Args) when Args =:= #{}; Args =:= null; Args =:= [] ->
+    {ok, toroco_live_json:value(toroco:inspect())};
+service(<<"/toroco/inspect">>, #{<<"name">> := N}) when is_binary(N) ->
+    try binary_to_existing_atom(N) of
+        Name ->
+            case toroco:inspect(Name) of
+                #{} = Info -> {ok, toroco_live_json:value(Info)};
+                {error, _} -> {error, [<<"/toroco/inspect: no behavior or device ">>, N]}
+            end
+    catch error:badarg -> {error, [<<"/toroco/inspect: no behavior or device ">>, N]}
+    end;
+service(<<"/toroco/inspect">>, _) ->
+    {error, <<"/toroco/inspect takes {} or {\"name\": N}">>};
+service(Service, _) ->
+    {error, [<<"unknown service ">>, Service, <<" (call /rosapi/services)">>]}.
+
+%%--------------------------------------------------------------------
+%% Fragments in
+%%--------------------------------------------------------------------
+
+fragment(Id, M, C = #conn{fragments = F, max = Max}) ->
+    case M of
+        #{<<"data">> := Data, <<"num">> := Num, <<"total">> := Total}
+          when Id =/= null, is_binary(Data), is_integer(Num), is_integer(Total), Total > 0,
+               Total =< ?MAX_FRAGMENTS, Num >= 0, Num < Total ->
+            Held = lists:sum([B || {_, _, B, _} <- maps:values(F)]),
+            case F of
+                #{Id := {T, _, _, _}} when T =/= Total ->
+                    fault(C, Id, io_lib:format("fragment ~b of message ~ts says ~b pieces, not ~b",
+                                               [Num, text(Id), Total, T]));
+                _ when Held + byte_size(Data) > Max ->
+                    fault(drop_fragments(Id, C), Id,
+                          io_lib:format("fragments over the limit of ~b bytes: message ~ts dropped",
+                                        [Max, text(Id)]));
+                #{Id := {_, Got, Bytes, Ref}} ->
+                    pieces_in(Id, Total, Got#{Num => Data}, Bytes + byte_size(Data), Ref, C);
+                #{} when map_size(F) >= ?MAX_PENDING ->
+                    fault(C, Id, io_lib:format("at most ~b fragmented messages at once", [?MAX_PENDING]));
+                #{} ->
+                    Ms = application:get_env(toroco_live, rosbridge_fragment_ms, ?FRAGMENT_MS),
+                    Ref = make_ref(),
+                    erlang:send_after(Ms, self(), {fragments_expired, Id, Ref}),
+                    pieces_in(Id, Total, #{Num => Data}, byte_size(Data), Ref, C)
+            end;
+        _ ->
+            fault(C, Id, io_lib:format("a fragment needs an id, a string \"data\", and integers "
+                                       "0 =< num < total =< ~b", [?MAX_FRAGMENTS]))
+    end.
+
+pieces_in(Id, Total, Got, _Bytes, _Ref, C) when map_size(Got) =:= Total ->
+    Whole = iolist_to_binary([maps:get(N, Got) || N <- lists:seq(0, Total - 1)]),
+    C1 = drop_fragments(Id, C),
+    case jiffy_decode(Whole) of
+        #{<<"op">> := <<"fragment">>} -> fault(C1, Id, <<"fragments of fragments are not taken">>);
+        #{<<"op">> := Op} = M when is_binary(Op) -> op(Op, M, C1);
+        _ -> fault(C1, Id, [<<"the fragments of message ">>, text(Id),
+                            <<" do not make a JSON object with an \"op\"">>])
+    end;
+pieces_in(Id, Total, Got, Bytes, Ref, C = #conn{fragments = F}) ->
+    {ok, C#conn{fragments = F#{Id => {Total, Got, Bytes, Ref}}}}.
+
+drop_fragments(Id, C = #conn{fragments = F}) ->
+    C#conn{fragments = maps:remove(Id, F)}.
+
+jiffy_decode(Bin) ->
+    try jiffy:decode(Bin, [return_maps])
+    catch _:_ -> not_json
+    end.
+
+%%====================================================================
+%% Sending
+%%====================================================================
+
+text(B) when is_binary(B) -> binary:part(B, 0, min(200, byte_size(B)));
+text(Other) -> toroco_live_json:encode(toroco_live_json:value(Other)).
+
+fault(C = #conn{faults = N}, _Id, Msg) when N >= ?MAX_FAULTS ->
+    toroco_live_rosbridge:count(faults),
+    toroco_live_rosbridge:count(disconnected),
+    logger:notice("rosbridge: a client was disconnected after ~b faults, the last: ~ts",
+                  [N + 1, iolist_to_binary(Msg)], ?LOG),
+    close(status(C, error, null, [<<"too many faults: disconnected; the last: ">>, Msg]),
+          1008, too_many_faults);
+fault(C = #conn{faults = N}, Id, Msg) ->
+    toroco_live_rosbridge:count(faults),
+    {ok, status(C#conn{faults = N + 1}, error, Id, Msg)}.
+
+status(C = #conn{level = Min}, Level, Id, Msg) ->
+    case severity(Level) >= Min of
+        true ->
+            Base = #{op => status, level => Level, msg => iolist_to_binary(Msg)},
+            send_json(C, case Id of
+                             null -> Base;
+                             _ -> Base#{id => Id}
+                         end);
+        false -> C
+    end.
+
+severity(info) -> 1;
+severity(warning) -> 2;
+severity(error) -> 3.
+
+send_json(C, Map) ->
+    send_text(C, jiffy:encode(Map)).
+
+send_text(C, Text) ->
+    case send(C, toroco_live_ws_frame:frame(text, Text)) of
+        {noreply, C1} -> C1;
+        {stop, _, _} -> exit(normal)
+    end.
+
+send(C = #conn{socket = S}, Frame) ->
+    case mochiweb_socket:send(S, Frame) of
+        ok -> {noreply, C};
+        {error, _} -> {stop, normal, C}
+    end.
+
+close(C = #conn{socket = S}, Code, Why) ->
+    case mochiweb_socket:send(S, toroco_live_ws_frame:close_frame(Code, iolist_to_binary(io_lib:format("~0p", [Why])))) of
+        ok ->
+            ok = mochiweb_socket:setopts(S, [{active, once}]),
+            {noreply, C#conn{closing = true}, ?CLOSING_MS};
+        {error, _} ->
+            {stop, normal, C}
+    end.
