@@ -187,7 +187,9 @@ rosbridge_disconnect(Pid) ->
 %% `waiting' to dial again), `attempts' since it was last connected,
 %% `connects', messages `sent' and `received', `dropped' (the robot's
 %% messages it could not send), `refused' (the server's messages that did
-%% not fit their type), `last_error'.
+%% not fit their type or the `ros' device could not take), `refused_topics'
+%% (the topics the server said it does not take, on this connection),
+%% `last_error'.
 -spec rosbridge_clients() -> [toroco_live_rosclient:info()].
 rosbridge_clients() ->
     [I || Pid <- toroco_live_rosclient_sup:clients(),

@@ -1,7 +1,8 @@
 %% @doc Client mode (SPEC §15): the robot dials a rosbridge v2 server (in
 %% a user's ROS 2 graph, or another robot's `toroco_live'), advertises its
 %% topics there, publishes its messages, subscribes to its inbound topics
-%% and feeds what comes into the robot. One process per server, a child of
+%% and feeds what comes into the robot (the `ros' device,
+%% `toroco_live_ros_device', as the rosbridge server does). One process per server, a child of
 %% `toroco_live_rosclient_sup', started by `toroco_live:rosbridge_connect/2'.
 %%
 %% A `gen_statem' with three states:
@@ -31,8 +32,15 @@
 %% this process (`dropped'); a server that stops reading stalls the socket
 %% for at most `?SEND_TIMEOUT_MS', after which the connection is dropped
 %% and dialled again. A `publish' from the server on an inbound topic
-%% enters the robot through {@link inbound/2}; a message that does not fit
-%% its type is refused and counted (`refused'), never a crash.
+%% enters the robot through {@link inbound/3}; a message that does not fit
+%% its type, or that the device cannot take (none runs, or it is behind),
+%% is refused and counted (`refused'), never a crash.
+%%
+%% Each advertise and subscribe carries an `id' (`advertise:<topic>',
+%% `subscribe:<topic>'); a server that answers one with a `status' of
+%% level `error' (it does not take that topic) is believed: the topic is
+%% not published on, nor asked again, until the next connection, and
+%% counted (`refused_topics').
 %%
 %% The URL is `ws://host[:port][/path][?query]' (`wss' is not supported);
 %% the query goes with the upgrade request, so `?token=T' authorises the
@@ -44,7 +52,7 @@
 -module(toroco_live_rosclient).
 -behaviour(gen_statem).
 
--export([start_link/2, info/1, options/2, inbound/2]).
+-export([start_link/2, info/1, options/2, inbound/3]).
 -export([init/1, callback_mode/0, terminate/3, connecting/3, connected/3, waiting/3]).
 
 -export_type([opts/0, info/0]).
@@ -56,7 +64,7 @@
                   attempts := non_neg_integer(), connects := non_neg_integer(),
                   sent := non_neg_integer(), received := non_neg_integer(),
                   dropped := non_neg_integer(), refused := non_neg_integer(),
-                  last_error := term()}.
+                  refused_topics := [binary()], last_error := term()}.
 
 -define(DEFAULTS, #{max_queue => 1000, backoff_min => 250, backoff_max => 30000,
                     connect_timeout => 5000, max_message => 1048576}).
@@ -80,6 +88,8 @@
                %% topic => type, as advertised or subscribed on this connection
                advertised = #{} :: #{binary() => binary()},
                subscribed = #{} :: #{binary() => binary()},
+               %% topics the server refused on this connection
+               refused_topics = #{} :: #{binary() => true},
                attempts = 0 :: non_neg_integer(),
                connects = 0 :: non_neg_integer(),
                sent = 0 :: non_neg_integer(),
@@ -152,21 +162,22 @@ parse_url(Url) when is_binary(Url) ->
 parse_url(Url) ->
     {error, {bad_url, Url}}.
 
-%% @doc Where a message from ROS enters the robot: a `geometry_msgs/msg/Twist'
-%% on `/cmd_vel' (or another inbound topic) becomes the wheel velocities
-%% the `ros' device emits on the output of that name (the source
-%% `{ros, cmd_vel}' the wiring names), through the robot's wheel geometry.
--spec inbound(binary(), term()) -> ok | {error, term()}.
-inbound(<<$/, Name/binary>>, Msg) ->
-    case toroco_live_ros:twist_to_wheels(Msg, toroco_live_ros:geometry()) of
-        {ok, Wheels} ->
+%% @doc Where a message from ROS enters the robot, as the rosbridge server
+%% does it: checked against its topic's type (`toroco_live_ros:normalise/1')
+%% and handed to the `ros' device (`toroco_live_ros_device:publish/3'),
+%% which emits it on the output of the topic's name (`/cmd_vel': the
+%% source `{ros, cmd_vel}').
+-spec inbound(binary(), binary(), term()) -> ok | {error, term()}.
+inbound(<<$/, Name/binary>> = Topic, Type, Msg) ->
+    case toroco_live_ros:normalise({Type, Msg}) of
+        {ok, M} ->
             try binary_to_existing_atom(Name, utf8) of
-                Output -> toroco:inject({ros, Output}, Wheels)
-            catch error:badarg -> {error, {unknown_topic, <<$/, Name/binary>>}}
+                Output -> toroco_live_ros_device:publish(ros, Output, M)
+            catch error:badarg -> {error, {unknown_topic, Topic}}
             end;
         {error, _} = E -> E
     end;
-inbound(Topic, _) ->
+inbound(Topic, _, _) ->
     {error, {unknown_topic, Topic}}.
 
 %%====================================================================
@@ -341,7 +352,7 @@ upgrade(Bytes, D = #data{socket = S, key = Key, opts = #{max_message := Max}}) -
 %% The handshake is done: the topics advertised and subscribed, the tap on.
 up(D0 = #data{connects = C}) ->
     D = refresh(tap_on(D0#data{attempts = 0, connects = C + 1, last_error = none,
-                               advertised = #{}, subscribed = #{}})),
+                               advertised = #{}, subscribed = #{}, refused_topics = #{}})),
     case D#data.socket of
         none -> fail(D#data.last_error, D);
         _ -> {next_state, connected, D}
@@ -397,17 +408,22 @@ tap_off(D = #data{tap = Tap, tap_monitor = M}) ->
     D#data{tap = none, tap_monitor = none}.
 
 %% Advertise what appeared, unadvertise what went, subscribe to the inbound.
-refresh(D = #data{advertised = Adv, subscribed = Sub}) ->
+refresh(D = #data{advertised = Adv, subscribed = Sub, refused_topics = Refused}) ->
     Topics = try toroco_live_ros:topics() catch _:_ -> [] end,
-    Out = maps:from_list([{T, Ty} || #{topic := T, type := Ty, dir := out} <- Topics]),
-    In = maps:from_list([{T, Ty} || #{topic := T, type := Ty, dir := in} <- Topics]),
-    Ops = [#{op => advertise, topic => T, type => Ty} || {T, Ty} <- lists:sort(maps:to_list(Out)),
-                                                         maps:get(T, Adv, none) =/= Ty]
+    Out = maps:from_list([{T, Ty} || #{topic := T, type := Ty, dir := out} <- Topics,
+                                     not is_map_key(T, Refused)]),
+    In = maps:from_list([{T, Ty} || #{topic := T, type := Ty, dir := in} <- Topics,
+                                    not is_map_key(T, Refused)]),
+    Ops = [advertise_op(T, Ty) || {T, Ty} <- lists:sort(maps:to_list(Out)),
+                                  maps:get(T, Adv, none) =/= Ty]
         ++ [#{op => unadvertise, topic => T} || T <- lists:sort(maps:keys(Adv)),
                                                  not maps:is_key(T, Out)]
-        ++ [#{op => subscribe, topic => T, type => Ty} || {T, Ty} <- lists:sort(maps:to_list(In)),
-                                                         not maps:is_key(T, Sub)],
+        ++ [#{op => subscribe, id => <<"subscribe:", T/binary>>, topic => T, type => Ty}
+            || {T, Ty} <- lists:sort(maps:to_list(In)), not maps:is_key(T, Sub)],
     send_ops(Ops, D#data{advertised = Out, subscribed = maps:merge(Sub, In)}).
+
+advertise_op(Topic, Type) ->
+    #{op => advertise, id => <<"advertise:", Topic/binary>>, topic => Topic, type => Type}.
 
 send_event({dropped, N}, D = #data{dropped = Dr}) ->
     {keep_state, D#data{dropped = Dr + N}};
@@ -417,10 +433,12 @@ send_event(Event, D) ->
     publish_all(try toroco_live_ros:of_event(Event) catch _:_ -> [] end, D).
 
 publish_all(Messages, D0) ->
-    D = lists:foldl(fun({Topic, Type, Msg}, Acc = #data{advertised = Adv}) ->
+    D = lists:foldl(fun({Topic, _, _}, Acc = #data{refused_topics = R}) when is_map_key(Topic, R) ->
+                            Acc;
+                       ({Topic, Type, Msg}, Acc = #data{advertised = Adv}) ->
                             Acc1 = case Adv of
                                        #{Topic := Type} -> Acc;
-                                       #{} -> send_ops([#{op => advertise, topic => Topic, type => Type}],
+                                       #{} -> send_ops([advertise_op(Topic, Type)],
                                                        Acc#data{advertised = Adv#{Topic => Type}})
                                    end,
                             publish(Topic, Msg, Acc1)
@@ -486,19 +504,34 @@ server_op(Json, D = #data{subscribed = Sub, received = N, refused = Refused}) ->
     case decode(Json) of
         #{<<"op">> := <<"publish">>, <<"topic">> := Topic, <<"msg">> := Msg}
           when is_map_key(Topic, Sub) ->
-            case inbound(Topic, Msg) of
+            case inbound(Topic, maps:get(Topic, Sub), Msg) of
                 ok -> D#data{received = N + 1};
                 {error, Why} ->
                     logger:info("rosbridge client: ~ts: a message on ~ts refused: ~0p",
                                 [D#data.url, Topic, Why], ?LOG),
                     D#data{received = N + 1, refused = Refused + 1}
             end;
-        #{<<"op">> := <<"status">>} = Status ->
-            logger:info("rosbridge client: ~ts: status ~0p", [D#data.url, Status], ?LOG),
+        #{<<"op">> := <<"status">>, <<"level">> := <<"error">>, <<"id">> := <<"advertise:", Topic/binary>>} = St ->
+            status(St, D),
+            refuse_topic(Topic, D);
+        #{<<"op">> := <<"status">>, <<"level">> := <<"error">>, <<"id">> := <<"subscribe:", Topic/binary>>} = St ->
+            status(St, D),
+            refuse_topic(Topic, D);
+        #{<<"op">> := <<"status">>} = St ->
+            status(St, D),
             D;
         _ ->
             D
     end.
+
+status(Status, D) ->
+    logger:info("rosbridge client: ~ts: ~ts status: ~ts", [D#data.url, maps:get(<<"level">>, Status, <<"?">>),
+                                                          maps:get(<<"msg">>, Status, <<>>)], ?LOG).
+
+%% The server does not take this topic: not published on, nor asked for
+%% again, on this connection.
+refuse_topic(Topic, D = #data{refused_topics = R}) ->
+    D#data{refused_topics = R#{Topic => true}}.
 
 decode(Json) ->
     try jiffy:decode(Json, [return_maps])
@@ -506,6 +539,6 @@ decode(Json) ->
     end.
 
 info(State, #data{url = Url, attempts = A, connects = C, sent = S, received = R,
-                  dropped = Dr, refused = Rf, last_error = E}) ->
+                  dropped = Dr, refused = Rf, last_error = E, refused_topics = RT}) ->
     #{url => Url, state => State, attempts => A, connects => C, sent => S, received => R,
-      dropped => Dr, refused => Rf, last_error => E}.
+      dropped => Dr, refused => Rf, refused_topics => lists:sort(maps:keys(RT)), last_error => E}.

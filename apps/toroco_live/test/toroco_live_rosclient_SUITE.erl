@@ -7,7 +7,8 @@
 -compile([export_all, nowarn_export_all]).
 
 all() ->
-    [advertises_publishes_and_drives, reconnects_with_backoff, disconnect_ends_it,
+    [advertises_publishes_and_drives, refused_topic_not_published, reconnects_with_backoff,
+     disconnect_ends_it,
      bad_handshakes_retried, bad_url_and_options_refused, stalled_server_costs_the_robot_nothing].
 
 suite() -> [{timetrap, {seconds, 90}}].
@@ -21,7 +22,7 @@ end_per_suite(Config) ->
 init_per_testcase(_Case, Config) ->
     tl_live:fake_robot(),
     %% the inbound topic /cmd_vel: the `ros' device's output, wired to motors
-    ok = toroco:add_device(ros, toroco_fake_sensor, #{outputs => [cmd_vel]}),
+    ok = toroco:add_device(ros, toroco_live_ros_device, #{}),
     ok = toroco:add_device(motors, toroco_fake_actuator, #{inputs => [setvel]}),
     ok = toroco:set_inputs(motors, #{setvel => [{ros, cmd_vel}]}),
     Config.
@@ -86,6 +87,29 @@ advertises_publishes_and_drives(_Config) ->
     nomatch = re:run(Metrics, "t0ken-123"),
     true = is_process_alive(Pid),
     _ = P2,
+    gen_tcp:close(S),
+    gen_tcp:close(L).
+
+refused_topic_not_published() ->
+    [{doc, "A topic the server refuses (a status error for its advertise's id) is not "
+      "published on for the rest of the connection, and is counted; the others are"}].
+refused_topic_not_published(_Config) ->
+    ok = toroco:add_device(t, toroco_fake_sensor, #{outputs => [v]}),
+    {L, Port} = listen(),
+    {ok, _} = toroco_live:rosbridge_connect(url(Port, "/"), #{}),
+    {S, _, P0} = accept(L),
+    {#{<<"id">> := Id}, _, P1} =
+        recv_op(S, P0, fun(#{<<"op">> := <<"advertise">>, <<"topic">> := T}) -> T =:= <<"/toroco/out/s/dist">>;
+                          (_) -> false end),
+    send_op(S, #{op => status, level => error, id => Id, msg => <<"cannot publish on /toroco/out/s/dist">>}),
+    ok = until(fun() -> [#{refused_topics := R}] = toroco_live:rosbridge_clients(),
+                         R =:= [<<"/toroco/out/s/dist">>] end, 5000),
+    %% s before t: the client handles the robot's events in order
+    ok = toroco:inject({s, dist}, 1),
+    ok = toroco:inject({t, v}, 2),
+    {_, Seen, _} = recv_op(S, P1, fun(#{<<"op">> := <<"publish">>, <<"topic">> := T}) -> T =:= <<"/toroco/out/t/v">>;
+                                     (_) -> false end),
+    [] = [Op || #{<<"op">> := <<"publish">>, <<"topic">> := <<"/toroco/out/s/dist">>} = Op <- Seen],
     gen_tcp:close(S),
     gen_tcp:close(L).
 
