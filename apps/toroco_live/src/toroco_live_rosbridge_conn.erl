@@ -12,10 +12,13 @@
 %%     message per `throttle_rate' and keeps the newest `queue_length'
 %%     (at least 1) meanwhile. A message longer than `fragment_size' goes
 %%     out as `fragment' operations (`id', `data', `num' from 0, `total').</li>
-%% <li>`advertise' / `unadvertise' / `publish': on the inbound topics only
+%% <li>`advertise' / `unadvertise' / `publish': on the inbound topics
 %%     (`/cmd_vel'), checked against the topic's type
 %%     (`toroco_live_ros:normalise/1') and handed to the `ros' device
-%%     (`toroco_live_ros_device:publish/3'). Publishing needs the
+%%     (`toroco_live_ros_device:publish/3') and to the topic's
+%%     subscribers; or on a topic the robot does not have, which the hub
+%%     relays to its subscribers (`toroco_live_rosbridge', relaying: how
+%%     a robot in client mode shows its topics here). Publishing needs the
 %%     dashboard's token.</li>
 %% <li>`call_service' (`service', `args', `id'): `/rosapi/topics',
 %%     `/rosapi/topic_type', `/rosapi/services', `/toroco/inspect' (`args'
@@ -312,7 +315,10 @@ op(<<"unsubscribe">>, Id, M, C) ->
 op(<<"advertise">>, Id, M, C) ->
     with_topic(Id, M, C, fun(Topic) -> advertise(Id, Topic, M, C) end);
 op(<<"unadvertise">>, Id, M, C = #conn{advertised = A}) ->
-    with_topic(Id, M, C, fun(Topic) -> {ok, C#conn{advertised = maps:remove(Topic, A)}} end);
+    with_topic(Id, M, C, fun(Topic) ->
+                                 toroco_live_rosbridge:unadvertise(self(), Topic),
+                                 {ok, C#conn{advertised = maps:remove(Topic, A)}}
+                         end);
 op(<<"publish">>, Id, M, C) ->
     with_topic(Id, M, C, fun(Topic) -> publish(Id, Topic, M, C) end);
 op(<<"call_service">>, Id, M, C) ->
@@ -475,7 +481,7 @@ advertise(Id, _Topic, _M, C = #conn{authorized = false}) ->
     unauthorized(C, Id);
 advertise(Id, Topic, M, C = #conn{advertised = A}) ->
     case {inbound(Topic), maps:get(<<"type">>, M, null)} of
-        {error, _} -> not_inbound(C, Id, Topic);
+        {error, Asked} -> advertise_relayed(Id, Topic, Asked, C);
         {{ok, Type}, Asked} ->
             case same_type(Asked, Type) of
                 true -> {ok, C#conn{advertised = A#{Topic => Type}}};
@@ -488,10 +494,12 @@ publish(Id, _Topic, _M, C = #conn{authorized = false}) ->
     unauthorized(C, Id);
 publish(Id, Topic, M, C) ->
     case inbound(Topic) of
-        error -> not_inbound(C, Id, Topic);
+        error -> publish_relayed(Id, Topic, M, C);
         {ok, Type} ->
             case toroco_live_ros:normalise({Type, maps:get(<<"msg">>, M, null)}) of
-                {ok, Msg} -> hand_over(Id, Topic, Msg, C);
+                {ok, Msg} ->
+                    toroco_live_rosbridge:relay(Topic, jiffy:encode(Msg)),
+                    hand_over(Id, Topic, Msg, C);
                 {error, {bad_field, Path}} ->
                     fault(C, Id, [<<"publish on ">>, Topic, <<": not a ">>, Type, <<": field ">>,
                                   Path, <<" does not fit">>]);
@@ -499,6 +507,31 @@ publish(Id, Topic, M, C) ->
                     fault(C, Id, [<<"publish on ">>, Topic, <<": \"msg\" must be a ">>, Type,
                                   <<" object">>])
             end
+    end.
+
+%% A topic the robot does not have, relayed by the hub to its subscribers.
+advertise_relayed(Id, Topic, Type, C = #conn{advertised = A}) when is_binary(Type), Type =/= <<>> ->
+    case toroco_live_rosbridge:advertise(self(), Topic, Type) of
+        ok -> {ok, C#conn{advertised = A#{Topic => Type}}};
+        {error, robot_topic} ->
+            fault(C, Id, [<<"cannot advertise ">>, Topic, <<": the robot publishes it">>]);
+        {error, {type, Other}} ->
+            fault(C, Id, [<<"topic ">>, Topic, <<" is of type ">>, Other, <<", not ">>, Type]);
+        {error, _} ->
+            fault(C, Id, [<<"cannot advertise ">>, Topic, <<": the server is going down">>])
+    end;
+advertise_relayed(Id, Topic, _Type, C) ->
+    fault(C, Id, [<<"advertise ">>, Topic, <<" needs a \"type\"">>]).
+
+publish_relayed(Id, Topic, M, C = #conn{advertised = A}) ->
+    case {A, maps:get(<<"msg">>, M, null)} of
+        {#{Topic := _}, Msg} when is_map(Msg) ->
+            toroco_live_rosbridge:relay(Topic, jiffy:encode(Msg)),
+            {ok, C};
+        {#{Topic := Type}, _} ->
+            fault(C, Id, [<<"publish on ">>, Topic, <<": \"msg\" must be a ">>, Type, <<" object">>]);
+        {#{}, _} ->
+            not_inbound(C, Id, Topic)
     end.
 
 hand_over(Id, <<$/, Name/binary>> = Topic, Msg, C) ->
