@@ -1,7 +1,9 @@
 %% Client mode (SPEC §15): the robot dials a rosbridge v2 server. There is
 %% no ROS graph here: the server is a scripted rosbridge peer in this
 %% suite (an Erlang WebSocket server that checks the client's ops and
-%% publishes on /cmd_vel).
+%% publishes on /cmd_vel), and this project's own server on a second node
+%% (OTP's `peer', on loopback, not connected to this one: two robots),
+%% used by roslib in Node.
 -module(toroco_live_rosclient_SUITE).
 -include_lib("common_test/include/ct.hrl").
 -compile([export_all, nowarn_export_all]).
@@ -9,7 +11,8 @@
 all() ->
     [advertises_publishes_and_drives, refused_topic_not_published, reconnects_with_backoff,
      disconnect_ends_it,
-     bad_handshakes_retried, bad_url_and_options_refused, stalled_server_costs_the_robot_nothing].
+     bad_handshakes_retried, bad_url_and_options_refused, stalled_server_costs_the_robot_nothing,
+     own_server_on_another_node].
 
 suite() -> [{timetrap, {seconds, 90}}].
 
@@ -239,6 +242,61 @@ flood(L, Big, N, Until) ->
         {error, timeout} -> flood(L, Big, N + 500, Until)
     end.
 
+own_server_on_another_node() ->
+    [{doc, "Against this project's rosbridge server on another node: the robot's topics "
+      "appear there (roslib's getTopics lists them with their types, and a subscription "
+      "there gets the robot's messages), and Twists roslib publishes there on /cmd_vel at "
+      "10 Hz drive the robot here"}].
+own_server_on_another_node(_Config) ->
+    Token = <<"peer-node-token-42">>,
+    {Peer, RosPort} = start_server_node(Token),
+    try
+        Url = "ws://127.0.0.1:" ++ integer_to_list(RosPort) ++ "/?token=" ++ binary_to_list(Token),
+        {ok, _} = toroco_live:rosbridge_connect(Url, #{}),
+        ok = until(fun() -> [#{state := connected}] = toroco_live:rosbridge_clients(), true end, 10000),
+        %% the robot here keeps emitting while roslib looks there
+        Injector = spawn_link(fun() -> inject_loop(0) end),
+        Twist = #{linear => #{x => 0.1, y => 0.0, z => 0.0}, angular => #{x => 0.0, y => 0.0, z => -0.4}},
+        {ok, Wheels} = toroco_live_ros:twist_to_wheels(Twist, toroco_live_ros:geometry()),
+        R = toroco_live_js:run("roslib_peer.js", [url_there(RosPort, Token), "/toroco/out/s/dist",
+                                                  binary_to_list(jiffy:encode(Twist)), "10"]),
+        unlink(Injector),
+        exit(Injector, kill),
+        ct:log("roslib there: ~p", [R]),
+        #{<<"ok">> := true, <<"topics">> := Topics, <<"types">> := Types,
+          <<"message">> := #{<<"data">> := Data}, <<"published">> := 10} = R,
+        Listed = maps:from_list(lists:zip(Topics, Types)),
+        #{<<"/toroco/out/s/dist">> := <<"std_msgs/msg/String">>,
+          <<"/cmd_vel">> := <<"geometry_msgs/msg/Twist">>} = Listed,
+        #{<<"kind">> := <<"send">>, <<"term">> := _} = jiffy:decode(Data, [return_maps]),
+        %% the Twists from there, here: each one the same wheels
+        ok = toroco_fake_actuator:await(motors, fun(H) -> length(H) >= 10 end, 10000),
+        [Wheels] = lists:usort([W || {setvel, W, _} <- toroco_fake_actuator:history(motors)]),
+        [#{received := 10, refused := 0, refused_topics := []}] = toroco_live:rosbridge_clients()
+    after
+        peer:stop(Peer)
+    end.
+
+url_there(Port, Token) ->
+    "ws://127.0.0.1:" ++ integer_to_list(Port) ++ "/?token=" ++ binary_to_list(Token).
+
+inject_loop(I) ->
+    ok = toroco:inject({s, dist}, {tick, I}),
+    receive after 50 -> inject_loop(I + 1) end.
+
+%% A second node, not connected to this one (its own robot), running the
+%% rosbridge server with a ros device of its own: its handle and port.
+start_server_node(Token) ->
+    Paths = [P || P <- code:get_path(), string:find(P, "_build") =/= nomatch],
+    {ok, Peer, _} = peer:start_link(#{connection => standard_io, args => ["-pa" | Paths]}),
+    ok = peer:call(Peer, application, load, [toroco_live]),
+    ok = peer:call(Peer, application, set_env, [toroco_live, enabled, false]),
+    {ok, _} = peer:call(Peer, application, ensure_all_started, [toroco_live], 30000),
+    {ok, #{rosbridge := Port}} =
+        peer:call(Peer, toroco_live, start, [#{http => 0, foxglove => off, rosbridge => 0, token => Token}]),
+    ok = peer:call(Peer, toroco, add_device, [ros, toroco_live_ros_device, #{}]),
+    {Peer, Port}.
+
 %%====================================================================
 %% The scripted rosbridge peer
 %%====================================================================
@@ -315,7 +373,7 @@ until(Pred, Ms) ->
 until_(Pred, Deadline) ->
     case catch Pred() of
         true -> ok;
-        false ->
+        _ ->
             case erlang:monotonic_time(millisecond) > Deadline of
                 true -> {error, timeout};
                 false -> timer:sleep(20), until_(Pred, Deadline)
