@@ -118,7 +118,7 @@ dependencies(Fields, Seen0) ->
                                 {ok, Fs} = fields(T),
                                 dependencies(Fs, Seen ++ [T])
                         end
-                end, Seen0, [T || {_, {msg, T}} <- Fields] ++ [T || {_, {msg, T}, _} <- Fields]).
+                end, Seen0, [T || {_, {msg, T}} <- Fields]).
 
 text(Fields) ->
     [line(F) || F <- Fields].
