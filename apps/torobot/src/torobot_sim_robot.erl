@@ -77,7 +77,7 @@
 
 -record(robot, {wheels = {0, 0} :: {number(), number()},
                 started :: [atom()],
-                behaviors :: [atom()],
+                behaviors :: [{behavior | device, atom()}],
                 sensors :: [atom()],
                 clock :: {previous, number()} | lockstep,
                 going :: {gen_server:from(), integer()} | undefined}).
@@ -93,7 +93,9 @@
 start(#{wiring := Wiring} = Opts) ->
     case file:consult(Wiring) of
         {ok, Terms} ->
-            Behaviors = [Name || {behavior, Name, _, _} <- Terms],
+            %% What the wiring adds, taken away again by teardown/1.
+            Behaviors = [{Kind, Name} || {Kind, Name, _, _} <- Terms,
+                                         Kind =:= behavior orelse Kind =:= device],
             case application:ensure_all_started(torobot) of
                 {ok, Started} ->
                     Init = Opts#{started => Started, behaviors => Behaviors},
@@ -335,7 +337,8 @@ camera_port() ->
 %% The applications this run started are stopped whole; in a node where
 %% they were already running, only what the run added is removed.
 teardown(#robot{started = [], behaviors = Behaviors, sensors = Sensors, clock = Clock}) ->
-    _ = [toroco:remove_behavior(B) || B <- Behaviors],
+    _ = [toroco:remove_behavior(B) || {behavior, B} <- Behaviors],
+    _ = [toroco:remove_device(D) || {device, D} <- Behaviors],
     _ = [toroco:remove_device(D) || D <- Sensors],
     _ = [toroco:remove_device(D) || D <- [wheels | lists:reverse(?DEVICES)]],
     restore_clock(Clock);

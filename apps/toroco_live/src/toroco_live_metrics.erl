@@ -14,7 +14,7 @@
 %% <tr><td>`toroco_live_skipped_total'</td><td>counter</td><td>states a slow client did not get (coalesced)</td></tr>
 %% <tr><td>`toroco_live_tap_dropped_total'</td><td>counter</td><td>tap events the dashboard fell behind on</td></tr>
 %% <tr><td>`toroco_live_rosbridge_clients'</td><td>gauge</td><td>rosbridge clients connected</td></tr>
-%% <tr><td>`toroco_live_rosbridge_total'</td><td>counter</td><td>`counter': the rosbridge server's totals (`toroco_live_rosbridge:stats/0': `connections', `messages', `dropped', `published', `publish_dropped', `refused_unauthorized', `faults', `disconnected', `fragments_expired')</td></tr>
+%% <tr><td>`toroco_live_rosbridge_total'</td><td>counter</td><td>`counter': the rosbridge server's totals (`toroco_live_rosbridge:stats/0': `connections', `messages', `dropped', `tap_dropped', `published', `publish_dropped', `refused_unauthorized', `faults', `disconnected', `fragments_expired')</td></tr>
 %% <tr><td>`toroco_live_connections'</td><td>gauge</td><td>`listener' (`dashboard', `foxglove', `rosbridge'): TCP connections holding a slot (`toroco_live_listener')</td></tr>
 %% <tr><td>`toroco_live_connections_accepted_total'</td><td>counter</td><td>`listener': connections given a slot</td></tr>
 %% <tr><td>`toroco_live_connections_closed_total'</td><td>counter</td><td>`listener', `reason': `request_timeout', `idle_timeout', `shed' (for a newcomer), `too_many_from_peer', `too_many_clients' (refused), `ended'</td></tr>
@@ -68,7 +68,7 @@ rosbridge() ->
         undefined -> [];
         _ ->
             Stats = toroco_live_rosbridge:stats(),
-            Totals = [connections, messages, dropped, published, publish_dropped,
+            Totals = [connections, messages, dropped, tap_dropped, published, publish_dropped,
                       refused_unauthorized, faults, disconnected, fragments_expired],
             [family(toroco_live_rosbridge_clients, gauge, "rosbridge clients connected.",
                     [{[], maps:get(clients, Stats, 0)}]),

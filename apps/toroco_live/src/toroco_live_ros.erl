@@ -40,7 +40,7 @@
 
 -export([geometry/0, wheels_to_twist/2, twist_to_wheels/2]).
 -export([topics/0, topics/1, of_event/1, event_topic/1, of_world/1, of_world/2]).
--export([types/0, type_of/1, fields/1, normalise/1, stamp/1]).
+-export([types/0, type_of/1, fields/1, definition/1, normalise/1, stamp/1]).
 
 -export_type([geometry/0, topic/0, message/0]).
 
@@ -150,6 +150,45 @@ fields(<<"sensor_msgs/msg/Range">>) ->
     [{header, <<"std_msgs/msg/Header">>}, {radiation_type, uint8}, {field_of_view, float32},
      {min_range, float32}, {max_range, float32}, {range, float32}, {variance, float32}].
 
+%% @doc The ROS 2 message definition of a type with its dependencies, as
+%% ROS 2 tools concatenate them (rosbag2, rosapi's `typedefs_full_text'):
+%% the type's own fields (and constants), then each type it uses, first
+%% met first, after a line of 80 `=' and `MSG: pkg/Type'.
+-spec definition(binary()) -> binary().
+definition(Type) ->
+    Deps = dependencies([Type], []),
+    iolist_to_binary([msg_text(Type)
+                      | [[lists:duplicate(80, $=), "\nMSG: ", short(D), $\n, msg_text(D)]
+                         || D <- Deps, D =/= Type]]).
+
+dependencies([], Acc) -> lists:reverse(Acc);
+dependencies([T | Ts], Acc) ->
+    case lists:member(T, Acc) of
+        true -> dependencies(Ts, Acc);
+        false -> dependencies(Ts ++ [FT || {_, FT} <- fields(T), is_binary(FT)], [T | Acc])
+    end.
+
+msg_text(Type) ->
+    [[[constant_type(Type), " ", C, "=", integer_to_binary(V), "\n"] || {C, V} <- constants(Type)],
+     [[field_type(FT), " ", atom_to_binary(N), "\n"] || {N, FT} <- fields(Type)]].
+
+constants(<<"sensor_msgs/msg/Range">>) -> [{<<"ULTRASOUND">>, 0}, {<<"INFRARED">>, ?INFRARED}];
+constants(_) -> [].
+
+constant_type(<<"sensor_msgs/msg/Range">>) -> <<"uint8">>;
+constant_type(_) -> <<>>.
+
+field_type({array, E, N}) -> [atom_to_binary(E), $[, integer_to_binary(N), $]];
+field_type(T) when is_atom(T) -> atom_to_binary(T);
+field_type(T) -> short(T).
+
+%% `pkg/msg/Type' as a definition names it: `pkg/Type'.
+short(Type) ->
+    case binary:split(Type, <<"/msg/">>) of
+        [Pkg, Name] -> <<Pkg/binary, $/, Name/binary>>;
+        _ -> Type
+    end.
+
 %% @doc The type of one of the robot's topics now, `error' if it has none.
 -spec type_of(binary()) -> {ok, binary()} | error.
 type_of(Topic) ->
@@ -183,9 +222,7 @@ struct(Type, Msg, Path) when is_map(Msg) ->
     _ = [throw({bad_field, join(Path, key_text(K))})
          || K <- maps:keys(Msg), not lists:member(key_text(K), Names)],
     maps:from_list([{N, field(FT, lookup(N, Msg), join(Path, atom_to_binary(N)))}
-                    || {N, FT} <- Fields]);
-struct(_, _, Path) ->
-    throw({bad_field, Path}).
+                    || {N, FT} <- Fields]).
 
 lookup(N, Msg) ->
     case Msg of

@@ -10,10 +10,11 @@
 %% after the last.
 %%
 %% The rosbridge server (`toroco_live_rosbridge') checks a message against
-%% its type before it hands it over with {@link publish/3}, a cast, so a
-%% client never waits on the robot; a device whose mailbox holds more than
-%% `?MAX_QUEUE' messages gets none (`{error, busy}'), and a Twist that does
-%% not fit is counted as `bad_message' here too. `info/2': `received',
+%% its type before it hands it over with {@link publish/3}, a call bounded by
+%% `?CALL_MS': a device that does not take it by then (the robot is behind)
+%% answers `{error, busy}' and the message is dropped, so a client waits at
+%% most that long and a flood of publishes piles up nowhere. A Twist that
+%% does not fit is counted as `bad_message' here too. `info/2': `received',
 %% `emitted', `bad_message'; publishes refused as `busy' are counted by the
 %% server (`/metrics').
 %%
@@ -32,22 +33,18 @@
 -export([publish/3, stimulus/2]).
 -export([interface/1, init/2, handle_input/4, handle_event/4, info/2]).
 
-%% Publishes waiting in the device's mailbox past which more are refused.
--define(MAX_QUEUE, 200).
+%% How long a publish may wait for the device.
+-define(CALL_MS, 200).
 %% The inbound topics: output name => ROS 2 type.
 -define(INBOUND, #{cmd_vel => <<"geometry_msgs/msg/Twist">>}).
 
 %% @doc Hands a message for output `Output' (`cmd_vel') to device `Name'.
 -spec publish(atom(), atom(), map()) -> ok | {error, {not_running, atom()} | busy}.
 publish(Name, Output, Msg) ->
-    case whereis(toroco_names:process(Name)) of
-        undefined -> {error, {not_running, Name}};
-        Pid ->
-            case erlang:process_info(Pid, message_queue_len) of
-                {message_queue_len, N} when N > ?MAX_QUEUE -> {error, busy};
-                {message_queue_len, _} -> Pid ! {?MODULE, publish, Output, Msg}, ok;
-                undefined -> {error, {not_running, Name}}
-            end
+    try toroco_device:call(Name, {?MODULE, publish, Output, Msg}, ?CALL_MS)
+    catch
+        exit:{timeout, _} -> {error, busy};
+        exit:_ -> {error, {not_running, Name}}
     end.
 
 %% @doc Lockstep: a message on `cmd_vel' for device `Name' as a stimulus
@@ -73,6 +70,11 @@ handle_input(_Input, _Value, _State, _D) ->
 
 -spec handle_event(gen_statem:event_type(), term(), listening, map()) ->
           toroco_behavior:result().
+handle_event({call, From}, {?MODULE, publish, cmd_vel, Msg}, State, D) ->
+    {keep_state, D1, Actions} = handle_event(info, {?MODULE, publish, cmd_vel, Msg}, State, D),
+    {keep_state, D1, [{reply, From, ok} | Actions]};
+handle_event({call, From}, _Request, _State, _D) ->
+    {keep_state_and_data, [{reply, From, {error, unknown_call}}]};
 handle_event(info, {?MODULE, publish, cmd_vel, Msg}, _State, D = #{received := R}) ->
     case toroco_live_ros:twist_to_wheels(Msg, toroco_live_ros:geometry()) of
         {ok, Wheels} ->
@@ -82,7 +84,7 @@ handle_event(info, {?MODULE, publish, cmd_vel, Msg}, _State, D = #{received := R
             #{name := Name, bad_message := B} = D,
             logger:warning("~p: a /cmd_vel message that is not a Twist: ~0p", [Name, Why],
                            #{domain => [toroco, live, ros]}),
-            {keep_state, D#{received := R + 1, bad_message := B + 1}}
+            {keep_state, D#{received := R + 1, bad_message := B + 1}, []}
     end;
 handle_event(_Type, _Content, _State, _D) ->
     keep_state_and_data.

@@ -84,12 +84,13 @@ port() ->
 
 %% @doc The counters (`/metrics'): `clients' now, and totals: `connections',
 %% `messages' sent to clients, `dropped' (not sent to a client behind),
+%% `tap_dropped' (events the hub itself fell behind on, SPEC §10),
 %% `published' (handed to the `ros' device), `refused_unauthorized',
 %% `faults' (status errors for bad input), `disconnected' (clients closed
 %% for misbehaving), `fragments_expired'. Empty when the server does not run.
 -spec stats() -> #{atom() => non_neg_integer()}.
 stats() ->
-    try gen_server:call(?MODULE, stats, 2000)
+    try gen_server:call(?MODULE, stats, 10000)
     catch exit:_ -> #{}
     end.
 
@@ -245,8 +246,11 @@ terminate(_, #hub{listener = L, tap = Tap}) ->
 %% Inside
 %%====================================================================
 
-bump(Counter, H = #hub{counters = Cs}) ->
-    H#hub{counters = maps:update_with(Counter, fun(N) -> N + 1 end, 1, Cs)}.
+bump(Counter, H) ->
+    bump(Counter, 1, H).
+
+bump(Counter, N, H = #hub{counters = Cs}) ->
+    H#hub{counters = maps:update_with(Counter, fun(K) -> K + N end, N, Cs)}.
 
 fresh_topics(H = #hub{topics = {_, At}}) ->
     Now = erlang:monotonic_time(millisecond),
@@ -295,7 +299,7 @@ event({lifecycle, _, _, _}, H = #hub{topics = {Topics, _}}) ->
     H#hub{topics = {Topics, -1}};
 event({dropped, N}, H = #hub{conns = Conns}) ->
     _ = [C ! {rosbridge, dropped, N} || C <- maps:keys(Conns)],
-    H;
+    bump(tap_dropped, N, H);
 event(Event, H = #hub{subs = Subs}) ->
     case toroco_live_ros:event_topic(Event) of
         none -> H;

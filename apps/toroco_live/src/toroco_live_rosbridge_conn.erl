@@ -21,7 +21,10 @@
 %%     a robot in client mode shows its topics here). Publishing needs the
 %%     dashboard's token.</li>
 %% <li>`call_service' (`service', `args', `id'): `/rosapi/topics',
-%%     `/rosapi/topic_type', `/rosapi/services', `/toroco/inspect' (`args'
+%%     `/rosapi/topics_and_raw_types' (with each type's message definition,
+%%     `toroco_live_ros:definition/1', which Foxglove's Rosbridge connection
+%%     reads for ROS 2), `/rosapi/topic_type', `/rosapi/services',
+%%     `/rosapi/get_ros_version' (2, `jazzy': the types' distribution), `/toroco/inspect' (`args'
 %%     `{}' or `{"name": N}'), answered with `service_response'. None of
 %%     them changes the robot, so none needs the token.</li>
 %% <li>`auth' (`mac' or `token': the dashboard's token; `?token=T' on the
@@ -294,10 +297,22 @@ client_message({close, _, _}, {ok, C}) ->
     close(C, 1000, normal).
 
 text_message(Text, C) ->
-    try jiffy:decode(Text, [return_maps]) of
-        #{<<"op">> := Op} = M when is_binary(Op) -> op(Op, M, C);
+    case jiffy_decode(Text) of
+        #{<<"op">> := Op} = M when is_binary(Op) -> safe_op(Op, M, C);
+        not_json -> fault(C, null, <<"not JSON">>);
         _ -> fault(C, null, <<"a JSON object with an \"op\" field was expected">>)
-    catch _:_ -> fault(C, null, <<"not JSON">>)
+    end.
+
+%% A message this module did not foresee is a fault of the client's, logged,
+%% never a crash of the connection.
+safe_op(Op, M, C) ->
+    try op(Op, M, C)
+    catch
+        exit:normal:_ -> exit(normal);
+        Class:Why:Stack ->
+            logger:error("rosbridge: ~ts failed: ~0p:~0P ~0P", [text(Op), Class, Why, 20, Stack, 20],
+                         ?LOG),
+            fault(C, maps:get(<<"id">>, M, null), [<<"op ">>, text(Op), <<" could not be handled">>])
     end.
 
 op(Op, M, C) ->
@@ -398,7 +413,7 @@ subscribe(Id, M, C = #conn{subs = Subs}) ->
         case {known_type(Topic), maps:get(<<"type">>, M, null)} of
             _ when Count >= ?MAX_SUBS ->
                 fault(C, Id, io_lib:format("at most ~b subscriptions per connection", [?MAX_SUBS]));
-            {error, _} ->
+            {{error, _}, _} ->
                 fault(C, Id, [<<"unknown topic ">>, Topic, <<" (the robot's topics: call /rosapi/topics)">>]);
             {{ok, Type}, Asked} when Asked =/= null, Asked =/= <<>> ->
                 case same_type(Asked, Type) of
@@ -450,7 +465,9 @@ known_type(Topic) ->
         [] -> {error, unknown_topic}
     end.
 
-%% `pkg/Type' (as ROS 1 and many clients write it) is `pkg/msg/Type'.
+%% `pkg/Type' (as ROS 1 and many clients write it) is `pkg/msg/Type'; no
+%% type is the topic's.
+same_type(null, _) -> true;
 same_type(Asked, Type) when is_binary(Asked) ->
     case binary:split(Asked, <<"/">>, [global]) of
         [Pkg, Name] -> <<Pkg/binary, "/msg/", Name/binary>> =:= Type;
@@ -552,7 +569,8 @@ hand_over(Id, <<$/, Name/binary>> = Topic, Msg, C) ->
 %% Services
 %%--------------------------------------------------------------------
 
--define(SERVICES, [<<"/rosapi/topics">>, <<"/rosapi/topic_type">>, <<"/rosapi/services">>,
+-define(SERVICES, [<<"/rosapi/topics">>, <<"/rosapi/topics_and_raw_types">>,
+                   <<"/rosapi/topic_type">>, <<"/rosapi/services">>, <<"/rosapi/get_ros_version">>,
                    <<"/toroco/inspect">>]).
 
 call_service(Id, Service, Args, C) ->
@@ -569,6 +587,10 @@ call_service(Id, Service, Args, C) ->
 service(<<"/rosapi/topics">>, _) ->
     Topics = toroco_live_rosbridge:topics(),
     {ok, #{topics => [T || #{topic := T} <- Topics], types => [Ty || #{type := Ty} <- Topics]}};
+service(<<"/rosapi/topics_and_raw_types">>, _) ->
+    Topics = toroco_live_rosbridge:topics(),
+    {ok, #{topics => [T || #{topic := T} <- Topics], types => [Ty || #{type := Ty} <- Topics],
+           typedefs_full_text => [toroco_live_ros:definition(Ty) || #{type := Ty} <- Topics]}};
 service(<<"/rosapi/topic_type">>, #{<<"topic">> := T}) when is_binary(T) ->
     case known_type(slash(T)) of
         {ok, Type} -> {ok, #{type => Type}};
@@ -576,6 +598,9 @@ service(<<"/rosapi/topic_type">>, #{<<"topic">> := T}) when is_binary(T) ->
     end;
 service(<<"/rosapi/topic_type">>, _) ->
     {error, <<"/rosapi/topic_type needs {\"topic\": T}">>};
+service(<<"/rosapi/get_ros_version">>, _) ->
+    %% The message types are Jazzy's (Range has `variance').
+    {ok, #{version => 2, distro => <<"jazzy">>}};
 service(<<"/rosapi/services">>, _) ->
     {ok, #{services => ?SERVICES}};
 service(<<"/toroco/inspect">>, Args) when Args =:= #{}; Args =:= null; Args =:= [] ->
@@ -632,7 +657,7 @@ pieces_in(Id, Total, Got, _Bytes, _Ref, C) when map_size(Got) =:= Total ->
     C1 = drop_fragments(Id, C),
     case jiffy_decode(Whole) of
         #{<<"op">> := <<"fragment">>} -> fault(C1, Id, <<"fragments of fragments are not taken">>);
-        #{<<"op">> := Op} = M when is_binary(Op) -> op(Op, M, C1);
+        #{<<"op">> := Op} = M when is_binary(Op) -> safe_op(Op, M, C1);
         _ -> fault(C1, Id, [<<"the fragments of message ">>, text(Id),
                             <<" do not make a JSON object with an \"op\"">>])
     end;

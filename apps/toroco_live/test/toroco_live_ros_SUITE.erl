@@ -6,7 +6,7 @@
 
 all() ->
     [twist_wheels_round_trip, twist_checked_against_its_type, messages_have_every_field,
-     topics_of_a_wiring, geometry_from_env, stamps].
+     topics_of_a_wiring, geometry_from_env, stamps, definitions].
 
 twist_wheels_round_trip() ->
     [{doc, "Wheels -> Twist -> wheels gives the same servo units; forward is +x, left wheel "
@@ -121,4 +121,25 @@ stamps(_Config) ->
     #{sec := 1, nanosec := 5} = toroco_live_ros:stamp(1000000005),
     #{sec := -1, nanosec := 999999999} = toroco_live_ros:stamp(-1),
     #{sec := 0, nanosec := 0} = toroco_live_ros:stamp(0),
+    ok.
+
+definitions() ->
+    [{doc, "A type's message definition lists its fields in order, then each type it uses "
+      "once, after the separator and MSG: line ROS 2 tools write"}].
+definitions(_Config) ->
+    Odom = toroco_live_ros:definition(<<"nav_msgs/msg/Odometry">>),
+    [Own | Deps] = binary:split(Odom, <<"\n", (binary:copy(<<"=">>, 80))/binary, "\nMSG: ">>, [global]),
+    <<"std_msgs/Header header\nstring child_frame_id\n"
+      "geometry_msgs/PoseWithCovariance pose\ngeometry_msgs/TwistWithCovariance twist">> =
+        string:trim(Own),
+    Names = [hd(binary:split(D, <<"\n">>)) || D <- Deps],
+    true = length(Names) =:= length(lists:usort(Names)),   % each once
+    [<<"builtin_interfaces/Time">>, <<"geometry_msgs/Point">>, <<"geometry_msgs/Pose">>,
+     <<"geometry_msgs/PoseWithCovariance">>, <<"geometry_msgs/Quaternion">>, <<"geometry_msgs/Twist">>,
+     <<"geometry_msgs/TwistWithCovariance">>, <<"geometry_msgs/Vector3">>, <<"std_msgs/Header">>] =
+        lists:sort(Names),
+    true = nomatch =/= binary:match(Odom, <<"float64[36] covariance">>),
+    <<"uint8 ULTRASOUND=0\nuint8 INFRARED=1\nstd_msgs/Header header\n", _/binary>> =
+        toroco_live_ros:definition(<<"sensor_msgs/msg/Range">>),
+    <<"string data\n">> = toroco_live_ros:definition(<<"std_msgs/msg/String">>),
     ok.

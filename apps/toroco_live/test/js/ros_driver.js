@@ -1,0 +1,150 @@
+// Drives rosbridge clients for toroco_live_rosbridge_SUITE: one JSON
+// command per stdin line, one JSON event per stdout line.
+// The reference client (roslib 2.1.0, ESM, over ws):
+//   {"cmd":"connect","url":U}                 -> open | error | close {code}
+//   {"cmd":"getTopics"}                       -> topics {topics, types}
+//   {"cmd":"getServices"}                     -> services {services}
+//   {"cmd":"rawTypes"}                        -> raw_types {topics, types, parsed}: each
+//                                                definition parsed by @foxglove/rosmsg
+//   {"cmd":"getTopicType","topic":T}          -> topic_type {type}
+//   {"cmd":"subscribe","topic":T,"type":Ty, "throttle_rate":Ms, "queue_length":N}
+//                                             -> message {topic, msg} per message
+//   {"cmd":"unsubscribe","topic":T}
+//   {"cmd":"publish","topic":T,"type":Ty,"msg":M}
+//   {"cmd":"drive","topic":T,"type":Ty,"msg":M,"hz":H,"ms":D}
+//                                             -> drove {n, last_ms}: published n times
+//                                                (last_ms: Date.now() of the last)
+//   {"cmd":"call","service":S,"args":A}       -> service {ok, values}
+//   {"cmd":"auth","token":T}
+//   {"cmd":"close"}
+// Every status operation the server sends comes out as status {level, msg, id}.
+// A raw WebSocket, for what a misbehaving client does:
+//   {"cmd":"raw_connect","url":U,"read":false}  (read:false never reads)
+//   {"cmd":"raw_text","text":S} | {"cmd":"raw_json","json":J}
+//   {"cmd":"raw_bytes","n":N}                    a text message of N bytes
+//   events raw_open, raw_text {msg}, raw_close {code}, raw_error
+"use strict";
+const readline = require("readline");
+const path = require("path");
+const { pathToFileURL } = require("url");
+
+const out = (ev) => process.stdout.write(JSON.stringify(ev) + "\n");
+// The suite closes the port when a case ends: stdout goes, so does the driver.
+process.stdout.on("error", () => process.exit(0));
+const modules = process.env.NODE_PATH;
+
+async function main() {
+  const ROSLIB = await import(pathToFileURL(path.join(modules, "roslib", "dist", "RosLib.js")).href);
+  const WebSocket = require(path.join(modules, "ws"));
+  let ros = null;
+  const topics = new Map();
+  let raw = null;
+
+  function topic(name, type, extra) {
+    const key = name + " " + JSON.stringify(extra || {});
+    if (!topics.has(key)) topics.set(key, new ROSLIB.Topic({ ros, name, messageType: type, ...(extra || {}) }));
+    return topics.get(key);
+  }
+
+  function connect(url) {
+    ros = new ROSLIB.Ros({ url });
+    const handle = ros.handleMessage.bind(ros);
+    ros.handleMessage = (m) => {
+      if (m && m.op === "status") out({ ev: "status", level: m.level, msg: m.msg, id: m.id || null });
+      handle(m);
+    };
+    ros.on("connection", () => out({ ev: "open" }));
+    ros.on("error", (e) => out({ ev: "error", error: String(e && e.message || e) }));
+    ros.on("close", (e) => out({ ev: "close", code: e && e.code }));
+  }
+
+  function rawConnect(url, read) {
+    raw = new WebSocket(url);
+    raw.on("open", () => { out({ ev: "raw_open" }); if (!read) raw._socket.pause(); });
+    raw.on("message", (data) => {
+      let msg;
+      try { msg = JSON.parse(data.toString()); } catch { msg = { unparsed: data.length }; }
+      out({ ev: "raw_text", msg });
+    });
+    raw.on("close", (code) => out({ ev: "raw_close", code }));
+    raw.on("error", (e) => out({ ev: "raw_error", error: String(e && e.message || e) }));
+  }
+
+  const rl = readline.createInterface({ input: process.stdin });
+  rl.on("line", (line) => {
+    let c;
+    try { c = JSON.parse(line); } catch { out({ ev: "bad_command", line }); return; }
+    try {
+      switch (c.cmd) {
+        case "connect": connect(c.url); break;
+        case "getTopics":
+          ros.getTopics((r) => out({ ev: "topics", topics: r.topics, types: r.types }),
+                        (e) => out({ ev: "topics_failed", error: String(e) }));
+          break;
+        case "rawTypes": {
+          // rosapi/topics_and_raw_types, each definition parsed as ROS 2 tooling does
+          const { parse } = require(path.join(modules, "@foxglove", "rosmsg"));
+          new ROSLIB.Service({ ros, name: "rosapi/topics_and_raw_types", serviceType: "" }).callService({},
+            (r) => out({ ev: "raw_types", topics: r.topics, types: r.types,
+                         parsed: r.typedefs_full_text.map((t) => parse(t, { ros2: true }).map((d) => ({ name: d.name || null, fields: d.definitions.length }))) }),
+            (e) => out({ ev: "raw_types_failed", error: String(e) }));
+          break;
+        }
+        case "getServices":
+          ros.getServices((s) => out({ ev: "services", services: s }),
+                          (e) => out({ ev: "services_failed", error: String(e) }));
+          break;
+        case "getTopicType":
+          ros.getTopicType(c.topic, (t) => out({ ev: "topic_type", type: t }),
+                           (e) => out({ ev: "topic_type_failed", error: String(e) }));
+          break;
+        case "subscribe": {
+          const extra = {};
+          for (const k of ["throttle_rate", "queue_length"]) if (k in c) extra[k] = c[k];
+          topic(c.topic, c.type, extra).subscribe((msg) => out({ ev: "message", topic: c.topic, msg }));
+          out({ ev: "subscribed", topic: c.topic });
+          break;
+        }
+        case "unsubscribe":
+          for (const [k, t] of topics) if (k.startsWith(c.topic + " ")) t.unsubscribe();
+          out({ ev: "unsubscribed", topic: c.topic });
+          break;
+        case "publish":
+          topic(c.topic, c.type).publish(c.msg);
+          out({ ev: "published" });
+          break;
+        case "drive": {
+          const t = topic(c.topic, c.type);
+          const every = 1000 / c.hz;
+          const start = Date.now();
+          let n = 0;
+          const tick = () => {
+            t.publish(c.msg); n++;
+            if (Date.now() - start + every <= c.ms) setTimeout(tick, every);
+            else out({ ev: "drove", n, last_ms: Date.now() });
+          };
+          tick();
+          break;
+        }
+        case "call": {
+          const s = new ROSLIB.Service({ ros, name: c.service, serviceType: c.type || "" });
+          s.callService(c.args || {}, (values) => out({ ev: "service", ok: true, values }),
+                        (e) => out({ ev: "service", ok: false, values: e }));
+          break;
+        }
+        case "auth": ros.authenticate(c.token); break;
+        case "close": ros.close(); break;
+        case "raw_connect": rawConnect(c.url, c.read !== false); break;
+        case "raw_text": raw.send(c.text); break;
+        case "raw_json": raw.send(JSON.stringify(c.json)); break;
+        case "raw_bytes": raw.send(JSON.stringify({ op: "publish", topic: "/cmd_vel", msg: { pad: "x".repeat(c.n) } })); break;
+        default: out({ ev: "bad_command", line });
+      }
+    } catch (e) {
+      out({ ev: "failed", cmd: c.cmd, error: String(e && e.message || e) });
+    }
+  });
+  out({ ev: "ready" });
+}
+
+main().catch((e) => { out({ ev: "fatal", error: String(e && e.stack || e) }); process.exit(1); });
