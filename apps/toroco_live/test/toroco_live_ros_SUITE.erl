@@ -139,7 +139,7 @@ definitions(_Config) ->
      <<"geometry_msgs/TwistWithCovariance">>, <<"geometry_msgs/Vector3">>, <<"std_msgs/Header">>] =
         lists:sort(Names),
     true = nomatch =/= binary:match(Odom, <<"float64[36] covariance">>),
-    <<"uint8 ULTRASOUND=0\nuint8 INFRARED=1\nstd_msgs/Header header\n", _/binary>> =
+    <<"std_msgs/Header header\nuint8 ULTRASOUND=0\nuint8 INFRARED=1\n", _/binary>> =
         toroco_live_ros:definition(<<"sensor_msgs/msg/Range">>),
     <<"string data\n">> = toroco_live_ros:definition(<<"std_msgs/msg/String">>),
     ok.
