@@ -12,7 +12,7 @@ all() ->
     [advertises_publishes_and_drives, refused_topic_not_published, reconnects_with_backoff,
      disconnect_ends_it,
      bad_handshakes_retried, bad_url_and_options_refused, stalled_server_costs_the_robot_nothing,
-     own_server_on_another_node].
+     own_server_on_another_node, app_env_dials].
 
 suite() -> [{timetrap, {seconds, 90}}].
 
@@ -275,6 +275,32 @@ own_server_on_another_node(_Config) ->
         [#{received := 10, refused := 0, refused_topics := []}] = toroco_live:rosbridge_clients()
     after
         peer:stop(Peer)
+    end.
+
+app_env_dials() ->
+    [{doc, "The app env rosbridge_connect ({Url, Opts}, or a list) dials when toroco_live "
+      "starts, under toroco_live_rosclient_sup; a URL it cannot use (wss) does not keep "
+      "the application from starting"}].
+app_env_dials(_Config) ->
+    {L, Port} = listen(),
+    ok = application:stop(toroco_live),
+    ok = application:set_env(toroco_live, rosbridge_connect,
+                             [{url(Port, "/"), #{backoff_min => 20}}, "wss://nowhere/"]),
+    try
+        ok = application:start(toroco_live),
+        {S, _, P} = accept(L),
+        {_, _, _} = recv_op(S, P, fun(#{<<"op">> := <<"subscribe">>}) -> true; (_) -> false end),
+        [Pid] = toroco_live_rosclient_sup:clients(),
+        [{_, Pid, worker, _}] = supervisor:which_children(toroco_live_rosclient_sup),
+        {_, Sup, supervisor, _} = lists:keyfind(toroco_live_rosclient_sup, 1,
+                                                supervisor:which_children(toroco_live_sup)),
+        Sup = whereis(toroco_live_rosclient_sup),
+        gen_tcp:close(S)
+    after
+        application:unset_env(toroco_live, rosbridge_connect),
+        ok = application:stop(toroco_live),
+        ok = application:start(toroco_live),
+        gen_tcp:close(L)
     end.
 
 url_there(Port, Token) ->
