@@ -282,8 +282,12 @@ common(info, {rosclient_dialled, _, {ok, Socket}}, _State, _D) ->
     %% a connect that finished after its attempt was given up
     _ = gen_tcp:close(Socket),
     keep_state_and_data;
+common(info, {toroco_event, _, {dropped, N}}, _State, D = #data{dropped = Dr}) ->
+    %% from a subscription ended with the connection: not sent, counted
+    {keep_state, D#data{dropped = Dr + N}};
+common(info, {toroco_event, _, Event}, _State, D = #data{dropped = Dr}) when element(1, Event) =:= emit ->
+    {keep_state, D#data{dropped = Dr + 1}};
 common(info, {toroco_event, _, _}, _State, _D) ->
-    %% from a subscription already ended
     keep_state_and_data;
 common(_, _, _State, _D) ->
     keep_state_and_data.
