@@ -24,10 +24,11 @@
 %% the fields in order, each primitive aligned to its size counted from the
 %% end of the header (XCDR1: a float64 on 8), a string as its uint32
 %% length with the terminating zero, its bytes and the zero, a fixed array
-%% as its elements without a length. {@link types/0} lists what is known.
+%% as its elements without a length. {@link types/0} lists what is known;
+%% {@link string_data/1} reads a `std_msgs/msg/String' back (replay).
 -module(toroco_live_ros_msgs).
 
--export([types/0, definition/1, cdr/2]).
+-export([types/0, definition/1, cdr/2, string_data/1]).
 
 -export_type([type_name/0, msg/0]).
 
@@ -203,3 +204,19 @@ value(_, V, Path, _Acc) ->
 put_aligned(Align, Bytes, Size, {Acc, At}) ->
     Pad = (Align - At rem Align) rem Align,
     {[Bytes, <<0:(Pad * 8)>> | Acc], At + Pad + Size}.
+
+%% @doc The `data' of a `std_msgs/msg/String' in CDR (either byte order),
+%% `error' for bytes that are not one.
+-spec string_data(binary()) -> {ok, binary()} | error.
+string_data(<<0, 1, _:2/binary, Len:32/little, Rest/binary>>) -> string_bytes(Len, Rest);
+string_data(<<0, 0, _:2/binary, Len:32/big, Rest/binary>>) -> string_bytes(Len, Rest);
+string_data(_) -> error.
+
+string_bytes(Len, Rest) when Len >= 1, byte_size(Rest) >= Len ->
+    N = Len - 1,
+    case Rest of
+        <<Data:N/binary, 0, _/binary>> -> {ok, Data};
+        _ -> error
+    end;
+string_bytes(_, _) ->
+    error.

@@ -186,7 +186,8 @@ ros_cdr_as_reference(_Config) ->
 
 ros_cdr_errors() ->
     [{doc, "An unknown type, a missing field (named by its path), a value its field cannot "
-      "hold and a string with a NUL are errors naming the culprit"}].
+      "hold and a string with a NUL are errors naming the culprit; a String reads back, "
+      "and bytes that are not one are an error"}].
 ros_cdr_errors(_Config) ->
     {error, {unknown_type, <<"nav_msgs/msg/Path">>}} = toroco_live_ros_msgs:cdr(<<"nav_msgs/msg/Path">>, #{}),
     {error, {unknown_type, x}} = toroco_live_ros_msgs:definition(x),
@@ -210,6 +211,12 @@ ros_cdr_errors(_Config) ->
     {error, {bad_value, [], not_a_map}} = toroco_live_ros_msgs:cdr(<<"std_msgs/msg/String">>, not_a_map),
     %% extra keys are not the encoder's business
     {ok, _} = toroco_live_ros_msgs:cdr(<<"std_msgs/msg/String">>, #{data => <<"x">>, other => 1}),
+    %% a String read back, and bytes that are not one
+    [{ok, D} = toroco_live_ros_msgs:string_data(element(2, toroco_live_ros_msgs:cdr(<<"std_msgs/msg/String">>, #{data => D})))
+     || D <- [<<>>, <<"{}">>, <<"{\"é\":1}"/utf8>>, binary:copy(<<"x">>, 1000)]],
+    [error = toroco_live_ros_msgs:string_data(B)
+     || B <- [<<>>, <<0, 1, 0, 0>>, <<0, 1, 0, 0, 5:32/little, "ab">>, <<0, 1, 0, 0, 0:32>>,
+              <<0, 1, 0, 0, 3:32/little, "abc">>, crypto:strong_rand_bytes(3)]],
     ok.
 
 %% One case per type, `Frame' as every string.

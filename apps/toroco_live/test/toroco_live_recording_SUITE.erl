@@ -13,7 +13,8 @@ all() ->
      foreign_files_refused,
      simulated_run_replays,
      recording_in_lockstep_has_simulated_time,
-     ros2_recording_of_simulated_run, ros2_recording_of_range, ros2_profile_refused].
+     ros2_recording_of_simulated_run, ros2_recording_of_range, ros2_profile_refused,
+     ros2_recording_replays].
 %% The ROS 2 profile (SPEC §15) is read back as ROS 2 tooling reads it:
 %% @mcap/core, @foxglove/rosmsg and @foxglove/rosmsg2-serialization.
 
@@ -27,7 +28,8 @@ end_per_suite(Config) ->
     tl_live:stop(?config(env, Config)).
 
 init_per_testcase(C, Config) when C =:= simulated_run_replays;
-                                  C =:= ros2_recording_of_simulated_run ->
+                                  C =:= ros2_recording_of_simulated_run;
+                                  C =:= ros2_recording_replays ->
     Config;
 init_per_testcase(_Case, Config) ->
     tl_live:fake_robot(),
@@ -330,11 +332,7 @@ simulated_run_replays() ->
       "matching the recording"}].
 simulated_run_replays(Config) ->
     World = filename:join(?config(data_dir, Config), "short.world"),
-    Wiring = filename:join(code:lib_dir(torobot), "../../../../config/torobot.wiring"),
-    WiringFile = case filelib:is_file(Wiring) of
-                     true -> Wiring;
-                     false -> filename:join(root(), "config/torobot.wiring")
-                 end,
+    WiringFile = wiring_file(),
     Path = path(Config, "sim.mcap"),
     ok = toroco_live:record(Path, #{}),
     {ok, Summary} = torobot_sim:run(World, #{wiring => WiringFile}),
@@ -345,7 +343,22 @@ simulated_run_replays(Config) ->
     %% The world's snapshots, for the 3D panel.
     true = maps:get(<<"/toroco/sim/pose">>, P, 0) > 0,
     true = maps:get(<<"/toroco/sim/scene">>, P, 0) > 0,
-    %% The same wiring, with fake sensors and motors standing for the devices.
+    replays_on_fakes(Path, WiringFile).
+
+ros2_recording_replays() ->
+    [{doc, "A ros2-profile recording of a simulated run replays like the default one: the "
+      "sensors' Strings re-emitted, the motors' deliveries matching the recording"}].
+ros2_recording_replays(Config) ->
+    World = filename:join(?config(data_dir, Config), "short.world"),
+    Path = path(Config, "sim_ros2_replay.mcap"),
+    ok = toroco_live:record(Path, #{profile => ros2}),
+    {ok, _} = torobot_sim:run(World, #{wiring => wiring_file()}),
+    {ok, #{dropped := 0}} = toroco_live:stop_recording(),
+    replays_on_fakes(Path, wiring_file()).
+
+%% The wiring of a recorded run, with fake sensors and motors standing for
+%% the devices, replays the recording's sensors to the same motors.
+replays_on_fakes(Path, WiringFile) ->
     #{behaviors := Bs, devices := Ds} = toroco:inspect(),
     _ = [toroco:remove_behavior(B) || B <- Bs],
     _ = [toroco:remove_device(D) || D <- Ds],
