@@ -254,7 +254,7 @@ connected(info, {tcp_error, S, Why}, D = #data{socket = S}) ->
 connected(info, {toroco_event, Tap, Event}, D = #data{tap = Tap}) ->
     send_event(Event, D);
 connected(info, {toroco_live_world, changed}, D) ->
-    Snapshot = toroco_live_world:latest(),
+    Snapshot = try toroco_live_world:latest() catch exit:_ -> none end,
     publish_all(toroco_live_ros:of_world(Snapshot, erlang:system_time(nanosecond)), D);
 connected(info, {'DOWN', M, process, _, _}, D = #data{tap_monitor = M}) ->
     {keep_state, D#data{tap = none, tap_monitor = none}};
