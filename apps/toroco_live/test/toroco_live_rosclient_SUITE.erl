@@ -9,7 +9,8 @@
 -compile([export_all, nowarn_export_all]).
 
 all() ->
-    [advertises_publishes_and_drives, refused_topic_not_published, reconnects_with_backoff,
+    [advertises_publishes_and_drives, odometry_of_the_world, refused_topic_not_published,
+     reconnects_with_backoff,
      disconnect_ends_it,
      bad_handshakes_retried, bad_url_and_options_refused, stalled_server_costs_the_robot_nothing,
      own_server_on_another_node, app_env_dials].
@@ -90,6 +91,32 @@ advertises_publishes_and_drives(_Config) ->
     nomatch = re:run(Metrics, "t0ken-123"),
     true = is_process_alive(Pid),
     _ = P2,
+    gen_tcp:close(S),
+    gen_tcp:close(L).
+
+odometry_of_the_world() ->
+    [{doc, "While a simulated world runs, /odom is advertised as nav_msgs/msg/Odometry and "
+      "each snapshot's pose is published there"}].
+odometry_of_the_world(_Config) ->
+    {L, Port} = listen(),
+    {ok, _} = toroco_live:rosbridge_connect(url(Port, "/"), #{}),
+    {S, _, P0} = accept(L),
+    {_, _, P1} = recv_op(S, P0, fun(#{<<"op">> := <<"subscribe">>}) -> true; (_) -> false end),
+    Robot = #{name => r1, pose => {0.5, 0.75, 90.0}, radius => 0.1, winner => none, ir => [],
+              camera => #{fov_deg => 60, range => 1.0}},
+    toroco_live_world ! {toroco_live_world, snapshot,
+                         #{run => odom_test, t_ms => 0, arena => {2.0, 2.0}, walls => [], objects => [],
+                           robots => [Robot]}},
+    {#{<<"topic">> := <<"/odom">>, <<"type">> := <<"nav_msgs/msg/Odometry">>}, _, P2} =
+        recv_op(S, P1, fun(#{<<"op">> := <<"advertise">>, <<"topic">> := T}) -> T =:= <<"/odom">>;
+                          (_) -> false end),
+    {#{<<"msg">> := Odom}, _, _} =
+        recv_op(S, P2, fun(#{<<"op">> := <<"publish">>, <<"topic">> := T}) -> T =:= <<"/odom">>;
+                          (_) -> false end),
+    #{<<"header">> := #{<<"frame_id">> := <<"odom">>}, <<"child_frame_id">> := <<"base_link">>,
+      <<"pose">> := #{<<"pose">> := #{<<"position">> := #{<<"x">> := 0.5, <<"y">> := 0.75},
+                                      <<"orientation">> := #{<<"z">> := Z, <<"w">> := W}}}} = Odom,
+    true = abs(Z - math:sin(math:pi() / 4)) < 1.0e-9 andalso abs(W - math:cos(math:pi() / 4)) < 1.0e-9,
     gen_tcp:close(S),
     gen_tcp:close(L).
 
