@@ -259,6 +259,8 @@ rosbridge(off, _Config) ->
 rosbridge(_Port, Config) ->
     case supervisor:start_child(toroco_live_sup, toroco_live_rosbridge:child_spec(Config)) of
         {ok, _} -> {ok, toroco_live_rosbridge:port()};
+        %% The supervisor adds the child it could not start: the reason is enough.
+        {error, {Reason, Child}} when element(1, Child) =:= child -> {error, Reason};
         {error, Reason} -> {error, Reason}
     end.
 

@@ -315,8 +315,8 @@ not_a_websocket(Config) ->
     gen_tcp:close(S).
 
 start_options() ->
-    [{doc, "toroco_live:info/0 shows the rosbridge port; a bad rosbridge option is refused "
-      "naming it; start/1 leaves it off by default"}].
+    [{doc, "toroco_live:info/0 shows the rosbridge port; a bad rosbridge option or a port "
+      "already taken is refused naming it; start/1 leaves it off by default"}].
 start_options(Config) ->
     Port = ?config(port, Config),
     #{rosbridge := Port} = toroco_live:info(),
@@ -324,6 +324,14 @@ start_options(Config) ->
     {error, {bad_option, {rosbridge, fast}}} = toroco_live:start(#{http => 0, rosbridge => fast}),
     {ok, #{rosbridge := off}} = toroco_live:start(#{http => 0, foxglove => off}),
     off = toroco_live_rosbridge:port(),
+    toroco_live:stop(),
+    %% A port already taken: refused naming the server, nothing left running.
+    {ok, L} = gen_tcp:listen(0, [{ip, {127, 0, 0, 1}}]),
+    {ok, Taken} = inet:port(L),
+    {error, {rosbridge, {listen, eaddrinuse}}} =
+        toroco_live:start(#{http => 0, foxglove => off, rosbridge => Taken}),
+    not_running = toroco_live:info(),
+    gen_tcp:close(L),
     ok.
 
 simulated_range_and_odometry() ->
