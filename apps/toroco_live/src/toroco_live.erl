@@ -10,6 +10,13 @@
 %% takes them all away again. The application `toroco_live' calls {@link
 %% start/1} with its app env (the same keys).
 %%
+%% <b>Client mode</b> (SPEC §15): {@link rosbridge_connect/2} dials a
+%% rosbridge server and keeps the robot's topics there
+%% (`toroco_live_rosclient', under `toroco_live_rosclient_sup'),
+%% {@link rosbridge_disconnect/1} ends it, {@link rosbridge_clients/0}
+%% says how each is doing. The app env `rosbridge_connect' (a URL, `{Url,
+%% Opts}', or a list of them) dials when the application starts.
+%%
 %% <b>Recordings</b> (SPEC §12): {@link record/2}, {@link stop_recording/0}
 %% (MCAP files, `toroco_live_recorder'), {@link dump/1} (the flight
 %% recorder, `toroco_live_flight'), {@link replay/2} (`toroco_live_replay').
@@ -31,6 +38,7 @@
 
 -export([start/1, stop/0, info/0, url/0]).
 -export([record/2, stop_recording/0, dump/1, replay/2]).
+-export([rosbridge_connect/2, rosbridge_disconnect/1, rosbridge_clients/0]).
 
 -export_type([opts/0, info/0]).
 
@@ -110,17 +118,23 @@ url() ->
 %%====================================================================
 
 %% @doc Records the events of `kinds' (default all) about `names' (default
-%% all) to an MCAP file with the Foxglove bridge's channels and schemas.
+%% all) to an MCAP file. `profile' `foxglove' (the default): the Foxglove
+%% bridge's channels and JSON Schemas; `ros2' (SPEC §15): the MCAP profile
+%% `ros2', the robot's ROS 2 topics with `ros2msg' schemas and `cdr'
+%% messages, `std_msgs/msg/String' for the rest (`toroco_live_recorder').
 %% Writing never holds up the robot: past a bounded buffer events are
-%% dropped and counted.
+%% dropped and counted. `{error, {bad_option, {profile, V}}}' for another
+%% profile.
 -spec record(file:filename_all(), #{kinds => [emit | deliver | router | lifecycle],
-                                    names => all | [atom()]}) -> ok | {error, term()}.
+                                    names => all | [atom()],
+                                    profile => foxglove | ros2}) -> ok | {error, term()}.
 record(Path, Opts) ->
     toroco_live_flight:record(Path, Opts).
 
 %% @doc Ends the recording and completes the file.
 -spec stop_recording() -> {ok, #{path := file:filename_all(), messages := non_neg_integer(),
-                                 dropped := non_neg_integer()}} | {error, term()}.
+                                 dropped := non_neg_integer(),
+                                 unencodable => non_neg_integer()}} | {error, term()}.
 stop_recording() ->
     toroco_live_flight:stop_recording().
 
@@ -137,6 +151,49 @@ dump(Path) ->
                  differed := [map()]}} | {error, term()}.
 replay(Path, Opts) ->
     toroco_live_replay:replay(Path, Opts).
+
+%%====================================================================
+%% Client mode
+%%====================================================================
+
+%% @doc Dials the rosbridge v2 server at `Url' (`ws://host:port/path',
+%% `?token=T' for a server that asks for one), advertises the robot's
+%% topics there, publishes its messages, subscribes to its inbound topics
+%% (`/cmd_vel') and reconnects with backoff when the connection goes.
+%% `{ok, Pid}' at once, connected or not (see {@link rosbridge_clients/0});
+%% `{error, {bad_url, Url}}', `{error, {unsupported_scheme, S}}' or
+%% `{error, {bad_option, {Key, Value}}}' (options: `max_queue',
+%% `backoff_min', `backoff_max', `connect_timeout', `max_message', see
+%% `toroco_live_rosclient').
+-spec rosbridge_connect(binary() | string(), toroco_live_rosclient:opts()) ->
+          {ok, pid()} | {error, term()}.
+rosbridge_connect(Url, Opts) ->
+    case toroco_live_rosclient:options(Url, Opts) of
+        {ok, _, _} when is_map(Opts) ->
+            try toroco_live_rosclient_sup:start_client(Url, Opts)
+            catch exit:{noproc, _} -> {error, not_started}
+            end;
+        {error, _} = E -> E
+    end.
+
+%% @doc Ends a client: it closes its connection and is not dialled again.
+-spec rosbridge_disconnect(pid()) -> ok | {error, not_found}.
+rosbridge_disconnect(Pid) ->
+    try toroco_live_rosclient_sup:stop_client(Pid)
+    catch exit:{noproc, _} -> {error, not_found}
+    end.
+
+%% @doc Each client: its URL, `state' (`connected', `connecting' or
+%% `waiting' to dial again), `attempts' since it was last connected,
+%% `connects', messages `sent' and `received', `dropped' (the robot's
+%% messages it could not send), `refused' (the server's messages that did
+%% not fit their type or the `ros' device could not take), `refused_topics'
+%% (the topics the server said it does not take, on this connection),
+%% `last_error'.
+-spec rosbridge_clients() -> [toroco_live_rosclient:info()].
+rosbridge_clients() ->
+    [I || Pid <- toroco_live_rosclient_sup:clients(),
+          I <- [try toroco_live_rosclient:info(Pid) catch exit:_ -> none end], I =/= none].
 
 %%====================================================================
 %% Starting

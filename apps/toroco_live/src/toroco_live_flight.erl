@@ -99,7 +99,8 @@ record(Path, Opts) ->
 
 %% @doc Ends the recording (see `toroco_live:stop_recording/0').
 -spec stop_recording() -> {ok, #{path := file:filename_all(), messages := non_neg_integer(),
-                                 dropped := non_neg_integer()}} | {error, term()}.
+                                 dropped := non_neg_integer(),
+                                 unencodable => non_neg_integer()}} | {error, term()}.
 stop_recording() ->
     gen_server:call(?MODULE, stop_recording, 60000).
 
@@ -160,13 +161,16 @@ handle_info({'DOWN', M, process, _, _}, F = #flight{tap_monitor = M}) ->
     {noreply, F#flight{tap = none, tap_monitor = none}};
 handle_info(subscribe, F = #flight{tap = none}) ->
     {noreply, subscribe(F)};
-handle_info({toroco_live_world, changed}, F) ->
-    {Msgs, Scene} = toroco_live_channels:world(toroco_live_world:latest(),
-                                               erlang:system_time(nanosecond), F#flight.scene),
-    noreply(lists:foldl(fun({K, T, J}, Acc = #flight{recording = R}) ->
-                                keep({T, {message, K, J}},
-                                     Acc#flight{recording = record_message(K, T, J, R)})
-                        end, F#flight{scene = Scene}, Msgs));
+handle_info({toroco_live_world, changed}, F = #flight{recording = R}) ->
+    Snapshot = toroco_live_world:latest(),
+    Now = erlang:system_time(nanosecond),
+    {Msgs, Scene} = toroco_live_channels:world(Snapshot, Now, F#flight.scene),
+    R1 = case R of
+             none -> none;
+             _ -> toroco_live_recorder:world(Snapshot, Now, Msgs, R)
+         end,
+    noreply(lists:foldl(fun({K, T, J}, Acc) -> keep({T, {message, K, J}}, Acc) end,
+                        F#flight{scene = Scene, recording = R1}, Msgs));
 handle_info(_, F) ->
     {noreply, F}.
 
@@ -211,9 +215,6 @@ event(Event, F0 = #flight{recording = R}) ->
         _ -> ok
     end,
     F1.
-
-record_message(_, _, _, none) -> none;
-record_message(K, T, J, R) -> toroco_live_recorder:message(K, T, J, R).
 
 drain(F = #flight{tap = Tap}, Until) ->
     Wait = min(?QUIET_MS, max(0, Until - erlang:monotonic_time(millisecond))),

@@ -6,7 +6,7 @@
 %%
 %% What is written, following the published format (version 0):
 %% ```
-%% magic, Header (profile "", library "toroco_live ...")
+%% magic, Header (profile "" or "ros2", library "toroco_live ...")
 %% data section: Schema and Channel records as they first appear, then
 %%               Chunks (uncompressed) each followed by its Message Index
 %%               records, one per channel of the chunk
@@ -17,14 +17,17 @@
 %% Every record is `opcode:8, length:64/little, content'; strings and maps
 %% carry a 32-bit little-endian byte length.
 %%
-%% Writer: {@link new/1}, {@link add_schema/4}, {@link add_channel/5},
-%% {@link add_message/5}, {@link finish/1}; each returns the bytes to append
+%% Writer: {@link new/1}, {@link add_schema/4} (`jsonschema') or
+%% {@link add_schema/5} (any schema encoding, `ros2msg' for ROS 2),
+%% {@link add_channel/5} (`json' messages) or {@link add_channel/6} (any
+%% message encoding, `cdr' for ROS 2), {@link add_message/5},
+%% {@link finish/1}; each returns the bytes to append
 %% (possibly none) and the new writer. Reader: {@link read/1} checks magic,
 %% footer, summary CRC, data CRC and each chunk's CRC, and refuses with a
 %% reason anything that is not a complete MCAP file.
 -module(toroco_live_mcap).
 
--export([new/1, add_schema/4, add_channel/5, add_message/5, finish/1,
+-export([new/1, add_schema/4, add_schema/5, add_channel/5, add_channel/6, add_message/5, finish/1,
          bytes_written/1, message_count/1]).
 -export([read/1, library/0]).
 
@@ -87,25 +90,37 @@ library() ->
     <<"toroco_live 0.1.0">>.
 
 %% @doc A new file: its first bytes (magic and header) and the writer.
-%% Option `chunk_bytes' sets the chunk size (default 256 KiB).
--spec new(#{chunk_bytes => pos_integer()}) -> {iodata(), writer()}.
+%% Option `chunk_bytes' sets the chunk size (default 256 KiB), `profile'
+%% the header's profile (default none, `<<>>'; `<<"ros2">>' for ROS 2 data).
+-spec new(#{chunk_bytes => pos_integer(), profile => binary()}) -> {iodata(), writer()}.
 new(Opts) ->
-    Head = [?MAGIC, record(?OP_HEADER, [str(<<>>), str(library())])],
+    Head = [?MAGIC, record(?OP_HEADER, [str(maps:get(profile, Opts, <<>>)), str(library())])],
     W = #writer{chunk_bytes = maps:get(chunk_bytes, Opts, ?CHUNK_BYTES)},
     {Head, data(Head, W)}.
 
 %% @doc A schema record (written at once, outside chunks, and in the summary).
 -spec add_schema(writer(), pos_integer(), binary(), binary()) -> {iodata(), writer()}.
 add_schema(W, Id, Name, Data) ->
-    R = record(?OP_SCHEMA, [<<Id:16/little>>, str(Name), str(<<"jsonschema">>), str(Data)]),
+    add_schema(W, Id, Name, <<"jsonschema">>, Data).
+
+%% @doc A schema record in the schema encoding `Encoding'.
+-spec add_schema(writer(), pos_integer(), binary(), binary(), binary()) -> {iodata(), writer()}.
+add_schema(W, Id, Name, Encoding, Data) ->
+    R = record(?OP_SCHEMA, [<<Id:16/little>>, str(Name), str(Encoding), str(Data)]),
     {R, data(R, W#writer{schemas = [R | W#writer.schemas]})}.
 
 %% @doc A channel record: JSON messages on `Topic' with schema `SchemaId'.
 -spec add_channel(writer(), non_neg_integer(), pos_integer(), binary(), #{binary() => binary()}) ->
           {iodata(), writer()}.
 add_channel(W, Id, SchemaId, Topic, Metadata) ->
+    add_channel(W, Id, SchemaId, Topic, <<"json">>, Metadata).
+
+%% @doc A channel record: messages encoded as `Encoding' on `Topic'.
+-spec add_channel(writer(), non_neg_integer(), pos_integer(), binary(), binary(),
+                  #{binary() => binary()}) -> {iodata(), writer()}.
+add_channel(W, Id, SchemaId, Topic, Encoding, Metadata) ->
     R = record(?OP_CHANNEL, [<<Id:16/little, SchemaId:16/little>>, str(Topic),
-                             str(<<"json">>), map_ss(Metadata)]),
+                             str(Encoding), map_ss(Metadata)]),
     {R, data(R, W#writer{channels = [R | W#writer.channels]})}.
 
 %% @doc One message, logged and published at `T' (ns). Returns the bytes of

@@ -18,6 +18,13 @@
 %% <tr><td>`toroco_live_connections'</td><td>gauge</td><td>`listener' (`dashboard', `foxglove', `rosbridge'): TCP connections holding a slot (`toroco_live_listener')</td></tr>
 %% <tr><td>`toroco_live_connections_accepted_total'</td><td>counter</td><td>`listener': connections given a slot</td></tr>
 %% <tr><td>`toroco_live_connections_closed_total'</td><td>counter</td><td>`listener', `reason': `request_timeout', `idle_timeout', `shed' (for a newcomer), `too_many_from_peer', `too_many_clients' (refused), `ended'</td></tr>
+%% <tr><td>`toroco_live_rosclient_connected'</td><td>gauge</td><td>`url': a rosbridge client (SPEC §15, client mode), 1 connected, 0 dialling or waiting to</td></tr>
+%% <tr><td>`toroco_live_rosclient_attempts'</td><td>gauge</td><td>`url': failed attempts since it was last connected</td></tr>
+%% <tr><td>`toroco_live_rosclient_connects_total'</td><td>counter</td><td>`url': connections made</td></tr>
+%% <tr><td>`toroco_live_rosclient_sent_total'</td><td>counter</td><td>`url': the robot's messages published there</td></tr>
+%% <tr><td>`toroco_live_rosclient_received_total'</td><td>counter</td><td>`url': messages received on inbound topics</td></tr>
+%% <tr><td>`toroco_live_rosclient_dropped_total'</td><td>counter</td><td>`url': the robot's messages not sent (queue full, connection lost)</td></tr>
+%% <tr><td>`toroco_live_rosclient_refused_total'</td><td>counter</td><td>`url': received messages that did not fit their type</td></tr>
 %% </table>
 -module(toroco_live_metrics).
 
@@ -53,7 +60,7 @@ text() ->
             [{[], maps:get(skipped, Stats, 0)}]),
      family(toroco_live_tap_dropped_total, counter, "Tap events the dashboard fell behind on.",
             [{[], maps:get(tap_dropped, Stats, 0)}])
-     | rosbridge() ++ listeners()].
+     | rosbridge() ++ listeners() ++ rosclients()].
 
 %% The rosbridge server's counters, when it runs.
 rosbridge() ->
@@ -68,6 +75,24 @@ rosbridge() ->
              family(toroco_live_rosbridge_total, counter, "The rosbridge server's totals.",
                     [{[{counter, K}], maps:get(K, Stats, 0)} || K <- Totals])]
     end.
+
+%% The rosbridge clients (toroco_live_rosclient).
+rosclients() ->
+    Clients = toroco_live:rosbridge_clients(),
+    Each = fun(Key) -> [{[{url, U}], maps:get(Key, C)} || #{url := U} = C <- Clients] end,
+    [family(toroco_live_rosclient_connected, gauge, "A rosbridge client: 1 connected, 0 not.",
+            [{[{url, U}], case S of connected -> 1; _ -> 0 end} || #{url := U, state := S} <- Clients]),
+     family(toroco_live_rosclient_attempts, gauge, "Failed attempts since last connected.",
+            Each(attempts)),
+     family(toroco_live_rosclient_connects_total, counter, "Connections made.", Each(connects)),
+     family(toroco_live_rosclient_sent_total, counter, "Messages published to the server.",
+            Each(sent)),
+     family(toroco_live_rosclient_received_total, counter, "Messages received on inbound topics.",
+            Each(received)),
+     family(toroco_live_rosclient_dropped_total, counter, "The robot's messages not sent.",
+            Each(dropped)),
+     family(toroco_live_rosclient_refused_total, counter, "Received messages refused.",
+            Each(refused))].
 
 %% The bounded ports (`toroco_live_listener'), those that run.
 listeners() ->
@@ -106,6 +131,7 @@ labels(Ls) ->
     ["{", lists:join(",", [[atom_to_list(K), "=\"", escape(label(V)), "\""] || {K, V} <- Ls]), "}"].
 
 label(V) when is_atom(V) -> atom_to_list(V);
+label(V) when is_binary(V) -> unicode:characters_to_list(V);
 label(V) -> io_lib:format("~0tp", [V]).
 
 escape(S) ->

@@ -12,21 +12,39 @@
 %% ends the recording with a logged error naming the file, and
 %% `stop_recording/0' returns that error.
 %%
-%% Files: {@link open/2}, {@link event/2}, {@link message/4},
-%% {@link dropped/2}, {@link close/1}. Bytes: {@link log_new/0},
-%% {@link log_event/3}, {@link log_end/1} turn messages into MCAP (channels
-%% and schemas added as they first appear); flight dumps use them too.
+%% <b>Profiles.</b> `profile => foxglove' (the default) writes the
+%% bridge's JSON channels. `profile => ros2' writes ROS 2 data (SPEC §15):
+%% the header's profile `ros2', one channel per ROS topic
+%% (`toroco_live_ros:of_event/1' and, for the simulated world's `/odom',
+%% `toroco_live_ros:of_world/2'), each with its type's `ros2msg' schema
+%% and `cdr' messages (`toroco_live_ros_msgs'); the events that are not an
+%% output's emission (deliveries, routers, lifecycle) go on their §12
+%% topics as `std_msgs/msg/String' carrying the same JSON, so the file
+%% holds what the default one does, typed where a ROS type fits. A
+%% message its type does not take (a field missing) is left out, counted
+%% in `unencodable' and logged once per topic.
+%%
+%% Files: {@link open/2}, {@link event/2}, {@link world/4},
+%% {@link message/4}, {@link dropped/2}, {@link close/1}. Bytes:
+%% {@link log_new/0}, {@link log_event/3}, {@link log_end/1} turn messages
+%% into MCAP (channels and schemas added as they first appear); flight
+%% dumps use them too.
 -module(toroco_live_recorder).
 
--export([open/2, event/2, message/4, dropped/2, close/1, path/1]).
+-export([open/2, event/2, world/4, message/4, dropped/2, close/1, path/1]).
 -export([log_new/0, log_event/3, log_end/1, log_messages/1]).
 
 -export_type([log/0, recording/0]).
 
 -define(KINDS, [emit, deliver, router, lifecycle]).
+-define(PROFILES, [foxglove, ros2]).
+-define(STRING, <<"std_msgs/msg/String">>).
 
+%% A channel: a key of the bridge's channels (profile foxglove) or a ROS
+%% topic with its type (profile ros2).
 -record(log, {writer :: toroco_live_mcap:writer(),
-              channels = #{} :: #{toroco_live_channels:key() => non_neg_integer()},
+              channels = #{} :: #{toroco_live_channels:key() | {binary(), binary()}
+                                      => non_neg_integer()},
               schemas = #{} :: #{binary() => pos_integer()},
               seq = 0 :: non_neg_integer()}).
 -opaque log() :: #log{}.
@@ -35,6 +53,11 @@
               fd :: file:io_device(),
               kinds :: [atom()],
               names :: all | [atom()],
+              profile :: foxglove | ros2,
+              %% ros2: messages their type did not take, and the topics
+              %% already logged for it
+              unencodable = 0 :: non_neg_integer(),
+              warned = [] :: [binary()],
               log :: log(),
               %% when it started, on the runtime's clock then (events
               %% stamped before are not in it; SPEC §14: in lockstep the
@@ -48,30 +71,34 @@
 %%====================================================================
 
 %% @doc A recording of the events of `kinds' (default all) about `names'
-%% (default all) into `Path'.
+%% (default all) into `Path', in the `profile' `foxglove' (default) or
+%% `ros2'.
 -spec open(file:filename_all(), map()) -> {ok, recording()} | {error, term()}.
 open(Path, Opts) when is_map(Opts) ->
     Kinds = maps:get(kinds, Opts, ?KINDS),
     Names = maps:get(names, Opts, all),
-    case maps:keys(maps:without([kinds, names], Opts)) of
+    Profile = maps:get(profile, Opts, foxglove),
+    case maps:keys(maps:without([kinds, names, profile], Opts)) of
         [Bad | _] -> {error, {bad_option, Bad}};
         [] when not is_list(Kinds) -> {error, {bad_option, {kinds, Kinds}}};
         [] when Names =/= all, not is_list(Names) -> {error, {bad_option, {names, Names}}};
         [] ->
-            case Kinds -- ?KINDS of
-                [] -> open(Path, Kinds, Names);
-                Unknown -> {error, {bad_option, {kinds, Unknown}}}
+            case {Kinds -- ?KINDS, lists:member(Profile, ?PROFILES)} of
+                {[], true} -> open(Path, Kinds, Names, Profile);
+                {[], false} -> {error, {bad_option, {profile, Profile}}};
+                {Unknown, _} -> {error, {bad_option, {kinds, Unknown}}}
             end
     end;
 open(_Path, Opts) ->
     {error, {bad_option, Opts}}.
 
-open(Path, Kinds, Names) ->
+open(Path, Kinds, Names, Profile) ->
     case file:open(Path, [write, raw, binary]) of
         {ok, Fd} ->
-            {Head, Log} = log_new(),
+            {Head, Log} = log_new(Profile),
             case file:write(Fd, Head) of
                 ok -> {ok, #rec{path = Path, fd = Fd, kinds = Kinds, names = Names, log = Log,
+                                profile = Profile,
                                 since = {toroco_clock:mode(), toroco_clock:timestamp_ns()}}};
                 {error, Why} ->
                     _ = file:close(Fd),
@@ -89,11 +116,54 @@ event(Event, R = #rec{kinds = Kinds, names = Names, since = Since}) ->
         lists:member(element(1, Event), Kinds) andalso
         (Names =:= all orelse
          lists:any(fun(N) -> lists:member(N, Names) end, toroco_live_channels:event_names(Event))),
-    case Wanted andalso toroco_live_channels:of_event(Event) of
-        {Key, T, Json} -> message(Key, T, Json, R);
-        _ -> R
+    case Wanted of
+        false -> R;
+        true when R#rec.profile =:= ros2 -> ros_event(Event, R);
+        true ->
+            case toroco_live_channels:of_event(Event) of
+                {Key, T, Json} -> message(Key, T, Json, R);
+                none -> R
+            end
     end;
 event(_, Failed) ->
+    Failed.
+
+%% An emission is its ROS topics' messages; any other event its §12 JSON
+%% as a String on its §12 topic.
+ros_event(Event, R) ->
+    case element(1, Event) of
+        emit ->
+            T = toroco_live_channels:event_time(Event),
+            lists:foldl(fun({Topic, Type, Msg}, Acc) -> ros_message(Topic, Type, T, Msg, Acc) end,
+                        R, toroco_live_ros:of_event(Event));
+        _ ->
+            case toroco_live_channels:of_event(Event) of
+                {Key, T, Json} ->
+                    ros_message(toroco_live_channels:topic(Key), ?STRING, T, #{data => Json}, R);
+                none -> R
+            end
+    end.
+
+ros_message(Topic, Type, T, Msg, R = #rec{unencodable = U, warned = Warned}) ->
+    case toroco_live_ros_msgs:cdr(Type, Msg) of
+        {ok, Cdr} -> write(log_event({Topic, Type}, {T, Cdr}, R#rec.log), R);
+        {error, Why} ->
+            lists:member(Topic, Warned) orelse
+                logger:warning("recording to ~ts: a message on ~ts is not a ~ts (~0p), left out",
+                               [R#rec.path, Topic, Type, Why], #{domain => [toroco, live]}),
+            R#rec{unencodable = U + 1, warned = lists:usort([Topic | Warned])}
+    end.
+
+%% @doc A world snapshot at `T' (ns): its ROS messages (`/odom') in the
+%% ros2 profile, else `Msgs', the bridge's world messages made of it.
+-spec world(map() | none, integer(), [{toroco_live_channels:key(), integer(), binary()}],
+            recording()) -> recording().
+world(Snapshot, T, _Msgs, R = #rec{profile = ros2}) ->
+    lists:foldl(fun({Topic, Type, Msg}, Acc) -> ros_message(Topic, Type, T, Msg, Acc) end,
+                R, toroco_live_ros:of_world(Snapshot, T));
+world(_Snapshot, _T, Msgs, R = #rec{}) ->
+    lists:foldl(fun({K, T, J}, Acc) -> message(K, T, J, Acc) end, R, Msgs);
+world(_, _, _, Failed) ->
     Failed.
 
 %% A recording that outlives a change of the clock (the flight recorder
@@ -103,8 +173,14 @@ after_start(T, {Mode, Since}) ->
 
 %% @doc A message made elsewhere (the world's channels).
 -spec message(toroco_live_channels:key(), integer(), binary(), recording()) -> recording().
-message(Key, T, Json, R = #rec{fd = Fd, log = L}) ->
-    {Bytes, L1} = log_event(Key, {T, Json}, L),
+message(Key, T, Json, R = #rec{profile = foxglove, log = L}) ->
+    write(log_event(Key, {T, Json}, L), R);
+message(_, _, _, R = #rec{}) ->
+    R;
+message(_, _, _, Failed) ->
+    Failed.
+
+write({Bytes, L1}, R = #rec{fd = Fd}) ->
     case iolist_size(Bytes) of
         0 -> R#rec{log = L1};
         _ ->
@@ -112,9 +188,7 @@ message(Key, T, Json, R = #rec{fd = Fd, log = L}) ->
                 ok -> R#rec{log = L1};
                 {error, Why} -> fail(R, Why)
             end
-    end;
-message(_, _, _, Failed) ->
-    Failed.
+    end.
 
 %% @doc Events the tap dropped while this recording ran.
 -spec dropped(non_neg_integer(), recording()) -> recording().
@@ -127,14 +201,18 @@ path(#rec{path = P}) -> P;
 path({failed, P, _}) -> P.
 
 %% @doc Ends the recording: the file is complete (summary, footer) and
-%% readable by any MCAP reader.
+%% readable by any MCAP reader. A ros2 recording also says how many
+%% messages their type did not take (`unencodable').
 -spec close(recording()) -> {ok, #{path := file:filename_all(), messages := non_neg_integer(),
-                                   dropped := non_neg_integer()}} | {error, term()}.
-close(#rec{path = Path, fd = Fd, log = L, dropped = D}) ->
+                                   dropped := non_neg_integer(),
+                                   unencodable => non_neg_integer()}} | {error, term()}.
+close(#rec{path = Path, fd = Fd, log = L, dropped = D, profile = Profile, unencodable = U}) ->
     Result = file:write(Fd, log_end(L)),
     _ = file:close(Fd),
+    Counts = #{path => Path, messages => log_messages(L), dropped => D},
     case Result of
-        ok -> {ok, #{path => Path, messages => log_messages(L), dropped => D}};
+        ok when Profile =:= ros2 -> {ok, Counts#{unencodable => U}};
+        ok -> {ok, Counts};
         {error, Why} -> {error, {write_failed, Path, Why}}
     end;
 close({failed, Path, Why}) ->
@@ -152,12 +230,21 @@ fail(#rec{path = Path, fd = Fd}, Why) ->
 %% @doc A new file's log and its first bytes.
 -spec log_new() -> {iodata(), log()}.
 log_new() ->
+    log_new(foxglove).
+
+log_new(foxglove) ->
     {Head, W} = toroco_live_mcap:new(#{}),
+    {Head, #log{writer = W}};
+log_new(ros2) ->
+    {Head, W} = toroco_live_mcap:new(#{profile => <<"ros2">>}),
     {Head, #log{writer = W}}.
 
 %% @doc The bytes of one message on channel `Key' at `T' (ns), with the
-%% channel's and its schema's records the first time they appear.
--spec log_event(toroco_live_channels:key(), {integer(), binary()}, log()) -> {iodata(), log()}.
+%% channel's and its schema's records the first time they appear. `Key'
+%% is one of the bridge's channels (JSON), or `{Topic, Type}' with a ROS 2
+%% type for CDR bytes.
+-spec log_event(toroco_live_channels:key() | {binary(), binary()}, {integer(), binary()}, log()) ->
+          {iodata(), log()}.
 log_event(Key, {T, Json}, L0) ->
     {Decl, L = #log{writer = W, channels = Chs, seq = Seq}} = declare(Key, L0),
     {Bytes, W1} = toroco_live_mcap:add_message(W, maps:get(Key, Chs), Seq, max(T, 0), Json),
@@ -176,15 +263,22 @@ log_messages(#log{writer = W}) ->
 declare(Key, L = #log{channels = Chs}) when is_map_key(Key, Chs) ->
     {[], L};
 declare(Key, L = #log{writer = W, channels = Chs, schemas = Ss}) ->
-    {Name, Schema} = toroco_live_channels:schema(Key),
+    {Name, SchemaEnc, Schema, Topic, MsgEnc} = channel(Key),
     {SBytes, W1, Ss1, SId} =
         case Ss of
             #{Name := Id} -> {[], W, Ss, Id};
             #{} ->
                 Id = map_size(Ss) + 1,
-                {B, W0} = toroco_live_mcap:add_schema(W, Id, Name, Schema),
+                {B, W0} = toroco_live_mcap:add_schema(W, Id, Name, SchemaEnc, Schema),
                 {B, W0, Ss#{Name => Id}, Id}
         end,
     CId = map_size(Chs) + 1,
-    {CBytes, W2} = toroco_live_mcap:add_channel(W1, CId, SId, toroco_live_channels:topic(Key), #{}),
+    {CBytes, W2} = toroco_live_mcap:add_channel(W1, CId, SId, Topic, MsgEnc, #{}),
     {[SBytes, CBytes], L#log{writer = W2, channels = Chs#{Key => CId}, schemas = Ss1}}.
+
+channel({Topic, Type}) when is_binary(Topic) ->
+    {ok, Definition} = toroco_live_ros_msgs:definition(Type),
+    {Type, <<"ros2msg">>, Definition, Topic, <<"cdr">>};
+channel(Key) ->
+    {Name, Schema} = toroco_live_channels:schema(Key),
+    {Name, <<"jsonschema">>, Schema, toroco_live_channels:topic(Key), <<"json">>}.

@@ -16,6 +16,12 @@
 %% on are compared in order, per input, with those seen now (through the
 %% tap). The call returns when the last event has been replayed and the
 %% actuators have had `?SETTLE_MS' to answer.
+%%
+%% A recording in the ros2 profile replays too: its `std_msgs/msg/String'
+%% channels carry the same JSON in CDR (`toroco_live_ros_msgs:string_data/1'),
+%% so the outputs recorded as Strings are replayed and the deliveries
+%% compared; an output recorded with a typed ROS message (a range sensor's
+%% Range) cannot be, and is not.
 -module(toroco_live_replay).
 
 -export([replay/2]).
@@ -47,11 +53,29 @@ replay_contents({ok, #{library := Lib} = C}, Sources) ->
         false -> {error, {not_a_toroco_recording, Lib}}
     end.
 
-%% Each message as {T, Key, Map}; channels that are not ours are refused.
-messages(#{channels := Chs, messages := Ms}) ->
-    Keys = maps:map(fun(_, #{topic := T}) -> toroco_live_channels:key(T) end, Chs),
-    [{T, K, D} || #{channel := Ch, log_time := T, data := D} <- Ms,
-                  {ok, K} <- [maps:get(Ch, Keys, error)]].
+%% Each message as {T, Key, Json}; channels that are not ours are left out.
+messages(#{channels := Chs, schemas := Schemas, messages := Ms}) ->
+    Keys = maps:map(fun(_, Ch = #{topic := T}) ->
+                            case {toroco_live_channels:key(T), json_of(Ch, Schemas)} of
+                                {{ok, K}, {ok, Json}} -> {ok, K, Json};
+                                _ -> error
+                            end
+                    end, Chs),
+    [{T, K, Json} || #{channel := Ch, log_time := T, data := D} <- Ms,
+                     {ok, K, JsonOf} <- [maps:get(Ch, Keys, error)],
+                     {ok, Json} <- [JsonOf(D)]].
+
+%% How a channel's message becomes the JSON of SPEC §12: as it is, or (the
+%% ros2 profile) a std_msgs/msg/String's data.
+json_of(#{encoding := <<"json">>}, _) ->
+    {ok, fun(D) -> {ok, D} end};
+json_of(#{encoding := <<"cdr">>, schema := S}, Schemas) ->
+    case Schemas of
+        #{S := #{name := <<"std_msgs/msg/String">>}} -> {ok, fun toroco_live_ros_msgs:string_data/1};
+        #{} -> error
+    end;
+json_of(_, _) ->
+    error.
 
 run(Messages, Sources) ->
     Emissions = [{T, E, O, Kind, Term}

@@ -152,42 +152,12 @@ fields(<<"sensor_msgs/msg/Range">>) ->
 
 %% @doc The ROS 2 message definition of a type with its dependencies, as
 %% ROS 2 tools concatenate them (rosbag2, rosapi's `typedefs_full_text'):
-%% the type's own fields (and constants), then each type it uses, first
-%% met first, after a line of 80 `=' and `MSG: pkg/Type'.
+%% `toroco_live_ros_msgs:definition/1', the one place the ros2 recordings
+%% take them from too.
 -spec definition(binary()) -> binary().
 definition(Type) ->
-    Deps = dependencies([Type], []),
-    iolist_to_binary([msg_text(Type)
-                      | [[lists:duplicate(80, $=), "\nMSG: ", short(D), $\n, msg_text(D)]
-                         || D <- Deps, D =/= Type]]).
-
-dependencies([], Acc) -> lists:reverse(Acc);
-dependencies([T | Ts], Acc) ->
-    case lists:member(T, Acc) of
-        true -> dependencies(Ts, Acc);
-        false -> dependencies(Ts ++ [FT || {_, FT} <- fields(T), is_binary(FT)], [T | Acc])
-    end.
-
-msg_text(Type) ->
-    [[[constant_type(Type), " ", C, "=", integer_to_binary(V), "\n"] || {C, V} <- constants(Type)],
-     [[field_type(FT), " ", atom_to_binary(N), "\n"] || {N, FT} <- fields(Type)]].
-
-constants(<<"sensor_msgs/msg/Range">>) -> [{<<"ULTRASOUND">>, 0}, {<<"INFRARED">>, ?INFRARED}];
-constants(_) -> [].
-
-constant_type(<<"sensor_msgs/msg/Range">>) -> <<"uint8">>;
-constant_type(_) -> <<>>.
-
-field_type({array, E, N}) -> [atom_to_binary(E), $[, integer_to_binary(N), $]];
-field_type(T) when is_atom(T) -> atom_to_binary(T);
-field_type(T) -> short(T).
-
-%% `pkg/msg/Type' as a definition names it: `pkg/Type'.
-short(Type) ->
-    case binary:split(Type, <<"/msg/">>) of
-        [Pkg, Name] -> <<Pkg/binary, $/, Name/binary>>;
-        _ -> Type
-    end.
+    {ok, Definition} = toroco_live_ros_msgs:definition(Type),
+    Definition.
 
 %% @doc The type of one of the robot's topics now, `error' if it has none.
 -spec type_of(binary()) -> {ok, binary()} | error.

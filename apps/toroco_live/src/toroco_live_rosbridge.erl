@@ -23,15 +23,26 @@
 %% | conn | hub  | `{subscribe, Conn, Topic}'           | first subscription to a topic | none |
 %% | conn | hub  | `{unsubscribe, Conn, Topic}'         | its last one went       | none |
 %% | conn | hub  | `{count, Counter}'                   | a fault, a publish, ... | none |
+%% | conn | hub  | `{advertise, Conn, Topic, Type}' (call) | a client advertised a topic the robot does not have | `ok' or `{error, Why}' |
+%% | conn | hub  | `{unadvertise, Conn, Topic}'         | it unadvertised it      | none |
+%% | conn | hub  | `{relay, Topic, Type, Msg}'          | a publish on a relayed topic or on an inbound one | none |
 %% | hub  | conn | `{rosbridge, message, Topic, Type, Json, Msg}' | a message on a subscribed topic (its JSON, and the map for CBOR) | none |
 %% | hub  | conn | `{rosbridge, dropped, N}'            | N messages were not sent to it | none |
 %% A connection whose mailbox holds more than `?CONN_QUEUE' messages gets no
 %% more until it drains; the hub counts what it skipped and tells it.
+%%
+%% <b>Relaying</b>, as a rosbridge server in a ROS graph does: a topic a
+%% client advertises that the robot does not have (another robot in client
+%% mode, `toroco_live_rosclient', advertising its own) is listed among the
+%% topics while an advertiser is connected, and what is published on it goes
+%% to the clients subscribed to it; a publish on an inbound topic
+%% (`/cmd_vel') goes to its subscribers too, besides the `ros' device.
 -module(toroco_live_rosbridge).
 -behaviour(gen_server).
 
 -export([child_spec/1, port/0, stats/0]).
 -export([join/0, topics/0, subscribe/2, unsubscribe/2, count/1, receive_hub/1]).
+-export([advertise/3, unadvertise/2, relay/3]).
 -export([start_link/1]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2, terminate/2]).
 
@@ -47,6 +58,8 @@
               subs = #{} :: #{binary() => [pid()]},
               dropped = #{} :: #{pid() => pos_integer()},
               topics = {[], -1} :: {[toroco_live_ros:topic()], integer()},
+              %% topics clients advertised: type and advertisers
+              relayed = #{} :: #{binary() => {binary(), [pid()]}},
               tap = none :: none | reference(),
               tap_monitor = none :: none | reference(),
               counters = #{} :: #{atom() => non_neg_integer()}}).
@@ -104,6 +117,22 @@ subscribe(Conn, Topic) -> gen_server:cast(?MODULE, {subscribe, Conn, Topic}).
 -spec unsubscribe(pid(), binary()) -> ok.
 unsubscribe(Conn, Topic) -> gen_server:cast(?MODULE, {unsubscribe, Conn, Topic}).
 
+%% @doc A client advertises `Topic' of `Type', a topic the robot does not
+%% have: `{error, robot_topic}' if it does, `{error, {type, Other}}' if
+%% another client advertised it as `Other'.
+-spec advertise(pid(), binary(), binary()) -> ok | {error, robot_topic | {type, binary()} | server_down}.
+advertise(Conn, Topic, Type) ->
+    try gen_server:call(?MODULE, {advertise, Conn, Topic, Type}, 15000)
+    catch exit:_ -> {error, server_down}
+    end.
+
+-spec unadvertise(pid(), binary()) -> ok.
+unadvertise(Conn, Topic) -> gen_server:cast(?MODULE, {unadvertise, Conn, Topic}).
+
+%% @doc A message (its `msg' as JSON) for the clients subscribed to `Topic'.
+-spec relay(binary(), binary(), map()) -> ok.
+relay(Topic, Type, Msg) -> gen_server:cast(?MODULE, {relay, Topic, Type, Msg}).
+
 %% @doc Counts one of {@link stats/0}'s totals.
 -spec count(atom()) -> ok.
 count(Counter) -> gen_server:cast(?MODULE, {count, Counter}).
@@ -151,7 +180,20 @@ handle_call({join, Conn}, _From, H0) ->
 handle_call(topics, _From, H0) ->
     H = fresh_topics(H0),
     {Topics, _} = H#hub.topics,
-    {reply, Topics, H};
+    Robot = [T || #{topic := T} <- Topics],
+    Relayed = [#{topic => T, type => Ty, dir => out}
+               || {T, {Ty, _}} <- lists:sort(maps:to_list(H#hub.relayed)), not lists:member(T, Robot)],
+    {reply, Topics ++ Relayed, H};
+handle_call({advertise, Conn, Topic, Type}, _From, H0 = #hub{relayed = R}) when is_map_key(Conn, H0#hub.conns) ->
+    H = fresh_topics(H0),
+    {Topics, _} = H#hub.topics,
+    case {lists:any(fun(#{topic := T}) -> T =:= Topic end, Topics), R} of
+        {true, _} -> {reply, {error, robot_topic}, H};
+        {false, #{Topic := {Type, Conns}}} ->
+            {reply, ok, H#hub{relayed = R#{Topic := {Type, lists:usort([Conn | Conns])}}}};
+        {false, #{Topic := {Other, _}}} -> {reply, {error, {type, Other}}, H};
+        {false, #{}} -> {reply, ok, H#hub{relayed = R#{Topic => {Type, [Conn]}}}}
+    end;
 handle_call(_, _From, H) ->
     {reply, {error, unknown_call}, H}.
 
@@ -162,6 +204,10 @@ handle_cast({unsubscribe, Conn, Topic}, H) ->
     {noreply, unsubscribe_all(Conn, [Topic], H)};
 handle_cast({count, Counter}, H) when is_atom(Counter) ->
     {noreply, bump(Counter, H)};
+handle_cast({unadvertise, Conn, Topic}, H) ->
+    {noreply, unadvertise_all(Conn, [Topic], H)};
+handle_cast({relay, Topic, Type, Msg}, H) ->
+    {noreply, deliver_msg(Topic, Type, Msg, H)};
 handle_cast(_, H) ->
     {noreply, H}.
 
@@ -184,8 +230,9 @@ handle_info(retap, H = #hub{tap = none, conns = Conns}) when map_size(Conns) > 0
     {noreply, tap_on(H)};
 handle_info({'DOWN', _, process, Conn, _}, H = #hub{conns = Conns, subs = Subs}) ->
     H1 = unsubscribe_all(Conn, maps:keys(Subs),
-                         H#hub{conns = maps:remove(Conn, Conns),
-                               dropped = maps:remove(Conn, H#hub.dropped)}),
+                         unadvertise_all(Conn, maps:keys(H#hub.relayed),
+                                         H#hub{conns = maps:remove(Conn, Conns),
+                                               dropped = maps:remove(Conn, H#hub.dropped)})),
     {noreply, tap_off(H1)};
 handle_info({'EXIT', L, Why}, H = #hub{listener = L}) ->
     {stop, {listener, Why}, H};
@@ -266,11 +313,27 @@ event(Event, H = #hub{subs = Subs}) ->
 deliver({Topic, Type, Msg}, H = #hub{subs = Subs}) ->
     case maps:get(Topic, Subs, []) of
         [] -> H;
-        Conns ->
-            Json = iolist_to_binary(jiffy:encode(Msg)),
-            lists:foldl(fun(C, Acc) -> send_to(C, {rosbridge, message, Topic, Type, Json, Msg}, Acc) end,
-                        H, Conns)
+        _ -> deliver_msg(Topic, Type, Msg, H)
     end.
+
+%% Encoded once for every subscriber of the topic.
+deliver_msg(Topic, Type, Msg, H = #hub{subs = Subs}) ->
+    Json = iolist_to_binary(jiffy:encode(Msg)),
+    lists:foldl(fun(C, Acc) -> send_to(C, {rosbridge, message, Topic, Type, Json, Msg}, Acc) end,
+                H, maps:get(Topic, Subs, [])).
+
+unadvertise_all(Conn, Topics, H = #hub{relayed = R}) ->
+    R1 = lists:foldl(fun(T, Acc) ->
+                             case Acc of
+                                 #{T := {Ty, Conns}} ->
+                                     case Conns -- [Conn] of
+                                         [] -> maps:remove(T, Acc);
+                                         L -> Acc#{T := {Ty, L}}
+                                     end;
+                                 #{} -> Acc
+                             end
+                     end, R, Topics),
+    H#hub{relayed = R1}.
 
 %% A connection behind by more than ?CONN_QUEUE messages misses this one;
 %% it hears how many it missed once it has caught up.

@@ -12,10 +12,13 @@
 %%     message per `throttle_rate' and keeps the newest `queue_length'
 %%     (at least 1) meanwhile. A message longer than `fragment_size' goes
 %%     out as `fragment' operations (`id', `data', `num' from 0, `total').</li>
-%% <li>`advertise' / `unadvertise' / `publish': on the inbound topics only
+%% <li>`advertise' / `unadvertise' / `publish': on the inbound topics
 %%     (`/cmd_vel'), checked against the topic's type
 %%     (`toroco_live_ros:normalise/1') and handed to the `ros' device
-%%     (`toroco_live_ros_device:publish/3'). Publishing needs the
+%%     (`toroco_live_ros_device:publish/3') and to the topic's
+%%     subscribers; or on a topic the robot does not have, which the hub
+%%     relays to its subscribers (`toroco_live_rosbridge', relaying: how
+%%     a robot in client mode shows its topics here). Publishing needs the
 %%     dashboard's token.</li>
 %% <li>`call_service' (`service', `args', `id'): `/rosapi/topics',
 %%     `/rosapi/topics_and_raw_types' (with each type's message definition,
@@ -37,7 +40,7 @@
 %% A subscription's `compression' may be `none' (JSON text), `cbor' (the
 %% publish operation as CBOR, a binary frame: `toroco_live_cbor') or
 %% `cbor-raw' (CBOR with `msg' `{bytes, secs, nsecs}', the message's CDR
-%% bytes: `toroco_live_cdr'; what Foxglove's Rosbridge connection asks
+%% bytes: `toroco_live_ros_msgs:cdr/2'; what Foxglove's Rosbridge connection asks
 %% for); any other (`png') is refused naming it, and so is any compression
 %% on another operation.
 %%
@@ -261,8 +264,16 @@ publish_out(Topic, {Type, Json, Msg}, C = #conn{subs = Subs}) ->
                     #{header := #{stamp := Stamp}} -> Stamp;
                     #{} -> toroco_live_ros:stamp(erlang:system_time(nanosecond))
                 end,
-            Raw = #{bytes => {bytes, toroco_live_cdr:encode(Type, Msg)}, secs => Sec, nsecs => Nsec},
-            send_binary(C, toroco_live_cbor:encode(#{op => publish, topic => Topic, msg => Raw}))
+            case toroco_live_ros_msgs:cdr(Type, Msg) of
+                {ok, Cdr} ->
+                    Raw = #{bytes => {bytes, Cdr}, secs => Sec, nsecs => Nsec},
+                    send_binary(C, toroco_live_cbor:encode(#{op => publish, topic => Topic,
+                                                             msg => Raw}));
+                {error, Why} ->
+                    %% A relayed topic of a type this server cannot encode.
+                    status(C, warning, null, [<<"cannot send ">>, Topic, <<" as cbor-raw: ">>,
+                                              toroco_live_json:term_text(Why)])
+            end
     end.
 
 %% Pieces cut at character boundaries, so each is a JSON string.
@@ -354,7 +365,10 @@ op(<<"unsubscribe">>, Id, M, C) ->
 op(<<"advertise">>, Id, M, C) ->
     with_topic(Id, M, C, fun(Topic) -> advertise(Id, Topic, M, C) end);
 op(<<"unadvertise">>, Id, M, C = #conn{advertised = A}) ->
-    with_topic(Id, M, C, fun(Topic) -> {ok, C#conn{advertised = maps:remove(Topic, A)}} end);
+    with_topic(Id, M, C, fun(Topic) ->
+                                 toroco_live_rosbridge:unadvertise(self(), Topic),
+                                 {ok, C#conn{advertised = maps:remove(Topic, A)}}
+                         end);
 op(<<"publish">>, Id, M, C) ->
     with_topic(Id, M, C, fun(Topic) -> publish(Id, Topic, M, C) end);
 op(<<"call_service">>, Id, M, C) ->
@@ -525,7 +539,7 @@ advertise(Id, _Topic, _M, C = #conn{authorized = false}) ->
     unauthorized(C, Id);
 advertise(Id, Topic, M, C = #conn{advertised = A}) ->
     case {inbound(Topic), maps:get(<<"type">>, M, null)} of
-        {error, _} -> not_inbound(C, Id, Topic);
+        {error, Asked} -> advertise_relayed(Id, Topic, Asked, C);
         {{ok, Type}, Asked} ->
             case same_type(Asked, Type) of
                 true -> {ok, C#conn{advertised = A#{Topic => Type}}};
@@ -538,10 +552,12 @@ publish(Id, _Topic, _M, C = #conn{authorized = false}) ->
     unauthorized(C, Id);
 publish(Id, Topic, M, C) ->
     case inbound(Topic) of
-        error -> not_inbound(C, Id, Topic);
+        error -> publish_relayed(Id, Topic, M, C);
         {ok, Type} ->
             case toroco_live_ros:normalise({Type, maps:get(<<"msg">>, M, null)}) of
-                {ok, Msg} -> hand_over(Id, Topic, Msg, C);
+                {ok, Msg} ->
+                    toroco_live_rosbridge:relay(Topic, Type, Msg),
+                    hand_over(Id, Topic, Msg, C);
                 {error, {bad_field, Path}} ->
                     fault(C, Id, [<<"publish on ">>, Topic, <<": not a ">>, Type, <<": field ">>,
                                   Path, <<" does not fit">>]);
@@ -549,6 +565,31 @@ publish(Id, Topic, M, C) ->
                     fault(C, Id, [<<"publish on ">>, Topic, <<": \"msg\" must be a ">>, Type,
                                   <<" object">>])
             end
+    end.
+
+%% A topic the robot does not have, relayed by the hub to its subscribers.
+advertise_relayed(Id, Topic, Type, C = #conn{advertised = A}) when is_binary(Type), Type =/= <<>> ->
+    case toroco_live_rosbridge:advertise(self(), Topic, Type) of
+        ok -> {ok, C#conn{advertised = A#{Topic => Type}}};
+        {error, robot_topic} ->
+            fault(C, Id, [<<"cannot advertise ">>, Topic, <<": the robot publishes it">>]);
+        {error, {type, Other}} ->
+            fault(C, Id, [<<"topic ">>, Topic, <<" is of type ">>, Other, <<", not ">>, Type]);
+        {error, _} ->
+            fault(C, Id, [<<"cannot advertise ">>, Topic, <<": the server is going down">>])
+    end;
+advertise_relayed(Id, Topic, _Type, C) ->
+    fault(C, Id, [<<"advertise ">>, Topic, <<" needs a \"type\"">>]).
+
+publish_relayed(Id, Topic, M, C = #conn{advertised = A}) ->
+    case {A, maps:get(<<"msg">>, M, null)} of
+        {#{Topic := Type}, Msg} when is_map(Msg) ->
+            toroco_live_rosbridge:relay(Topic, Type, Msg),
+            {ok, C};
+        {#{Topic := Type}, _} ->
+            fault(C, Id, [<<"publish on ">>, Topic, <<": \"msg\" must be a ">>, Type, <<" object">>]);
+        {#{}, _} ->
+            not_inbound(C, Id, Topic)
     end.
 
 hand_over(Id, <<$/, Name/binary>> = Topic, Msg, C) ->

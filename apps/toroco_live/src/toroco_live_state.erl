@@ -24,14 +24,19 @@
 %% Longest term text shown for a state.
 -define(STATE_TEXT, 300).
 
-%% @doc `GET /api/state': `{"inspect": inspect(), "nodes": {Name: inspect(Name)}}'.
+%% @doc `GET /api/state': `{"inspect": inspect(), "nodes": {Name: inspect(Name)},
+%% "rosbridge_clients": [Client]}', a client as `toroco_live:rosbridge_clients/0'
+%% says (SPEC §15, client mode).
 -spec api() -> jiffy:json_value().
 api() ->
     Overview = toroco:inspect(),
     Names = names(Overview),
     Nodes = [{N, toroco:inspect(N)} || N <- Names],
+    Clients = [C#{last_error := toroco_live_json:term_text(E)}
+               || #{last_error := E} = C <- toroco_live:rosbridge_clients()],
     toroco_live_json:value(#{inspect => Overview,
-                             nodes => maps:from_list([{N, I} || {N, I} <- Nodes, is_map(I)])}).
+                             nodes => maps:from_list([{N, I} || {N, I} <- Nodes, is_map(I)]),
+                             rosbridge_clients => Clients}).
 
 %% @doc Every behavior and device with what the page and the metrics need.
 -spec readings() -> {map(), [node_reading()]}.

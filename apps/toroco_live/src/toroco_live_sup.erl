@@ -4,13 +4,16 @@
 %% toroco_live_sup (one_for_one)
 %%   toroco_live_world            the simulated world's latest snapshot (always there)
 %%   toroco_live_flight           the flight recorder (always on) and the recording
+%%   toroco_live_rosclient_sup    the rosbridge clients, one per server dialled
+%%                                (toroco_live:rosbridge_connect/2)
 %%   toroco_live_dashboard_sup    the dashboard, added by toroco_live:start/1
 %%   toroco_live_foxglove         the Foxglove bridge, added by toroco_live:start/1
 %%   toroco_live_rosbridge        the rosbridge v2 server, added by toroco_live:start/1
 %% '''
 %%
-%% one_for_one: the dashboard, the bridges and the recorders are independent
-%% views of the robot; one crashing takes none of the others with it.
+%% one_for_one: the dashboard, the bridges, the rosbridge clients and the
+%% recorders are independent views of the robot; one crashing takes none
+%% of the others with it.
 -module(toroco_live_sup).
 -behaviour(supervisor).
 
@@ -26,4 +29,6 @@ init([]) ->
     World = #{id => toroco_live_world, start => {toroco_live_world, start_link, []}},
     Flight = #{id => toroco_live_flight, start => {toroco_live_flight, start_link, []},
                shutdown => 30000},
-    {ok, {Flags, [World, Flight]}}.
+    Clients = #{id => toroco_live_rosclient_sup, start => {toroco_live_rosclient_sup, start_link, []},
+                type => supervisor},
+    {ok, {Flags, [World, Flight, Clients]}}.

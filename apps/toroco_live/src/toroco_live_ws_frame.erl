@@ -13,9 +13,16 @@
 %% `{close, Code, Reason}'), reassembling fragments, or an error naming the
 %% fault (unmasked client frame, reserved bits, a message over the size
 %% limit, a control frame fragmented or too long).
+%%
+%% The client's side, for the rosbridge client (`toroco_live_rosclient'):
+%% {@link client_decoder/1} reads a server's frames (unmasked; a masked
+%% one is an error), {@link client_frame/2} and {@link client_close_frame/2}
+%% write masked frames with a fresh key each, {@link accept_key/1} is the
+%% `Sec-WebSocket-Accept' a server must answer to a key.
 -module(toroco_live_ws_frame).
 
 -export([accept/2, decoder/1, decode/2, frame/2, close_frame/2]).
+-export([client_decoder/1, client_frame/2, client_close_frame/2, accept_key/1]).
 
 -export_type([decoder/0, message/0]).
 
@@ -23,6 +30,8 @@
 
 -record(dec, {buffer = <<>> :: binary(),
               max :: pos_integer(),
+              %% the frames this side reads: a server's are unmasked
+              masked = true :: boolean(),
               fragments = none :: none | {text | binary, [binary()], non_neg_integer()}}).
 
 -opaque decoder() :: #dec{}.
@@ -49,7 +58,7 @@ accept(Req, Subprotocol) ->
             case Subprotocol =:= none orelse lists:member(Subprotocol, Protocols) of
                 false -> {error, {subprotocol, Protocols}};
                 true ->
-                    Accept = base64:encode(crypto:hash(sha, <<Key/binary, ?GUID/binary>>)),
+                    Accept = accept_key(Key),
                     Named = [{"Sec-WebSocket-Protocol", binary_to_list(Subprotocol)}
                              || Subprotocol =/= none],
                     _ = mochiweb_request:respond(
@@ -64,13 +73,23 @@ accept(Req, Subprotocol) ->
 decoder(MaxBytes) ->
     #dec{max = MaxBytes}.
 
+%% @doc A decoder of a server's frames, for a client.
+-spec client_decoder(pos_integer()) -> decoder().
+client_decoder(MaxBytes) ->
+    #dec{max = MaxBytes, masked = false}.
+
+%% @doc The `Sec-WebSocket-Accept' value that answers `Key'.
+-spec accept_key(binary()) -> binary().
+accept_key(Key) ->
+    base64:encode(crypto:hash(sha, <<Key/binary, ?GUID/binary>>)).
+
 %% @doc Whole messages from `Bytes' and what came before them.
 -spec decode(binary(), decoder()) -> {ok, [message()], decoder()} | {error, term()}.
 decode(Bytes, D = #dec{buffer = Buf}) ->
     messages(D#dec{buffer = <<Buf/binary, Bytes/binary>>}, []).
 
-messages(D = #dec{buffer = Buf, max = Max}, Acc) ->
-    case frame_of(Buf, Max) of
+messages(D = #dec{buffer = Buf, max = Max, masked = Masked}, Acc) ->
+    case frame_of(Buf, Max, Masked) of
         more -> {ok, lists:reverse(Acc), D};
         {error, _} = E -> E;
         {ok, Fin, Op, Payload, Rest} ->
@@ -81,9 +100,10 @@ messages(D = #dec{buffer = Buf, max = Max}, Acc) ->
             end
     end.
 
-frame_of(<<_:1, Rsv:3, _/bits>>, _) when Rsv =/= 0 -> {error, reserved_bits};
-frame_of(<<_:8, 0:1, _/bits>>, _) -> {error, unmasked_frame};
-frame_of(<<Fin:1, 0:3, Op:4, 1:1, Len:7, Rest/binary>>, Max) ->
+frame_of(<<_:1, Rsv:3, _/bits>>, _, _) when Rsv =/= 0 -> {error, reserved_bits};
+frame_of(<<_:8, 0:1, _/bits>>, _, true) -> {error, unmasked_frame};
+frame_of(<<_:8, 1:1, _/bits>>, _, false) -> {error, masked_frame};
+frame_of(<<Fin:1, 0:3, Op:4, 1:1, Len:7, Rest/binary>>, Max, true) ->
     case length_of(Len, Rest) of
         more -> more;
         {N, _} when N > Max -> {error, too_big};
@@ -94,7 +114,17 @@ frame_of(<<Fin:1, 0:3, Op:4, 1:1, Len:7, Rest/binary>>, Max) ->
                 _ -> more
             end
     end;
-frame_of(_, _) -> more.
+frame_of(<<Fin:1, 0:3, Op:4, 0:1, Len:7, Rest/binary>>, Max, false) ->
+    case length_of(Len, Rest) of
+        more -> more;
+        {N, _} when N > Max -> {error, too_big};
+        {N, R} ->
+            case R of
+                <<Payload:N/binary, After/binary>> -> {ok, Fin, Op, Payload, After};
+                _ -> more
+            end
+    end;
+frame_of(_, _, _) -> more.
 
 length_of(126, <<N:16, R/binary>>) -> {N, R};
 length_of(127, <<0:1, N:63, R/binary>>) -> {N, R};
@@ -153,3 +183,25 @@ frame(Kind, Payload) ->
 close_frame(Code, Reason) ->
     R = binary:part(Reason, 0, min(byte_size(Reason), 120)),
     [<<1:1, 0:3, 8:4, 0:1, (2 + byte_size(R)):7, Code:16>>, R].
+
+%% @doc A client frame (masked with a fresh key, unfragmented).
+-spec client_frame(text | binary | ping | pong, iodata()) -> iodata().
+client_frame(Kind, Payload) ->
+    Op = case Kind of text -> 1; binary -> 2; ping -> 9; pong -> 10 end,
+    masked(Op, iolist_to_binary(Payload)).
+
+%% @doc A client's close frame with a status code.
+-spec client_close_frame(non_neg_integer(), binary()) -> iodata().
+client_close_frame(Code, Reason) ->
+    R = binary:part(Reason, 0, min(byte_size(Reason), 120)),
+    masked(8, <<Code:16, R/binary>>).
+
+masked(Op, Payload) ->
+    Len = byte_size(Payload),
+    Head = if
+               Len < 126 -> <<1:1, 0:3, Op:4, 1:1, Len:7>>;
+               Len < 65536 -> <<1:1, 0:3, Op:4, 1:1, 126:7, Len:16>>;
+               true -> <<1:1, 0:3, Op:4, 1:1, 127:7, Len:64>>
+           end,
+    Mask = crypto:strong_rand_bytes(4),
+    [Head, Mask, unmask(Payload, Mask)].

@@ -139,7 +139,7 @@ definitions(_Config) ->
      <<"geometry_msgs/TwistWithCovariance">>, <<"geometry_msgs/Vector3">>, <<"std_msgs/Header">>] =
         lists:sort(Names),
     true = nomatch =/= binary:match(Odom, <<"float64[36] covariance">>),
-    <<"uint8 ULTRASOUND=0\nuint8 INFRARED=1\nstd_msgs/Header header\n", _/binary>> =
+    <<"std_msgs/Header header\nuint8 ULTRASOUND=0\nuint8 INFRARED=1\n", _/binary>> =
         toroco_live_ros:definition(<<"sensor_msgs/msg/Range">>),
     <<"string data\n">> = toroco_live_ros:definition(<<"std_msgs/msg/String">>),
     ok.
@@ -161,17 +161,17 @@ cdr_layout() ->
     [{doc, "CDR: the little-endian encapsulation header, primitives aligned to their size "
       "from the start of the data, strings with their length and NUL"}].
 cdr_layout(_Config) ->
-    <<0, 1, 0, 0, 3:32/little, "hi", 0>> =
-        toroco_live_cdr:encode(<<"std_msgs/msg/String">>, #{data => <<"hi">>}),
+    {ok, <<0, 1, 0, 0, 3:32/little, "hi", 0>>} =
+        toroco_live_ros_msgs:cdr(<<"std_msgs/msg/String">>, #{data => <<"hi">>}),
     G = toroco_live_ros:geometry(),
-    <<0, 1, 0, 0, X:64/float-little, 0:64, 0:64, 0:64, 0:64, Z:64/float-little>> =
-        toroco_live_cdr:encode(<<"geometry_msgs/msg/Twist">>, toroco_live_ros:wheels_to_twist({50, 100}, G)),
+    {ok, <<0, 1, 0, 0, X:64/float-little, 0:64, 0:64, 0:64, 0:64, Z:64/float-little>>} =
+        toroco_live_ros_msgs:cdr(<<"geometry_msgs/msg/Twist">>, toroco_live_ros:wheels_to_twist({50, 100}, G)),
     #{linear := #{x := X}, angular := #{z := Z}} = toroco_live_ros:wheels_to_twist({50, 100}, G),
     [{_, _, Range}] = toroco_live_ros:of_event({emit, 1000000002, {range, front}, send, 0.5}),
     %% stamp (8), frame_id "range_front" (4 + 12), radiation_type (1), 3 bytes of padding,
     %% then five float32.
-    <<0, 1, 0, 0, 1:32/little, 2:32/little, 12:32/little, "range_front", 0, 1, 0, 0, 0,
-      _Fov:32/float-little, _Min:32/float-little, _Max:32/float-little, R:32/float-little,
-      0:32>> = toroco_live_cdr:encode(<<"sensor_msgs/msg/Range">>, Range),
+    {ok, <<0, 1, 0, 0, 1:32/little, 2:32/little, 12:32/little, "range_front", 0, 1, 0, 0, 0,
+           _Fov:32/float-little, _Min:32/float-little, _Max:32/float-little, R:32/float-little,
+           0:32>>} = toroco_live_ros_msgs:cdr(<<"sensor_msgs/msg/Range">>, Range),
     true = R == 0.5,
     ok.
