@@ -1,6 +1,6 @@
 %% @doc One Foxglove client of the bridge (`toroco_live_foxglove'): the
-%% mochiweb connection process that answered the WebSocket upgrade becomes
-%% this gen_server and owns the socket.
+%% protocol's side of a `toroco_live_ws_conn', the process that answered
+%% the WebSocket upgrade and owns the socket.
 %%
 %% What it does, by the protocol's messages (`foxglove.websocket.v1'):
 %% <ul>
@@ -26,19 +26,15 @@
 %% reading (a send blocked `?SEND_TIMEOUT_MS') is disconnected. Nothing a
 %% client sends reaches the robot other than a valid published term.
 -module(toroco_live_foxglove_conn).
--behaviour(gen_server).
+-behaviour(toroco_live_ws_conn).
 
 -export([serve/3]).
--export([init/1, handle_call/3, handle_cast/2, handle_info/2, terminate/2]).
+-export([join/2, handle_frame/2, handle_info/2, handle_framing_error/2]).
 
 -define(MAX_MESSAGE, 1048576).
 -define(MAX_FAULTS, 20).
--define(SEND_TIMEOUT_MS, 5000).
-%% After our close frame, how long the client has to close its side.
--define(CLOSING_MS, 2000).
 
--record(conn, {socket :: mochiweb_socket:socket(),
-               decoder :: toroco_live_ws_frame:decoder(),
+-record(conn, {socket :: toroco_live_ws_conn:socket(),
                publish :: boolean(),
                channels = #{} :: #{pos_integer() => toroco_live_foxglove:channel()},
                subs = #{} :: #{non_neg_integer() => pos_integer()},      % sub id => channel
@@ -46,36 +42,26 @@
                client_channels = #{} :: #{non_neg_integer() => toroco_live_channels:key()},
                graph = none :: none | {list(), list()},
                graph_subscribed = false :: boolean(),
-               faults = 0 :: non_neg_integer(),
-               closing = false :: boolean()}).
+               faults = 0 :: non_neg_integer()}).
 
 %% @doc The mochiweb loop of the bridge's port: a WebSocket upgrade to
 %% `Subprotocol' becomes a connection, anything else gets a 400.
 -spec serve(mochiweb_request:request(), binary(), #{client_publish := boolean(),
                                                     session := binary()}) -> ok.
 serve(Req, Subprotocol, Opts) ->
-    case toroco_live_ws_frame:accept(Req, Subprotocol) of
-        ok ->
-            Socket = mochiweb_request:get(socket, Req),
-            case toroco_live_foxglove:join() of
-                {ok, Channels, Graph} ->
-                    C = #conn{socket = Socket, decoder = toroco_live_ws_frame:decoder(?MAX_MESSAGE),
-                              publish = maps:get(client_publish, Opts), graph = Graph},
-                    ok = mochiweb_socket:setopts(Socket, [{packet, raw}, {active, once},
-                                                           {send_timeout, ?SEND_TIMEOUT_MS},
-                                                           {send_timeout_close, true}]),
-                    C1 = send_json(C, server_info(C, maps:get(session, Opts))),
-                    C2 = advertise(C1, Channels),
-                    gen_server:enter_loop(?MODULE, [], C2);
-                {error, _} ->
-                    _ = mochiweb_socket:send(Socket, toroco_live_ws_frame:close_frame(1011, <<"bridge down">>)),
-                    exit(normal)
-            end;
-        {error, Why} ->
-            Text = io_lib:format("a Foxglove WebSocket endpoint (subprotocol ~s): ~0p~n",
-                                 [Subprotocol, Why]),
-            _ = mochiweb_request:respond({400, [{"Content-Type", "text/plain"}], Text}, Req),
-            ok
+    Endpoint = io_lib:format("a Foxglove WebSocket endpoint (subprotocol ~s)", [Subprotocol]),
+    toroco_live_ws_conn:serve(Req, #{subprotocol => Subprotocol, max => ?MAX_MESSAGE,
+                                     endpoint => Endpoint}, {?MODULE, Opts}).
+
+-spec join(toroco_live_ws_conn:socket(), #{client_publish := boolean(), session := binary()}) ->
+          {ok, #conn{}} | {error, term()}.
+join(Socket, Opts) ->
+    case toroco_live_foxglove:join() of
+        {ok, Channels, Graph} ->
+            C = #conn{socket = Socket, publish = maps:get(client_publish, Opts), graph = Graph},
+            {ok, advertise(send_json(C, server_info(C, maps:get(session, Opts))), Channels)};
+        {error, _} = Error ->
+            Error
     end.
 
 server_info(#conn{publish = Publish}, Session) ->
@@ -88,59 +74,23 @@ server_info(#conn{publish = Publish}, Session) ->
     end.
 
 %%====================================================================
-%% gen_server
+%% toroco_live_ws_conn
 %%====================================================================
 
--spec init(term()) -> {stop, not_started_this_way}.
-init(_) ->
-    {stop, not_started_this_way}.
+-spec handle_frame({text | binary, binary()}, #conn{}) -> toroco_live_ws_conn:result(#conn{}).
+handle_frame(Frame, C) ->
+    client_message(Frame, C).
 
--spec handle_call(term(), gen_server:from(), #conn{}) -> {reply, term(), #conn{}}.
-handle_call(_, _From, C) ->
-    {reply, {error, unknown_call}, C}.
-
--spec handle_cast(term(), #conn{}) -> {noreply, #conn{}}.
-handle_cast(_, C) ->
-    {noreply, C}.
-
--spec handle_info(term(), #conn{}) -> {noreply, #conn{}} | {noreply, #conn{}, timeout()}
-                                          | {stop, term(), #conn{}}.
-handle_info({Tcp, _, _}, C = #conn{socket = S, closing = true}) when Tcp =:= tcp; Tcp =:= ssl ->
-    %% Read on until the client closes: closing with unread bytes would
-    %% reset the connection and lose our close frame.
-    ok = mochiweb_socket:setopts(S, [{active, once}]),
-    {noreply, C, ?CLOSING_MS};
-handle_info(timeout, C = #conn{closing = true}) ->
-    {stop, normal, C};
-handle_info(_, C = #conn{closing = true}) ->
-    {noreply, C, ?CLOSING_MS};
-handle_info({Tcp, _, Bytes}, C = #conn{socket = S, decoder = D}) when Tcp =:= tcp; Tcp =:= ssl ->
-    case toroco_live_ws_frame:decode(Bytes, D) of
-        {ok, Messages, D1} ->
-            case lists:foldl(fun client_message/2, {ok, C#conn{decoder = D1}}, Messages) of
-                {ok, C1} ->
-                    ok = mochiweb_socket:setopts(S, [{active, once}]),
-                    {noreply, C1};
-                Stop ->
-                    Stop
-            end;
-        {error, Why} ->
-            Code = case Why of too_big -> 1009; _ -> 1002 end,
-            close(C, Code, Why)
-    end;
-handle_info({Closed, _}, C) when Closed =:= tcp_closed; Closed =:= ssl_closed ->
-    {stop, normal, C};
-handle_info({Err, _, _}, C) when Err =:= tcp_error; Err =:= ssl_error ->
-    {stop, normal, C};
+-spec handle_info(term(), #conn{}) -> toroco_live_ws_conn:result(#conn{}).
 handle_info(Msg, C) ->
     case toroco_live_foxglove:receive_fox(Msg) of
         {ok, Fox} -> hub(Fox, C);
-        error -> {noreply, C}
+        error -> {ok, C}
     end.
 
--spec terminate(term(), #conn{}) -> ok.
-terminate(_, #conn{socket = S}) ->
-    mochiweb_socket:close(S).
+-spec handle_framing_error(term(), #conn{}) -> toroco_live_ws_conn:result(#conn{}).
+handle_framing_error(_Why, C) ->
+    {ok, C}.
 
 %%====================================================================
 %% From the hub
@@ -148,22 +98,22 @@ terminate(_, #conn{socket = S}) ->
 
 hub({message, Id, T, Json}, C = #conn{by_channel = By}) ->
     case By of
-        #{Id := Sub} -> send(C, toroco_live_ws_frame:frame(binary, [<<1, Sub:32/little, T:64/little>>, Json]));
-        #{} -> {noreply, C}
+        #{Id := Sub} -> {ok, send(C, toroco_live_ws_frame:frame(binary, [<<1, Sub:32/little, T:64/little>>, Json]))};
+        #{} -> {ok, C}
     end;
 hub({advertise, Channels}, C) ->
-    {noreply, advertise(C, Channels)};
+    {ok, advertise(C, Channels)};
 hub({unadvertise, Ids}, C = #conn{channels = Chs, subs = Subs, by_channel = By}) ->
     C1 = C#conn{channels = maps:without(Ids, Chs),
                 subs = maps:filter(fun(_, Ch) -> not lists:member(Ch, Ids) end, Subs),
                 by_channel = maps:without(Ids, By)},
-    {noreply, send_json(C1, #{op => unadvertise, channelIds => Ids})};
+    {ok, send_json(C1, #{op => unadvertise, channelIds => Ids})};
 hub({graph, Graph}, C = #conn{graph_subscribed = true, graph = Old}) ->
-    {noreply, send_json(C#conn{graph = Graph}, graph_update(Old, Graph))};
+    {ok, send_json(C#conn{graph = Graph}, graph_update(Old, Graph))};
 hub({graph, Graph}, C) ->
-    {noreply, C#conn{graph = Graph}};
+    {ok, C#conn{graph = Graph}};
 hub({dropped, N}, C) ->
-    {noreply, status(C, 1, io_lib:format("~b messages were dropped: this client reads "
+    {ok, status(C, 1, io_lib:format("~b messages were dropped: this client reads "
                                          "more slowly than the robot emits", [N]))}.
 
 advertise(C, []) -> C;
@@ -191,31 +141,18 @@ graph_update({OldPub, _}, {Pub, Sub}) ->
 %% From the client
 %%====================================================================
 
-client_message(_, Stop = {stop, _, _}) ->
-    Stop;
-client_message(_, Closing = {noreply, #conn{closing = true}, _}) ->
-    Closing;
-client_message({text, Text}, {ok, C}) ->
+client_message({text, Text}, C) ->
     try jiffy:decode(Text, [return_maps]) of
         #{<<"op">> := Op} = M when is_binary(Op) -> op(Op, M, C);
         _ -> fault(C, <<"a JSON object with an \"op\" field was expected">>)
     catch _:_ -> fault(C, <<"not JSON">>)
     end;
-client_message({binary, <<1, Id:32/little, Payload/binary>>}, {ok, C}) ->
+client_message({binary, <<1, Id:32/little, Payload/binary>>}, C) ->
     publish(Id, Payload, C);
-client_message({binary, <<Op, _/binary>>}, {ok, C}) ->
+client_message({binary, <<Op, _/binary>>}, C) ->
     fault(C, io_lib:format("unknown binary opcode ~b", [Op]));
-client_message({binary, <<>>}, {ok, C}) ->
-    fault(C, <<"empty binary message">>);
-client_message({ping, P}, {ok, C}) ->
-    case send(C, toroco_live_ws_frame:frame(pong, P)) of
-        {noreply, C1} -> {ok, C1};
-        Stop -> Stop
-    end;
-client_message({pong, _}, Acc) ->
-    Acc;
-client_message({close, _, _}, {ok, C}) ->
-    close(C, 1000, normal).
+client_message({binary, <<>>}, C) ->
+    fault(C, <<"empty binary message">>).
 
 op(<<"subscribe">>, #{<<"subscriptions">> := Subs}, C) when is_list(Subs) ->
     lists:foldl(fun(S, {ok, Acc}) -> subscribe(S, Acc); (_, Stop) -> Stop end, {ok, C}, Subs);
@@ -316,7 +253,7 @@ source({in, R, I}) ->
 %%====================================================================
 
 fault(C = #conn{faults = N}, _Msg) when N >= ?MAX_FAULTS ->
-    close(C, 1008, too_many_faults);
+    {close, 1008, too_many_faults, C};
 fault(C = #conn{faults = N}, Msg) ->
     {ok, status(C#conn{faults = N + 1}, 2, Msg)}.
 
@@ -324,22 +261,8 @@ status(C, Level, Msg) ->
     send_json(C, #{op => status, level => Level, message => iolist_to_binary(Msg)}).
 
 send_json(C, Map) ->
-    case send(C, toroco_live_ws_frame:frame(text, jiffy:encode(Map))) of
-        {noreply, C1} -> C1;
-        {stop, _, _} -> exit(normal)
-    end.
+    send(C, toroco_live_ws_frame:frame(text, jiffy:encode(Map))).
 
 send(C = #conn{socket = S}, Frame) ->
-    case mochiweb_socket:send(S, Frame) of
-        ok -> {noreply, C};
-        {error, _} -> {stop, normal, C}
-    end.
-
-close(C = #conn{socket = S}, Code, Why) ->
-    case mochiweb_socket:send(S, toroco_live_ws_frame:close_frame(Code, iolist_to_binary(io_lib:format("~0p", [Why])))) of
-        ok ->
-            ok = mochiweb_socket:setopts(S, [{active, once}]),
-            {noreply, C#conn{closing = true}, ?CLOSING_MS};
-        {error, _} ->
-            {stop, normal, C}
-    end.
+    ok = toroco_live_ws_conn:send(S, Frame),
+    C.

@@ -1,7 +1,7 @@
 %% @doc One rosbridge client of the server (`toroco_live_rosbridge'): the
-%% mochiweb connection process that answered the WebSocket upgrade becomes
-%% this gen_server and owns the socket. JSON text frames, one rosbridge v2
-%% operation each.
+%% protocol's side of a `toroco_live_ws_conn', the process that answered
+%% the WebSocket upgrade and owns the socket. JSON text frames, one
+%% rosbridge v2 operation each.
 %%
 %% <ul>
 %% <li>`subscribe' (`topic', `id', `type', `throttle_rate' ms,
@@ -54,10 +54,10 @@
 %% disconnected; one that reads slowly loses messages (the hub counts them
 %% and tells it, a `warning').
 -module(toroco_live_rosbridge_conn).
--behaviour(gen_server).
+-behaviour(toroco_live_ws_conn).
 
 -export([serve/2]).
--export([init/1, handle_call/3, handle_cast/2, handle_info/2, terminate/2]).
+-export([join/2, handle_frame/2, handle_info/2, handle_framing_error/2]).
 
 -define(MAX_MESSAGE, 1048576).
 -define(MAX_FAULTS, 20).
@@ -66,8 +66,6 @@
 -define(MAX_PENDING, 8).
 -define(MAX_FRAGMENTS, 10000).
 -define(FRAGMENT_MS, 10000).
--define(SEND_TIMEOUT_MS, 5000).
--define(CLOSING_MS, 2000).
 -define(LOG, #{domain => [toroco, live, ros]}).
 -define(UNAUTHORIZED, "publishing needs the dashboard's token: connect with ?token=T on "
         "the URL or send {\"op\": \"auth\", \"mac\": T}; without it this connection may only "
@@ -81,8 +79,7 @@
               queue = [] :: [{binary(), binary(), toroco_live_ros:message()}],
               timer = none :: none | reference()}).
 
--record(conn, {socket :: mochiweb_socket:socket(),
-               decoder :: toroco_live_ws_frame:decoder(),
+-record(conn, {socket :: toroco_live_ws_conn:socket(),
                max :: pos_integer(),
                authorized :: boolean(),
                level = 3 :: 1..4,
@@ -92,112 +89,69 @@
                                                non_neg_integer(), reference()}},
                out_id = 0 :: non_neg_integer(),
                window = {0, 0} :: {integer(), non_neg_integer()},
-               faults = 0 :: non_neg_integer(),
-               closing = false :: boolean()}).
+               faults = 0 :: non_neg_integer()}).
 
 %% @doc The mochiweb loop of the server's port: a WebSocket upgrade becomes
 %% a connection (authorized when the URL has the token), anything else a 400.
 -spec serve(mochiweb_request:request(), map()) -> ok.
 serve(Req, Opts) ->
-    case toroco_live_ws_frame:accept(Req, none) of
-        ok ->
-            Socket = mochiweb_request:get(socket, Req),
-            case toroco_live_rosbridge:join() of
-                ok ->
-                    Max = maps:get(max_message, Opts,
-                                   application:get_env(toroco_live, rosbridge_max_message, ?MAX_MESSAGE)),
-                    C = #conn{socket = Socket, decoder = toroco_live_ws_frame:decoder(Max), max = Max,
-                              authorized = toroco_live_config:authorized(toroco_live_http:token(Req))},
-                    ok = mochiweb_socket:setopts(Socket, [{packet, raw}, {active, once},
-                                                           {send_timeout, ?SEND_TIMEOUT_MS},
-                                                           {send_timeout_close, true}]),
-                    gen_server:enter_loop(?MODULE, [], C);
-                {error, _} ->
-                    _ = mochiweb_socket:send(Socket, toroco_live_ws_frame:close_frame(1011, <<"server down">>)),
-                    exit(normal)
-            end;
-        {error, Why} ->
-            Text = io_lib:format("a rosbridge v2 WebSocket endpoint: ~0p~n", [Why]),
-            _ = mochiweb_request:respond({400, [{"Content-Type", "text/plain"}], Text}, Req),
-            ok
+    Max = maps:get(max_message, Opts,
+                   application:get_env(toroco_live, rosbridge_max_message, ?MAX_MESSAGE)),
+    toroco_live_ws_conn:serve(Req, #{subprotocol => none, max => Max,
+                                     endpoint => "a rosbridge v2 WebSocket endpoint"},
+                              {?MODULE, {Max, toroco_live_http:token(Req)}}).
+
+-spec join(toroco_live_ws_conn:socket(), {pos_integer(), binary() | none}) ->
+          {ok, #conn{}} | {error, term()}.
+join(Socket, {Max, Token}) ->
+    case toroco_live_rosbridge:join() of
+        ok -> {ok, #conn{socket = Socket, max = Max,
+                         authorized = toroco_live_config:authorized(Token)}};
+        {error, _} = Error -> Error
     end.
 
 %%====================================================================
-%% gen_server
+%% toroco_live_ws_conn
 %%====================================================================
 
--spec init(term()) -> {stop, not_started_this_way}.
-init(_) ->
-    {stop, not_started_this_way}.
+-spec handle_frame({text | binary, binary()}, #conn{}) -> toroco_live_ws_conn:result(#conn{}).
+handle_frame({text, Text}, C) ->
+    text_message(Text, C);
+handle_frame({binary, _}, C) ->
+    fault(C, null, <<"binary messages are not taken: JSON text only (no CBOR, no BSON)">>).
 
--spec handle_call(term(), gen_server:from(), #conn{}) -> {reply, term(), #conn{}}.
-handle_call(_, _From, C) ->
-    {reply, {error, unknown_call}, C}.
+-spec handle_framing_error(term(), #conn{}) -> toroco_live_ws_conn:result(#conn{}).
+handle_framing_error(too_big, C) ->
+    toroco_live_rosbridge:count(faults),
+    {ok, status(C, error, null,
+                io_lib:format("a message over the limit of ~b bytes: closing, the rest of "
+                              "it cannot be read", [C#conn.max]))};
+handle_framing_error(_, C) ->
+    {ok, C}.
 
--spec handle_cast(term(), #conn{}) -> {noreply, #conn{}}.
-handle_cast(_, C) ->
-    {noreply, C}.
-
--spec handle_info(term(), #conn{}) -> {noreply, #conn{}} | {noreply, #conn{}, timeout()}
-                                          | {stop, term(), #conn{}}.
-handle_info({Tcp, _, _}, C = #conn{socket = S, closing = true}) when Tcp =:= tcp; Tcp =:= ssl ->
-    ok = mochiweb_socket:setopts(S, [{active, once}]),
-    {noreply, C, ?CLOSING_MS};
-handle_info(timeout, C = #conn{closing = true}) ->
-    {stop, normal, C};
-handle_info(_, C = #conn{closing = true}) ->
-    {noreply, C, ?CLOSING_MS};
-handle_info({Tcp, _, Bytes}, C = #conn{socket = S, decoder = D}) when Tcp =:= tcp; Tcp =:= ssl ->
-    case toroco_live_ws_frame:decode(Bytes, D) of
-        {ok, Messages, D1} ->
-            case lists:foldl(fun client_message/2, {ok, C#conn{decoder = D1}}, Messages) of
-                {ok, C1} ->
-                    ok = mochiweb_socket:setopts(S, [{active, once}]),
-                    {noreply, C1};
-                Stop ->
-                    Stop
-            end;
-        {error, too_big} ->
-            C1 = status(C, error, null,
-                        io_lib:format("a message over the limit of ~b bytes: closing, the rest of "
-                                      "it cannot be read", [C#conn.max])),
-            toroco_live_rosbridge:count(faults),
-            close(C1, 1009, too_big);
-        {error, Why} ->
-            close(C, 1002, Why)
-    end;
-handle_info({Closed, _}, C) when Closed =:= tcp_closed; Closed =:= ssl_closed ->
-    {stop, normal, C};
-handle_info({Err, _, _}, C) when Err =:= tcp_error; Err =:= ssl_error ->
-    {stop, normal, C};
+-spec handle_info(term(), #conn{}) -> toroco_live_ws_conn:result(#conn{}).
 handle_info({flush, Topic}, C) ->
-    {noreply, flush(Topic, C)};
+    {ok, flush(Topic, C)};
 handle_info({fragments_expired, Id, Ref}, C = #conn{fragments = F}) ->
     case F of
         #{Id := {Total, Got, _, Ref}} ->
             toroco_live_rosbridge:count(fragments_expired),
             Ms = application:get_env(toroco_live, rosbridge_fragment_ms, ?FRAGMENT_MS),
-            reply(fault(C#conn{fragments = maps:remove(Id, F)}, Id,
-                        io_lib:format("fragments of message ~ts never completed: ~b of ~b "
-                                      "came in ~b ms; dropped", [text(Id), map_size(Got), Total, Ms])));
-        #{} -> {noreply, C}
+            fault(C#conn{fragments = maps:remove(Id, F)}, Id,
+                  io_lib:format("fragments of message ~ts never completed: ~b of ~b "
+                                "came in ~b ms; dropped", [text(Id), map_size(Got), Total, Ms]));
+        #{} -> {ok, C}
     end;
 handle_info(Msg, C) ->
     case toroco_live_rosbridge:receive_hub(Msg) of
-        {ok, {message, Topic, Message}} -> {noreply, message(Topic, Message, C)};
+        {ok, {message, Topic, Message}} -> {ok, message(Topic, Message, C)};
         {ok, {dropped, N}} ->
-            {noreply, status(C, warning, null,
-                             io_lib:format("~b messages were dropped: this client reads more "
-                                           "slowly than the robot emits", [N]))};
-        error -> {noreply, C}
+            {ok, status(C, warning, null,
+                        io_lib:format("~b messages were dropped: this client reads more "
+                                      "slowly than the robot emits", [N]))};
+        error -> {ok, C}
     end.
 
--spec terminate(term(), #conn{}) -> ok.
-terminate(_, #conn{socket = S}) ->
-    mochiweb_socket:close(S).
-
-reply({ok, C}) -> {noreply, C};
-reply(Stop) -> Stop.
 
 %%====================================================================
 %% From the hub: messages on subscribed topics
@@ -307,24 +261,6 @@ boundary(Text, 0) ->
 %%====================================================================
 %% From the client
 %%====================================================================
-
-client_message(_, Stop = {stop, _, _}) ->
-    Stop;
-client_message(_, Closing = {noreply, #conn{closing = true}, _}) ->
-    Closing;
-client_message({text, Text}, {ok, C}) ->
-    text_message(Text, C);
-client_message({binary, _}, {ok, C}) ->
-    fault(C, null, <<"binary messages are not taken: JSON text only (no CBOR, no BSON)">>);
-client_message({ping, P}, {ok, C}) ->
-    case send(C, toroco_live_ws_frame:frame(pong, P)) of
-        {noreply, C1} -> {ok, C1};
-        Stop -> Stop
-    end;
-client_message({pong, _}, Acc) ->
-    Acc;
-client_message({close, _, _}, {ok, C}) ->
-    close(C, 1000, normal).
 
 text_message(Text, C) ->
     case jiffy_decode(Text) of
@@ -725,8 +661,8 @@ fault(C = #conn{faults = N}, _Id, Msg) when N >= ?MAX_FAULTS ->
     toroco_live_rosbridge:count(disconnected),
     logger:notice("rosbridge: a client was disconnected after ~b faults, the last: ~ts",
                   [N + 1, iolist_to_binary(Msg)], ?LOG),
-    close(status(C, error, null, [<<"too many faults: disconnected; the last: ">>, Msg]),
-          1008, too_many_faults);
+    {close, 1008, too_many_faults,
+     status(C, error, null, [<<"too many faults: disconnected; the last: ">>, Msg])};
 fault(C = #conn{faults = N}, Id, Msg) ->
     toroco_live_rosbridge:count(faults),
     {ok, status(C#conn{faults = N + 1}, error, Id, Msg)}.
@@ -750,28 +686,11 @@ send_json(C, Map) ->
     send_text(C, jiffy:encode(Map)).
 
 send_binary(C, Bin) ->
-    case send(C, toroco_live_ws_frame:frame(binary, Bin)) of
-        {noreply, C1} -> C1;
-        {stop, _, _} -> exit(normal)
-    end.
+    send(C, toroco_live_ws_frame:frame(binary, Bin)).
 
 send_text(C, Text) ->
-    case send(C, toroco_live_ws_frame:frame(text, Text)) of
-        {noreply, C1} -> C1;
-        {stop, _, _} -> exit(normal)
-    end.
+    send(C, toroco_live_ws_frame:frame(text, Text)).
 
 send(C = #conn{socket = S}, Frame) ->
-    case mochiweb_socket:send(S, Frame) of
-        ok -> {noreply, C};
-        {error, _} -> {stop, normal, C}
-    end.
-
-close(C = #conn{socket = S}, Code, Why) ->
-    case mochiweb_socket:send(S, toroco_live_ws_frame:close_frame(Code, iolist_to_binary(io_lib:format("~0p", [Why])))) of
-        ok ->
-            ok = mochiweb_socket:setopts(S, [{active, once}]),
-            {noreply, C#conn{closing = true}, ?CLOSING_MS};
-        {error, _} ->
-            {stop, normal, C}
-    end.
+    ok = toroco_live_ws_conn:send(S, Frame),
+    C.
