@@ -1,34 +1,36 @@
 %% @doc One browser's WebSocket: the page's live state goes out, controls
-%% come in.
+%% come in. The protocol's side of a `toroco_live_ws_conn' (the process
+%% that answered the upgrade owns the socket, as for the Foxglove bridge
+%% and the rosbridge server): one process per client.
 %%
-%% Two processes per client. The connection process (mochiweb's, running
-%% `mochiweb_websocket''s loop) reads the client's frames, each a control
-%% request (`toroco_live_control', answered on the socket with
-%% `{"type": "reply", "id": Id, "ok": true}' or `{"type": "error", "id": Id,
-%% "error": Reason, "message": Why}'). The sender, linked to it, joins
-%% `toroco_live_hub' and writes what the hub pushes; the hub pushes one
-%% message at a time and waits for the sender's ack, so a client that does
-%% not read blocks only its own sender, whose mailbox holds at most one
-%% push. A write that stays blocked past 5 seconds closes
-%% the socket, which ends both processes.
+%% It joins `toroco_live_hub' before the upgrade and writes what the hub
+%% pushes; the hub pushes one message at a time and waits for the ack, so
+%% a client that does not read holds only its own frame. A write that stays
+%% blocked past the send timeout (5 s) ends the connection. Each frame the
+%% client sends is a control request (`toroco_live_control', answered on
+%% the socket with `{"type": "reply", "id": Id, "ok": true}' or
+%% `{"type": "error", "id": Id, "error": Reason, "message": Why}').
 %%
 %% Refusals at connection time are HTTP answers: 400 when the request is
 %% not a WebSocket upgrade, 503 `too_many_clients' past `max_clients'.
 %% Controls need the token on the URL (`/ws?token=T') or the bearer
 %% header; without it every control is refused (read-only). A frame larger
-%% than `max_body' is refused with `too_large' and the connection stays.
+%% than `max_body' is refused with `too_large' and the connection stays;
+%% one over `?MAX_FRAME' breaks the framing and closes it.
 -module(toroco_live_ws).
+-behaviour(toroco_live_ws_conn).
 
--export([upgrade/2, frames/3]).
+-export([upgrade/2]).
+-export([join/2, handle_frame/2, handle_info/2, handle_framing_error/2]).
 
--define(SEND_TIMEOUT, 5000).
+-define(MAX_FRAME, 1048576).
 
 %% @doc Turns an HTTP request on `/ws' into a client (never returns after
 %% the upgrade), or answers why not.
 -spec upgrade(term(), boolean()) -> term().
 upgrade(Req, Authorized) ->
     case string:lowercase(header(Req, "upgrade")) of
-        "websocket" -> join(Req, Authorized);
+        "websocket" -> join_hub(Req, Authorized);
         _ -> refuse(Req, 400, not_websocket, <<"/ws is a WebSocket: send Upgrade: websocket">>)
     end.
 
@@ -38,20 +40,16 @@ header(Req, Name) ->
         V -> V
     end.
 
-join(Req, Authorized) ->
-    Sender = proc_lib:spawn_link(fun() -> sender_wait() end),
-    case toroco_live_hub:join(Sender) of
+%% This process is the client: it joins before the upgrade, so a full
+%% dashboard is an HTTP refusal.
+join_hub(Req, Authorized) ->
+    case toroco_live_hub:join(self()) of
         {ok, Hello} ->
-            Socket = mochiweb_request:get(socket, Req),
-            {Reentry, Reply} = mochiweb_websocket:upgrade_connection(Req, {?MODULE, frames}),
-            _ = mochiweb_socket:setopts(Socket, [{send_timeout, ?SEND_TIMEOUT},
-                                                 {send_timeout_close, true}]),
-            Sender ! {go, Reply, Hello},
-            Reentry(#{authorized => Authorized, max => toroco_live_config:get(max_body, 16384),
-                      reply => Reply});
+            State = #{authorized => Authorized, max => toroco_live_config:get(max_body, 16384)},
+            toroco_live_ws_conn:serve(Req, #{subprotocol => none, max => ?MAX_FRAME,
+                                             endpoint => "the dashboard's WebSocket (/ws)"},
+                                      {?MODULE, {Hello, State}});
         {error, Reason} ->
-            unlink(Sender),
-            exit(Sender, kill),
             refuse(Req, 503, Reason, case Reason of
                                          too_many_clients ->
                                              <<"the dashboard has as many clients as it takes">>;
@@ -64,16 +62,19 @@ refuse(Req, Status, Reason, Message) ->
                               toroco_live_json:encode(#{<<"error">> => toroco_live_json:value(Reason),
                                                         <<"message">> => Message})}, Req).
 
-%% @doc mochiweb's callback with the frames that came in one read.
--spec frames([binary()], map(), fun((iodata()) -> term())) -> map().
-frames(Payloads, State, Reply) when is_list(Payloads) ->
-    lists:foldl(fun(P, S) -> frame(P, S, Reply) end, State, Payloads);
-frames(Payload, State, Reply) ->
-    frame(Payload, State, Reply).
+%%====================================================================
+%% toroco_live_ws_conn
+%%====================================================================
 
-frame(<<>>, State, _Reply) ->
-    State;
-frame(Payload, State = #{authorized := Auth, max := Max}, Reply) ->
+-spec join(toroco_live_ws_conn:socket(), {binary(), map()}) -> {ok, map()}.
+join(Socket, {Hello, State}) ->
+    write(Socket, [Hello]),
+    {ok, State#{socket => Socket}}.
+
+-spec handle_frame({text | binary, binary()}, map()) -> toroco_live_ws_conn:result(map()).
+handle_frame({_, <<>>}, State) ->
+    {ok, State};
+handle_frame({_, Payload}, State = #{authorized := Auth, max := Max, socket := S}) ->
     {Id, Answer} = case toroco_live_control:decode(Payload, Max) of
                        {ok, Req} -> {request_id(Req), toroco_live_control:run(Auth, Req, Max)};
                        Refused -> {null, Refused}
@@ -84,35 +85,24 @@ frame(Payload, State = #{authorized := Auth, max := Max}, Reply) ->
                    #{<<"type">> => <<"error">>, <<"id">> => Id,
                      <<"error">> => toroco_live_json:value(Reason), <<"message">> => Message}
            end,
-    _ = Reply(toroco_live_json:encode(Json)),
-    State.
+    write(S, [toroco_live_json:encode(Json)]),
+    {ok, State}.
+
+-spec handle_info(term(), map()) -> toroco_live_ws_conn:result(map()).
+handle_info({toroco_live_hub, frames, Frames}, State = #{socket := S}) ->
+    write(S, Frames),
+    toroco_live_hub:ack(self()),
+    {ok, State};
+handle_info(_, State) ->
+    {ok, State}.
+
+-spec handle_framing_error(term(), map()) -> toroco_live_ws_conn:result(map()).
+handle_framing_error(_, State) ->
+    {ok, State}.
 
 request_id(#{<<"id">> := Id}) when is_integer(Id); is_binary(Id) -> Id;
 request_id(#{}) -> null.
 
-%%====================================================================
-%% The sender
-%%====================================================================
-
-sender_wait() ->
-    receive
-        {go, Reply, Hello} ->
-            write(Reply, [Hello]),
-            sender(Reply)
-    end.
-
-sender(Reply) ->
-    receive
-        {toroco_live_hub, frames, Frames} ->
-            write(Reply, Frames),
-            toroco_live_hub:ack(self()),
-            sender(Reply)
-    end.
-
-write(Reply, Frames) ->
-    lists:foreach(fun(F) ->
-                          case Reply(F) of
-                              ok -> ok;
-                              {error, Why} -> exit({shutdown, {send, Why}})
-                          end
-                  end, Frames).
+write(Socket, Frames) ->
+    lists:foreach(fun(F) -> toroco_live_ws_conn:send(Socket, toroco_live_ws_frame:frame(text, F)) end,
+                  Frames).
