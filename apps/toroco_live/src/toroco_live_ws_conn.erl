@@ -10,7 +10,11 @@
 %% sends bounded by `?SEND_TIMEOUT_MS', after which the client is gone);
 %% frames cut from the bytes with a size bound; pings answered; the close
 %% handshake (our close frame, then reading on for `?CLOSING_MS' until the
-%% client closes, so it gets the frame); the socket closed at the end. The
+%% client closes, so it gets the frame); the socket closed at the end; and
+%% the idle bound: a client silent for `ping_ms' (app env `ws_ping_ms',
+%% default 30000) gets a ping, which every WebSocket client answers by
+%% itself, and one silent for twice that is closed (1001), so half-open
+%% connections do not hold slots forever. The
 %% callback gets each text or binary message, every other Erlang message,
 %% and a framing error, and answers with its new state or a close.
 %%
@@ -28,6 +32,7 @@
 -define(SEND_TIMEOUT_MS, 5000).
 %% After our close frame, how long the client has to close its side.
 -define(CLOSING_MS, 2000).
+-define(PING_MS, 30000).
 
 -type socket() :: mochiweb_socket:socket().
 %% What a callback answers: go on with the new state, or close with a
@@ -49,6 +54,8 @@
              decoder :: toroco_live_ws_frame:decoder(),
              mod :: module(),
              state :: term(),
+             ping_ms :: pos_integer(),
+             last_in :: integer(),
              closing = false :: boolean()}).
 
 %% @doc The mochiweb loop's answer to a request on a WebSocket port: an
@@ -67,9 +74,12 @@ serve(Req, #{subprotocol := Sub, max := Max, endpoint := Endpoint}, {Mod, Args})
             case Mod:join(Socket, Args) of
                 {ok, State} ->
                     ok = mochiweb_socket:setopts(Socket, [{active, once}]),
+                    Ping = application:get_env(toroco_live, ws_ping_ms, ?PING_MS),
+                    _ = erlang:send_after(Ping, self(), {?MODULE, idle_check}),
                     gen_server:enter_loop(?MODULE, [],
                                           #ws{socket = Socket, decoder = toroco_live_ws_frame:decoder(Max),
-                                              mod = Mod, state = State});
+                                              mod = Mod, state = State, ping_ms = Ping,
+                                              last_in = now_ms()});
                 {error, _} ->
                     _ = mochiweb_socket:send(Socket, toroco_live_ws_frame:close_frame(1011, <<"server down">>)),
                     exit(normal)
@@ -115,8 +125,9 @@ handle_info(timeout, W = #ws{closing = true}) ->
     {stop, normal, W};
 handle_info(_, W = #ws{closing = true}) ->
     {noreply, W, ?CLOSING_MS};
-handle_info({Tcp, _, Bytes}, W = #ws{socket = S, decoder = D, mod = Mod, state = State})
+handle_info({Tcp, _, Bytes}, W0 = #ws{socket = S, decoder = D, mod = Mod, state = State})
   when Tcp =:= tcp; Tcp =:= ssl ->
+    W = W0#ws{last_in = now_ms()},
     case toroco_live_ws_frame:decode(Bytes, D) of
         {ok, Messages, D1} ->
             case lists:foldl(fun message/2, {ok, W#ws{decoder = D1}}, Messages) of
@@ -132,6 +143,19 @@ handle_info({Tcp, _, Bytes}, W = #ws{socket = S, decoder = D, mod = Mod, state =
                 {ok, State1} -> close(W#ws{state = State1}, Code, Why);
                 {close, _, _, State1} -> close(W#ws{state = State1}, Code, Why)
             end
+    end;
+handle_info({?MODULE, idle_check}, W = #ws{socket = S, ping_ms = Ping, last_in = Last}) ->
+    Silent = now_ms() - Last,
+    if
+        Silent >= 2 * Ping ->
+            close(W, 1001, idle);
+        Silent >= Ping ->
+            send(S, toroco_live_ws_frame:frame(ping, <<>>)),
+            _ = erlang:send_after(Ping, self(), {?MODULE, idle_check}),
+            {noreply, W};
+        true ->
+            _ = erlang:send_after(Ping - Silent, self(), {?MODULE, idle_check}),
+            {noreply, W}
     end;
 handle_info({Closed, _}, W) when Closed =:= tcp_closed; Closed =:= ssl_closed ->
     {stop, normal, W};
@@ -172,3 +196,5 @@ close(W = #ws{socket = S}, Code, Why) ->
         {error, _} ->
             {stop, normal, W}
     end.
+
+now_ms() -> erlang:monotonic_time(millisecond).

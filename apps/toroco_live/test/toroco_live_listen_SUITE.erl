@@ -13,7 +13,8 @@
 -define(OTHER, {127, 0, 0, 2}).
 
 all() ->
-    [flood_from_one_address, slow_request_and_idle_timeouts, full_port_sheds_longest_idle].
+    [flood_from_one_address, slow_request_and_idle_timeouts, full_port_sheds_longest_idle,
+     silent_websocket_closed].
 
 suite() -> [{timetrap, {seconds, 120}}].
 
@@ -24,11 +25,87 @@ end_per_suite(Config) ->
     tl_live:stop(?config(env, Config)).
 
 end_per_testcase(_Case, _Config) ->
+    application:unset_env(toroco_live, ws_ping_ms),
     toroco_live:stop().
 
 %%====================================================================
 %% Cases
 %%====================================================================
+
+silent_websocket_closed() ->
+    [{doc, "A WebSocket client silent for ws_ping_ms gets a ping; one that never answers is "
+      "closed (1001) after twice that, one that answers pongs stays"}].
+silent_websocket_closed(_Config) ->
+    Ping = 200,
+    ok = application:set_env(toroco_live, ws_ping_ms, Ping),
+    {ok, #{http := Http}} = toroco_live:start(#{http => 0, foxglove => off}),
+    {ok, Silent, _} = toroco_live_test_client:raw_ws(Http, ""),
+    {ok, Answering, _} = toroco_live_test_client:raw_ws(Http, ""),
+    T0 = erlang:monotonic_time(millisecond),
+    Answerer = spawn_link(fun() -> answer_pings(Answering, <<>>) end),
+    ok = gen_tcp:controlling_process(Answering, Answerer),
+    Ops = ws_ops(Silent, <<>>, []),
+    {at, At} = lists:keyfind(at, 1, [O || O <- Ops, is_tuple(O)]),
+    Closed = At - T0,
+    ct:pal("silent client: frames ~w, closed after ~b ms (ping every ~b ms)", [Ops, Closed, Ping]),
+    ?assert(lists:member(9, Ops)),
+    ?assertMatch({8, 1001}, lists:keyfind(8, 1, [O || O <- Ops, is_tuple(O)])),
+    %% in real time: between its bound and a generous margin for a loaded machine
+    ?assert(Closed >= 2 * Ping andalso Closed < 20 * Ping),
+    %% The answering client is still there after three pings: past the
+    %% 2 x ping_ms at which a silent one is closed.
+    Pongs = fun() -> Answerer ! {self(), pongs},
+                     receive {pongs, N} -> N after 5000 -> ct:fail(answerer_gone) end
+            end,
+    toroco_test_lib:wait_until(fun() -> Pongs() >= 3 end, 20 * Ping, three_pongs),
+    ?assert(is_process_alive(Answerer)),
+    ok.
+
+%% The opcodes of the frames a passive socket gets until it is closed
+%% ({8, Code} for a close frame, after `{at, When}' it came).
+ws_ops(S, Buf, Acc) ->
+    case frame(Buf) of
+        {8, <<Code:16, _/binary>>, Rest} ->
+            ws_ops(S, Rest, [{8, Code}, {at, erlang:monotonic_time(millisecond)} | Acc]);
+        {Op, _, Rest} -> ws_ops(S, Rest, [Op | Acc]);
+        more ->
+            case gen_tcp:recv(S, 0, 10000) of
+                {ok, B} -> ws_ops(S, <<Buf/binary, B/binary>>, Acc);
+                {error, _} -> lists:reverse(Acc)
+            end
+    end.
+
+answer_pings(S, Buf) ->
+    answer_pings(S, Buf, 0).
+
+answer_pings(S, Buf, N) ->
+    case frame(Buf) of
+        {9, P, Rest} ->
+            ok = gen_tcp:send(S, masked(10, P)),
+            answer_pings(S, Rest, N + 1);
+        {_, _, Rest} -> answer_pings(S, Rest, N);
+        more ->
+            case gen_tcp:recv(S, 0, 50) of
+                {ok, B} -> answer_pings(S, <<Buf/binary, B/binary>>, N);
+                {error, timeout} ->
+                    receive {From, pongs} -> From ! {pongs, N}
+                    after 0 -> ok
+                    end,
+                    answer_pings(S, Buf, N);
+                {error, Why} -> exit({closed, Why})
+            end
+    end.
+
+frame(<<_:4, Op:4, 0:1, 126:7, Len:16, P:Len/binary, Rest/binary>>) -> {Op, P, Rest};
+frame(<<_:4, Op:4, 0:1, 127:7, Len:64, P:Len/binary, Rest/binary>>) -> {Op, P, Rest};
+frame(<<_:4, Op:4, 0:1, Len:7, P:Len/binary, Rest/binary>>) when Len < 126 -> {Op, P, Rest};
+frame(_) -> more.
+
+%% A client's frame: masked, short payloads only.
+masked(Op, P) when byte_size(P) < 126 ->
+    Key = crypto:strong_rand_bytes(4),
+    <<1:1, 0:3, Op:4, 1:1, (byte_size(P)):7, Key/binary,
+      (crypto:exor(P, binary:part(binary:copy(Key, byte_size(P) div 4 + 1), 0, byte_size(P))))/binary>>.
 
 flood_from_one_address() ->
     [{doc, "With 1,000 idle or half-open connections held from 127.0.0.1 on each port, "

@@ -53,7 +53,7 @@ ws(Port, Query) ->
                              {ok, Sock, Rest} = raw_ws(Port, Query),
                              ok = inet:setopts(Sock, [{active, true}]),
                              Owner ! {wsc_up, self()},
-                             loop(Sock, Owner, frames(Rest, Owner))
+                             loop(Sock, Owner, frames(Rest, Sock, Owner))
                      end),
     receive {wsc_up, Pid} -> Pid after 5000 -> error(ws_connect_timeout) end.
 
@@ -109,31 +109,34 @@ next(Pid, Pred, Deadline) ->
 
 loop(Sock, Owner, Buf) ->
     receive
-        {tcp, Sock, Data} -> loop(Sock, Owner, frames(<<Buf/binary, Data/binary>>, Owner));
+        {tcp, Sock, Data} -> loop(Sock, Owner, frames(<<Buf/binary, Data/binary>>, Sock, Owner));
         {tcp_closed, Sock} -> Owner ! {wsc_closed, self()};
-        {send, Bin} -> ok = gen_tcp:send(Sock, mask(Bin)), loop(Sock, Owner, Buf)
+        {send, Bin} -> ok = gen_tcp:send(Sock, mask(1, Bin)), loop(Sock, Owner, Buf)
     end.
 
-frames(<<_:4, Op:4, 0:1, 126:7, Len:16, P:Len/binary, Rest/binary>>, Owner) ->
-    deliver(Op, P, Owner), frames(Rest, Owner);
-frames(<<_:4, Op:4, 0:1, 127:7, Len:64, P:Len/binary, Rest/binary>>, Owner) ->
-    deliver(Op, P, Owner), frames(Rest, Owner);
-frames(<<_:4, Op:4, 0:1, Len:7, P:Len/binary, Rest/binary>>, Owner) when Len < 126 ->
-    deliver(Op, P, Owner), frames(Rest, Owner);
-frames(Partial, _Owner) ->
+frames(<<_:4, Op:4, 0:1, 126:7, Len:16, P:Len/binary, Rest/binary>>, Sock, Owner) ->
+    deliver(Op, P, Sock, Owner), frames(Rest, Sock, Owner);
+frames(<<_:4, Op:4, 0:1, 127:7, Len:64, P:Len/binary, Rest/binary>>, Sock, Owner) ->
+    deliver(Op, P, Sock, Owner), frames(Rest, Sock, Owner);
+frames(<<_:4, Op:4, 0:1, Len:7, P:Len/binary, Rest/binary>>, Sock, Owner) when Len < 126 ->
+    deliver(Op, P, Sock, Owner), frames(Rest, Sock, Owner);
+frames(Partial, _Sock, _Owner) ->
     Partial.
 
-deliver(1, P, Owner) -> Owner ! {wsc, self(), jiffy:decode(P, [return_maps])};
-deliver(_, _, _) -> ok.
+deliver(1, P, _Sock, Owner) -> Owner ! {wsc, self(), jiffy:decode(P, [return_maps])};
+%% a ping is answered, as every WebSocket client does (the server closes
+%% one that stays silent)
+deliver(9, P, Sock, _Owner) -> gen_tcp:send(Sock, mask(10, P));
+deliver(_, _, _, _) -> ok.
 
-mask(Bin) ->
+mask(Op, Bin) ->
     Key = crypto:strong_rand_bytes(4),
     Len = byte_size(Bin),
     LenBits = if Len < 126 -> <<1:1, Len:7>>;
                  Len < 65536 -> <<1:1, 126:7, Len:16>>;
                  true -> <<1:1, 127:7, Len:64>>
               end,
-    <<1:1, 0:3, 1:4, LenBits/bitstring, Key/binary, (xor_mask(Bin, Key))/binary>>.
+    <<1:1, 0:3, Op:4, LenBits/bitstring, Key/binary, (xor_mask(Bin, Key))/binary>>.
 
 xor_mask(Bin, <<K:32>>) ->
     Pad = (4 - byte_size(Bin) rem 4) rem 4,
