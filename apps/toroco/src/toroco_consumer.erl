@@ -68,6 +68,9 @@
     {events, [core_event()], kind_data()} | {reply, term(), [core_event()], kind_data()} | unknown.
 %% The inspection view.
 -callback info(Now :: integer(), kind_data()) -> term().
+%% The observer tap's events it keeps (toroco_tap:idle/1) go: `idle' if the
+%% process has nothing else to handle, `all' now (it is stopping).
+-callback tap_flush(idle | all, kind_data()) -> kind_data().
 
 -record(c, {mod :: module(),
             key :: key(),
@@ -145,49 +148,54 @@ init({Mod, Key, Caller}) ->
 
 -spec handle_event(gen_statem:event_type(), term(), ready | syncing | gone, #c{} | none) ->
           gen_statem:event_handler_result(ready | syncing | gone).
-handle_event(internal, gone, gone, none) ->
+%% Every event, then the kind's tapped events if the process has nothing
+%% else to handle (toroco_tap:idle/1).
+handle_event(Type, Content, St, C) ->
+    tap_idle(event(Type, Content, St, C), C).
+
+event(internal, gone, gone, none) ->
     {stop, normal};
 %% Lockstep (toroco_lockstep): one message of the event path, or the hold
 %% timer, as a step; the step is done once the events it inserts are handled.
-handle_event(info, ?WIRE_STEP(Token, ?WIRE_TIMER(Kind, Msg)), St, C) ->
-    toroco_wire:step_done(Token, handle_event(Kind, Msg, St, C));
-handle_event(info, ?WIRE_STEP(Token, Msg), St, C) ->
-    toroco_wire:step_done(Token, handle_event(info, Msg, St, C));
-handle_event(internal, ?WIRE_STEP_DONE(Token), _, _) ->
+event(info, ?WIRE_STEP(Token, ?WIRE_TIMER(Kind, Msg)), St, C) ->
+    toroco_wire:step_done(Token, event(Kind, Msg, St, C));
+event(info, ?WIRE_STEP(Token, Msg), St, C) ->
+    toroco_wire:step_done(Token, event(info, Msg, St, C));
+event(internal, ?WIRE_STEP_DONE(Token), _, _) ->
     toroco_lockstep:done(Token),
     keep_state_and_data;
 %% The idle tick (toroco_wire:idle_arm/0); the first event after
 %% hibernating arms it again.
-handle_event(info, ?WIRE_IDLE, _, C = #c{idle = Idle}) ->
+event(info, ?WIRE_IDLE, _, C = #c{idle = Idle}) ->
     {Idle1, Actions} = toroco_wire:idle_tick(Idle),
     {keep_state, C#c{idle = Idle1}, Actions};
-handle_event(Type, Content, St, C = #c{idle = off}) ->
-    handle_event(Type, Content, St, C#c{idle = toroco_wire:idle_arm()});
+event(Type, Content, St, C = #c{idle = off}) ->
+    event(Type, Content, St, C#c{idle = toroco_wire:idle_arm()});
 %% The event path.
-handle_event(info, ?WIRE_EVENT(Src, Op), St, C = #c{heard = H}) when map_size(H) =:= 0 ->
+event(info, ?WIRE_EVENT(Src, Op), St, C = #c{heard = H}) when map_size(H) =:= 0 ->
     op(emitter, Src, Op, St, C);
-handle_event(info, ?WIRE_GATED(Src, Op), St, C = #c{heard = H}) when map_size(H) =:= 0 ->
+event(info, ?WIRE_GATED(Src, Op), St, C = #c{heard = H}) when map_size(H) =:= 0 ->
     op(gate, Src, Op, St, C);
-handle_event(info, ?WIRE_EVENT(Src, Op), St, C) ->
+event(info, ?WIRE_EVENT(Src, Op), St, C) ->
     with_heard(Src, fun(C1) -> op(emitter, Src, Op, St, C1) end, C);
-handle_event(info, ?WIRE_GATED(Src, Op), St, C) ->
+event(info, ?WIRE_GATED(Src, Op), St, C) ->
     with_heard(Src, fun(C1) -> op(gate, Src, Op, St, C1) end, C);
-handle_event(info, ?WIRE_ALIVE(Tag, Src, Latch), _, C = #c{links = L, stale = Stale, mod = Mod}) ->
+event(info, ?WIRE_ALIVE(Tag, Src, Latch), _, C = #c{links = L, stale = Stale, mod = Mod}) ->
     case toroco_wire:carries(Tag, Src, L) andalso lists:member(Src, Stale) of
         %% Heard again after its silence: its latch comes back.
         true -> with_heard(Src, fun(C1) -> steps(Mod:late(Src, Latch), C1) end, C);
         false -> {keep_state, heard(Src, C)}
     end;
-handle_event({timeout, stale}, check, _, C) ->
+event({timeout, stale}, check, _, C) ->
     silent(C#c{stale_at = infinity});
-handle_event({timeout, resub}, again, _, C) ->
+event({timeout, resub}, again, _, C) ->
     resubscribe(C);
-handle_event(info, ?WIRE_RESUBSCRIBE, _, C) ->
+event(info, ?WIRE_RESUBSCRIBE, _, C) ->
     resubscribe(C#c{tries = 0});
-handle_event({timeout, hold}, expire, _, C) ->
+event({timeout, hold}, expire, _, C) ->
     steps([tick], C#c{timer = infinity});
 %% Upstreams: answers, new incarnations, deaths.
-handle_event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C = #c{sync = {Sync, From, Cfg}}) ->
+event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C = #c{sync = {Sync, From, Cfg}}) ->
     case toroco_wire:sync_answer(Tag, Src, Pid, Latch, Sync) of
         {ok, Sync1} ->
             maybe_finish(C#c{sync = {Sync1, From, Cfg}});
@@ -199,9 +207,9 @@ handle_event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C = #c{sync = {Sync, F
                 false -> late(Tag, Src, Pid, Latch, St, C)
             end
     end;
-handle_event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C) ->
+event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C) ->
     late(Tag, Src, Pid, Latch, St, C);
-handle_event(info, ?WIRE_HELLO(Tag, Src, Pid), St, C = #c{links = L}) ->
+event(info, ?WIRE_HELLO(Tag, Src, Pid), St, C = #c{links = L}) ->
     case St =:= syncing andalso toroco_wire:sync_fresh(Tag, Src, element(1, C#c.sync)) of
         true ->
             {keep_state_and_data, [postpone]};
@@ -211,7 +219,7 @@ handle_event(info, ?WIRE_HELLO(Tag, Src, Pid), St, C = #c{links = L}) ->
                 ignore -> keep_state_and_data
             end
     end;
-handle_event(info, {'DOWN', Ref, process, Pid, _} = Down, _, C = #c{links = L, sync = Sync}) ->
+event(info, {'DOWN', Ref, process, Pid, _} = Down, _, C = #c{links = L, sync = Sync}) ->
     case Sync =/= none andalso toroco_wire:sync_down(Ref, element(1, Sync)) of
         {ok, Sync1} ->
             maybe_finish(C#c{sync = setelement(1, Sync, Sync1)});
@@ -224,30 +232,31 @@ handle_event(info, {'DOWN', Ref, process, Pid, _} = Down, _, C = #c{links = L, s
                 ignore -> kind(info, Down, C)
             end
     end;
-handle_event({timeout, sync}, expire, syncing, C = #c{sync = {Sync, From, Cfg}}) ->
+event({timeout, sync}, expire, syncing, C = #c{sync = {Sync, From, Cfg}}) ->
     {ready, C1, Actions} = finish(C#c{sync = {toroco_wire:sync_expire(Sync), From, Cfg}}),
     {next_state, ready, C1, Actions};
 %% The wiring server, and inspection: answered once the change is in (a
 %% consumer that just restarted answers with its sources' state recovered).
-handle_event({call, _}, _Req, syncing, _C) ->
+event({call, _}, _Req, syncing, _C) ->
     {keep_state_and_data, [postpone]};
-handle_event({call, From}, info, ready, #c{mod = Mod, data = D}) ->
+event({call, From}, info, ready, #c{mod = Mod, data = D}) ->
     {keep_state_and_data, [{reply, From, Mod:info(toroco_clock:now_ms(), D)}]};
-handle_event({call, From}, {rewire, Cfg, Caller}, ready, C) ->
+event({call, From}, {rewire, Cfg, Caller}, ready, C) ->
     case start_sync(Cfg, Caller, From, C) of
         {syncing, C1, Actions} -> {next_state, syncing, C1, Actions};
         {ready, C1, Actions} -> {keep_state, C1, Actions}
     end;
-handle_event({call, From}, ready, ready, _C) ->
+event({call, From}, ready, ready, _C) ->
     {keep_state_and_data, [{reply, From, ok}]};
 %% The observer tap, and whatever is the kind's own.
-handle_event(Type, Content, _, C) ->
+event(Type, Content, _, C) ->
     kind(Type, Content, C).
 
 -spec terminate(term(), ready | syncing | gone, #c{} | none) -> ok.
 terminate(_Reason, gone, none) ->
     ok;
-terminate(_Reason, _, C = #c{links = L}) ->
+terminate(_Reason, _, C = #c{links = L, mod = Mod, data = D}) ->
+    _ = Mod:tap_flush(all, D),
     toroco_wire:detach_all(L, me(C)).
 
 %%====================================================================
@@ -303,6 +312,31 @@ settle(D0, C = #c{mod = Mod}) ->
 timer(C = #c{mod = Mod, data = D, timer = T}) ->
     {T1, Actions} = toroco_wire:hold_timer(Mod:deadline(D), T),
     {C#c{timer = T1}, Actions}.
+
+%% After an event: the kind's tapped events go if nothing else waits (in
+%% whichever data the result carries, or the data before the event).
+tap_idle({keep_state, C}, _) -> {keep_state, tap_idle(C)};
+tap_idle({keep_state, C, A}, _) -> {keep_state, tap_idle(C), A};
+tap_idle({next_state, St, C}, _) -> {next_state, St, tap_idle(C)};
+tap_idle({next_state, St, C, A}, _) -> {next_state, St, tap_idle(C), A};
+tap_idle(keep_state_and_data = R, C = #c{}) ->
+    case tap_idle(C) of
+        C -> R;
+        C1 -> {keep_state, C1}
+    end;
+tap_idle({keep_state_and_data, A} = R, C = #c{}) ->
+    case tap_idle(C) of
+        C -> R;
+        C1 -> {keep_state, C1, A}
+    end;
+tap_idle(R, _) -> R.
+
+tap_idle(C = #c{mod = Mod, data = D}) ->
+    case Mod:tap_flush(idle, D) of
+        D -> C;
+        D1 -> C#c{data = D1}
+    end;
+tap_idle(none) -> none.
 
 add_actions(More, {keep_state, C}) -> {keep_state, C, More};
 add_actions(More, {keep_state, C, Actions}) -> {keep_state, C, More ++ Actions}.
