@@ -111,7 +111,7 @@
             vtimers = #{} :: #{term() => integer()},
             %% the observer tap's sinks that concern this process (SPEC §10)
             tap = #{} :: toroco_tap:sinks(),
-            %% the tapped events not sent yet (toroco_tap:idle/1)
+            %% the tapped events not sent yet (toroco_tap:after_event/3)
             batch = [] :: toroco_tap:batch(),
             idle = off :: toroco_wire:idle(),
             %% names of the generic timeouts the callback module has set, so
@@ -262,10 +262,10 @@ start_user(E = #e{kind = Kind, module = M, args = Args, name = Name}) ->
 
 -spec handle_event(gen_statem:event_type(), term(), term(), #e{}) ->
           gen_statem:event_handler_result(term()).
-%% Every event, then the observer tap's batch if the process has nothing
-%% else to handle (toroco_tap:idle/1).
+%% Every event, then what becomes of the observer tap's batch
+%% (toroco_tap:after_event/3).
 handle_event(Type, Content, S, E) ->
-    tap_idle(event(Type, Content, S, E), E).
+    tap_after(event(Type, Content, S, E), E).
 
 %% Lockstep (toroco_lockstep): one message of the event path, or a timer,
 %% handled as it would be in real time; the step is done once the events
@@ -282,6 +282,9 @@ event(info, ?WIRE_IDLE, _S, E = #e{idle = Idle}) ->
     {keep_state, E#e{idle = Idle1}, Actions};
 event(Type, Content, S, E = #e{idle = off}) ->
     event(Type, Content, S, E#e{idle = toroco_wire:idle_arm()});
+%% The observer tap's batch is due (toroco_tap:after_event/3).
+event({timeout, '$toroco_tap'}, flush, _S, E = #e{batch = B}) ->
+    {keep_state, E#e{batch = toroco_tap:flush(B)}};
 %% The observer tap changed: keep the sinks that concern this process.
 event(info, ?WIRE_TAP(Subs), _S, E = #e{name = Name}) ->
     {keep_state, E#e{tap = tap(Subs, Name)}};
@@ -629,23 +632,38 @@ tap(Subs, Name) ->
 lifecycle(What, E = #e{tap = Tap, name = Name, batch = B}) ->
     E#e{batch = toroco_tap:lifecycle(Tap, Name, What, B)}.
 
-%% After an event: the batch goes if nothing else waits (whichever data the
-%% result carries, or the data before the event if it carries none).
-tap_idle({keep_state, E}, _) -> {keep_state, tap_idle(E)};
-tap_idle({keep_state, E, A}, _) -> {keep_state, tap_idle(E), A};
-tap_idle({next_state, S, E}, _) -> {next_state, S, tap_idle(E)};
-tap_idle({next_state, S, E, A}, _) -> {next_state, S, tap_idle(E), A};
-tap_idle({repeat_state, E}, _) -> {repeat_state, tap_idle(E)};
-tap_idle({repeat_state, E, A}, _) -> {repeat_state, tap_idle(E), A};
-tap_idle(R, #e{batch = []}) -> R;
-tap_idle(keep_state_and_data, E) -> {keep_state, tap_idle(E)};
-tap_idle({keep_state_and_data, A}, E) -> {keep_state, tap_idle(E), A};
-tap_idle(repeat_state_and_data, E) -> {repeat_state, tap_idle(E)};
-tap_idle({repeat_state_and_data, A}, E) -> {repeat_state, tap_idle(E), A};
-tap_idle(R, _) -> R.                            % stopping: terminate/3 sends it
+%% After an event, with the data the result carries (or the data before
+%% the event if it carries none): what becomes of the batch
+%% (toroco_tap:after_event/3).
+tap_after(R, E0) ->
+    case R of
+        {keep_state, E} -> tapped(keep_state, none, E, [], E0, R);
+        {keep_state, E, A} -> tapped(keep_state, none, E, A, E0, R);
+        {next_state, S, E} -> tapped(next_state, S, E, [], E0, R);
+        {next_state, S, E, A} -> tapped(next_state, S, E, A, E0, R);
+        {repeat_state, E} -> tapped(repeat_state, none, E, [], E0, R);
+        {repeat_state, E, A} -> tapped(repeat_state, none, E, A, E0, R);
+        keep_state_and_data -> tapped(keep_state, none, E0, [], E0, R);
+        {keep_state_and_data, A} -> tapped(keep_state, none, E0, A, E0, R);
+        repeat_state_and_data -> tapped(repeat_state, none, E0, [], E0, R);
+        {repeat_state_and_data, A} -> tapped(repeat_state, none, E0, A, E0, R);
+        _ -> R                                  % stopping: terminate/3 sends it
+    end.
 
-tap_idle(E = #e{batch = []}) -> E;
-tap_idle(E = #e{batch = B}) -> E#e{batch = toroco_tap:idle(B)}.
+tapped(_How, _S, #e{batch = []}, _A, _E0, R) ->
+    R;
+tapped(How, S, E = #e{batch = B}, A0, #e{batch = B0}, R) ->
+    A = case is_list(A0) of true -> A0; false -> [A0] end,
+    case toroco_tap:after_event(B0 =/= [], B, lists:any(fun event_timeout/1, A)) of
+        keep -> R;
+        {B1, More} when How =:= next_state -> {next_state, S, E#e{batch = B1}, More ++ A};
+        {B1, More} -> {How, E#e{batch = B1}, More ++ A}
+    end.
+
+event_timeout(T) when is_integer(T) -> true;
+event_timeout({timeout, _, _}) -> true;
+event_timeout({timeout, _, _, _}) -> true;
+event_timeout(_) -> false.
 
 send_all([], _Msg) -> ok;
 send_all([C | Cs], Msg) ->

@@ -68,9 +68,9 @@
     {events, [core_event()], kind_data()} | {reply, term(), [core_event()], kind_data()} | unknown.
 %% The inspection view.
 -callback info(Now :: integer(), kind_data()) -> term().
-%% The observer tap's events it keeps (toroco_tap:idle/1) go: `idle' if the
-%% process has nothing else to handle, `all' now (it is stopping).
--callback tap_flush(idle | all, kind_data()) -> kind_data().
+%% The observer tap's events it keeps, not sent yet (toroco_tap:after_event/3).
+-callback tap_batch(kind_data()) -> toroco_tap:batch().
+-callback tap_batch(toroco_tap:batch(), kind_data()) -> kind_data().
 
 -record(c, {mod :: module(),
             key :: key(),
@@ -148,10 +148,10 @@ init({Mod, Key, Caller}) ->
 
 -spec handle_event(gen_statem:event_type(), term(), ready | syncing | gone, #c{} | none) ->
           gen_statem:event_handler_result(ready | syncing | gone).
-%% Every event, then the kind's tapped events if the process has nothing
-%% else to handle (toroco_tap:idle/1).
+%% Every event, then what becomes of the kind's tapped events
+%% (toroco_tap:after_event/3).
 handle_event(Type, Content, St, C) ->
-    tap_idle(event(Type, Content, St, C), C).
+    tap_after(event(Type, Content, St, C), C).
 
 event(internal, gone, gone, none) ->
     {stop, normal};
@@ -248,6 +248,9 @@ event({call, From}, {rewire, Cfg, Caller}, ready, C) ->
     end;
 event({call, From}, ready, ready, _C) ->
     {keep_state_and_data, [{reply, From, ok}]};
+%% The kind's tapped events are due (toroco_tap:after_event/3).
+event({timeout, '$toroco_tap'}, flush, _, C = #c{mod = Mod, data = D}) ->
+    {keep_state, C#c{data = Mod:tap_batch(toroco_tap:flush(Mod:tap_batch(D)), D)}};
 %% The observer tap, and whatever is the kind's own.
 event(Type, Content, _, C) ->
     kind(Type, Content, C).
@@ -256,7 +259,7 @@ event(Type, Content, _, C) ->
 terminate(_Reason, gone, none) ->
     ok;
 terminate(_Reason, _, C = #c{links = L, mod = Mod, data = D}) ->
-    _ = Mod:tap_flush(all, D),
+    _ = toroco_tap:flush(Mod:tap_batch(D)),
     toroco_wire:detach_all(L, me(C)).
 
 %%====================================================================
@@ -313,30 +316,33 @@ timer(C = #c{mod = Mod, data = D, timer = T}) ->
     {T1, Actions} = toroco_wire:hold_timer(Mod:deadline(D), T),
     {C#c{timer = T1}, Actions}.
 
-%% After an event: the kind's tapped events go if nothing else waits (in
-%% whichever data the result carries, or the data before the event).
-tap_idle({keep_state, C}, _) -> {keep_state, tap_idle(C)};
-tap_idle({keep_state, C, A}, _) -> {keep_state, tap_idle(C), A};
-tap_idle({next_state, St, C}, _) -> {next_state, St, tap_idle(C)};
-tap_idle({next_state, St, C, A}, _) -> {next_state, St, tap_idle(C), A};
-tap_idle(keep_state_and_data = R, C = #c{}) ->
-    case tap_idle(C) of
-        C -> R;
-        C1 -> {keep_state, C1}
-    end;
-tap_idle({keep_state_and_data, A} = R, C = #c{}) ->
-    case tap_idle(C) of
-        C -> R;
-        C1 -> {keep_state, C1, A}
-    end;
-tap_idle(R, _) -> R.
+%% After an event, with the data the result carries (or the data before
+%% the event if it carries none).
+tap_after({keep_state, C}, C0) -> tapped(none, C, [], C0, {keep_state, C});
+tap_after({keep_state, C, A}, C0) -> tapped(none, C, A, C0, {keep_state, C, A});
+tap_after({next_state, St, C}, C0) -> tapped(St, C, [], C0, {next_state, St, C});
+tap_after({next_state, St, C, A}, C0) -> tapped(St, C, A, C0, {next_state, St, C, A});
+tap_after(keep_state_and_data = R, C0 = #c{}) -> tapped(none, C0, [], C0, R);
+tap_after({keep_state_and_data, A} = R, C0 = #c{}) -> tapped(none, C0, A, C0, R);
+tap_after(R, _) -> R.
 
-tap_idle(C = #c{mod = Mod, data = D}) ->
-    case Mod:tap_flush(idle, D) of
-        D -> C;
-        D1 -> C#c{data = D1}
+tapped(St, C = #c{mod = Mod, data = D}, A0, C0, R) ->
+    case Mod:tap_batch(D) of
+        [] -> R;
+        B ->
+            case toroco_tap:after_event(Mod:tap_batch(C0#c.data) =/= [], B, false) of
+                keep -> R;
+                {B1, More} ->
+                    C1 = C#c{data = Mod:tap_batch(B1, D)},
+                    A = case is_list(A0) of true -> A0; false -> [A0] end,
+                    case St of
+                        none -> {keep_state, C1, More ++ A};
+                        _ -> {next_state, St, C1, More ++ A}
+                    end
+            end
     end;
-tap_idle(none) -> none.
+tapped(_St, _C, _A, _C0, R) ->
+    R.
 
 add_actions(More, {keep_state, C}) -> {keep_state, C, More};
 add_actions(More, {keep_state, C, Actions}) -> {keep_state, C, More ++ Actions}.

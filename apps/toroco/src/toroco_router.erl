@@ -20,7 +20,7 @@
 
 -export([unwire/1, info/1]).
 -export([kind/0, reg/1, init/2, run/3, settled/1, deadline/1, rewired/5, late/2, handle/3,
-         info/2, tap_flush/2]).
+         info/2, tap_batch/1, tap_batch/2]).
 
 -record(r, {key :: {atom(), atom()},
             input :: atom(),
@@ -34,7 +34,7 @@
             %% what it last reported of the router's state
             tap = #{} :: toroco_tap:sinks(),
             view = none :: term(),
-            %% the tapped events not sent yet (toroco_tap:idle/1)
+            %% the tapped events not sent yet (toroco_tap:after_event/3)
             batch = [] :: toroco_tap:batch()}).
 
 %%====================================================================
@@ -125,12 +125,12 @@ handle({call, _}, unwire, D) ->
 handle(_Type, _Content, _D) ->
     unknown.
 
-%% @doc The tapped events go: now (`all'), or if the router has nothing
-%% else to handle (`idle').
--spec tap_flush(idle | all, #r{}) -> #r{}.
-tap_flush(_, D = #r{batch = []}) -> D;
-tap_flush(idle, D = #r{batch = B}) -> D#r{batch = toroco_tap:idle(B)};
-tap_flush(all, D = #r{batch = B}) -> D#r{batch = toroco_tap:flush(B)}.
+%% @doc The tapped events not sent yet (toroco_tap:after_event/3).
+-spec tap_batch(#r{}) -> toroco_tap:batch().
+tap_batch(#r{batch = B}) -> B.
+
+-spec tap_batch(toroco_tap:batch(), #r{}) -> #r{}.
+tap_batch(B, D) -> D#r{batch = B}.
 
 -spec info(integer(), #r{}) -> map().
 info(Now, #r{core = C, buffer = B, rx = Rx}) ->

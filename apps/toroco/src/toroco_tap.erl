@@ -12,19 +12,29 @@
 %%     ({@link select/3}): with no subscriber an emission does no send and no
 %%     lookup;</li>
 %% <li>the producers' side: {@link tap/3} takes room for an event and keeps
-%%     it in the producer's own batch; {@link idle/1} sends the batch as one
-%%     message once the producer has nothing else to handle (its mailbox is
-%%     empty), and a batch is sealed at `?BATCH_MAX' events. A busy period
-%%     costs the subscriber one message per batch, not one per event;</li>
-%% <li>one feeder process per subscription, beside the subscriber: it unpacks
-%%     the batches into `{toroco_event, Ref, Event}' messages, in order, and
-%%     reports what the producers dropped.</li>
+%%     it in the producer's own batch, sealed and sent as one message at
+%%     `?BATCH_MAX' events; {@link after_event/3} says when the rest goes:
+%%     the first event of a batch arms the producer's named gen_statem
+%%     timeout `'$toroco_tap'' (`?FLUSH_MS'), whose event comes after what
+%%     was already waiting, so the batch goes once the producer has handled
+%%     it. A busy period costs the subscriber one message per batch, not one
+%%     per event, and the scheduler that runs the subscriber is not woken at
+%%     each event. A behavior whose callback just set an event timeout
+%%     (which any event would cancel) sends its batch at once instead; in
+%%     lockstep a batch goes when the producer's mailbox is empty (no real
+%%     timer: SPEC §14);</li>
+%% <li>one feeder process per subscription, beside the subscriber: it holds
+%%     the batches that come within `?MERGE_MS' of each other, merges them by
+%%     time stamp (each producer's own order kept), unpacks them into
+%%     `{toroco_event, Ref, Event}' messages and reports what the producers
+%%     dropped.</li>
 %% </ul>
 %%
-%% Credit. A sink carries an `atomics' array: (1) events the producers took
-%% room for and the feeder has not passed on yet, (2) events dropped, (3)
+%% Credit. A sink carries an `atomics' array: (1) room the producers took
+%% and the feeder has not passed on yet (a producer takes it 16 events at a
+%% time and gives back what its batch did not use), (2) events dropped, (3)
 %% how many of the subscriber's messages the feeder counts as pending. A
-%% producer takes room only while taken + pending &lt; buffer, else counts
+%% producer takes room only while taken + pending &lt;= buffer, else counts
 %% a drop. The feeder adds what it passes on to the pending count and gives
 %% the room back by looking at the subscriber's queue: when a batch leaves
 %% the subscriber half full or more, and then every 5 ms only while it
@@ -47,7 +57,7 @@
 -include("toroco_wire.hrl").
 
 -export([start_link/0, subscribe/1, unsubscribe/1, feeder/1]).
--export([current/0, join/0, select/3, tap/3, idle/1, flush/1, notify/2, timestamp/0]).
+-export([current/0, join/0, select/3, tap/3, after_event/3, flush/1, notify/2, timestamp/0]).
 -export([lifecycle/2, lifecycle/3, lifecycle/4, relayed/4]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 -export_type([sinks/0, batch/0, kind/0, event/0, opts/0, sub/0]).
@@ -68,22 +78,29 @@
 %% What a producer keeps: the sinks of each kind that concern it.
 -type sinks() :: #{kind() => [sink()]}.
 %% The events a producer tapped and has not sent yet, per subscription
-%% (newest first).
--opaque batch() :: [{reference(), pid(), pos_integer(), [event()]}].
+%% (newest first); `[]' when there are none.
+%% With each, the room taken for it and not used yet.
+-type batch() :: [{reference(), pid(), atomics:atomics_ref(), pos_integer(), non_neg_integer(),
+                   [event()]}].
 
 -define(TABLE, toroco_tap).
 -define(SCOPE, toroco_tap_pg).
 -define(GROUP, network).
 -define(KINDS, [emit, deliver, router, lifecycle]).
 -define(DEFAULT_BUFFER, 10000).
--define(BATCH_MAX, 64).
+-define(BATCH_MAX, 128).
+-define(FLUSH_MS, 2).
+-define(CREDIT, 16).
+%% How long a feeder holds the batches that came, to merge them.
+-define(MERGE_MS, 3).
+-define(FLUSH_TIMER, {timeout, '$toroco_tap'}).
 -define(LOOK_MS, 5).
 %% Cells of a sink's atomics array.
 -define(HELD, 1).
 -define(DROPPED, 2).
 -define(SEEN, 3).
 %% producer -> feeder: events in emission order, N of them.
--define(BATCH(Ref, Events, N), {'$toroco_tap_batch', Ref, Events, N}).
+-define(BATCH(Ref, Producer, Events, N), {'$toroco_tap_batch', Ref, Producer, Events, N}).
 %% relay -> feeder: events of another node, and what was dropped there.
 -define(RELAYED(Ref, Events, N, Dropped), {'$toroco_tap_relayed', Ref, Events, N, Dropped}).
 
@@ -200,36 +217,66 @@ select(Subs, Kinds, Name) ->
 tap([], _Event, Batch) ->
     Batch;
 tap([{Ref, Feeder, A, Max} | Rest], Event, Batch) ->
-    Held = atomics:add_get(A, ?HELD, 1),
-    case Held + atomics:get(A, ?SEEN) > Max of
-        true ->
-            atomics:sub(A, ?HELD, 1),
-            atomics:add(A, ?DROPPED, 1),
-            tap(Rest, Event, Batch);
-        false ->
-            tap(Rest, Event, add(Ref, Feeder, Event, Batch))
-    end.
-
-add(Ref, Feeder, Event, Batch) ->
     case lists:keytake(Ref, 1, Batch) of
-        {value, {_, _, N, Evs}, Others} when N + 1 >= ?BATCH_MAX ->
-            send(Ref, Feeder, N + 1, [Event | Evs]),
-            Others;
-        {value, {_, _, N, Evs}, Others} ->
-            [{Ref, Feeder, N + 1, [Event | Evs]} | Others];
+        {value, {_, _, _, N, Room, Evs}, Others} when Room > 0 ->
+            tap(Rest, Event, add(Ref, Feeder, A, N + 1, Room - 1, [Event | Evs], Others));
+        {value, {_, _, _, N, 0, Evs}, Others} ->
+            case reserve(A, Max) of
+                0 -> tap(Rest, Event, Batch);
+                Room -> tap(Rest, Event, add(Ref, Feeder, A, N + 1, Room - 1, [Event | Evs], Others))
+            end;
         false ->
-            [{Ref, Feeder, 1, [Event]} | Batch]
+            case reserve(A, Max) of
+                0 -> tap(Rest, Event, Batch);
+                Room -> tap(Rest, Event, add(Ref, Feeder, A, 1, Room - 1, [Event], Batch))
+            end
     end.
 
-send(Ref, Feeder, N, Evs) ->
-    Feeder ! ?BATCH(Ref, lists:reverse(Evs), N),
+%% Room for up to ?CREDIT events taken at once (0: the event is dropped,
+%% and counted).
+reserve(A, Max) ->
+    Over = atomics:add_get(A, ?HELD, ?CREDIT) + atomics:get(A, ?SEEN) - Max,
+    if
+        Over =< 0 -> ?CREDIT;
+        Over >= ?CREDIT ->
+            atomics:sub(A, ?HELD, ?CREDIT),
+            atomics:add(A, ?DROPPED, 1),
+            0;
+        true ->
+            atomics:sub(A, ?HELD, Over),
+            ?CREDIT - Over
+    end.
+
+add(Ref, Feeder, A, N, Room, Evs, Batch) when N >= ?BATCH_MAX ->
+    send({Ref, Feeder, A, N, Room, Evs}),
+    Batch;
+add(Ref, Feeder, A, N, Room, Evs, Batch) ->
+    [{Ref, Feeder, A, N, Room, Evs} | Batch].
+
+%% A batch goes; the room it did not use is given back.
+send({Ref, Feeder, A, N, Room, Evs}) ->
+    Feeder ! ?BATCH(Ref, self(), lists:reverse(Evs), N),
+    _ = Room > 0 andalso atomics:sub(A, ?HELD, Room),
     ok.
 
-%% @doc The producer has handled an event: its batch goes if it has
-%% nothing else to handle now.
--spec idle(batch()) -> batch().
-idle([]) ->
-    [];
+%% @doc What a producer (a gen_statem) does with its batch after an event:
+%% `Was' says whether it had a batch before the event, `Hurry' whether the
+%% event's result sets an event timeout. Returns `keep' (nothing to do) or
+%% the batch to keep and the gen_statem actions to add; the producer
+%% handles the timeout `{{timeout, '$toroco_tap'}, flush}' with
+%% {@link flush/1}.
+-spec after_event(boolean(), batch(), boolean()) -> keep | {batch(), [gen_statem:action()]}.
+after_event(_Was, [], _Hurry) ->
+    keep;
+after_event(Was, Batch, Hurry) ->
+    case toroco_clock:lockstep_server() of
+        none when Hurry -> {flush(Batch), [{?FLUSH_TIMER, cancel}]};
+        none when Was -> keep;
+        none -> {Batch, [{?FLUSH_TIMER, ?FLUSH_MS, flush}]};
+        _ -> {idle(Batch), []}
+    end.
+
+%% In lockstep: the batch goes if the producer has nothing else to handle.
 idle(Batch) ->
     case erlang:process_info(self(), message_queue_len) of
         {message_queue_len, 0} -> flush(Batch);
@@ -239,7 +286,7 @@ idle(Batch) ->
 %% @doc Sends the producer's batch now.
 -spec flush(batch()) -> [].
 flush(Batch) ->
-    _ = [send(Ref, Feeder, N, Evs) || {Ref, Feeder, N, Evs} <- Batch],
+    lists:foreach(fun send/1, Batch),
     [].
 
 %% @doc Sends `Event' at once to each sink with room for it, counting a
@@ -360,6 +407,10 @@ publish(SubsMap) ->
                ref :: reference(),
                a :: atomics:atomics_ref(),
                max :: pos_integer(),
+               %% batches held for the merge, per producer (each newest
+               %% first), how many events, and whether the release is due
+               held = #{} :: #{pid() => [[event()]]},
+               n = 0 :: non_neg_integer(),
                %% whether a look timer is set
                timer = off :: off | on}).
 
@@ -371,11 +422,12 @@ spawn_feeder(Sub, Ref, A, Max) ->
 
 feed(F = #feed{ref = Ref, mon = Mon, a = A}) ->
     receive
-        ?BATCH(Ref, Events, N) ->
-            %% Room was taken for these by their producer.
-            pass(Events, N, F),
-            atomics:sub(A, ?HELD, N),
-            feed(settle(F));
+        ?BATCH(Ref, Producer, Events, N) ->
+            %% Room was taken for these by their producer; they wait for
+            %% the batches of the other producers (?MERGE_MS).
+            feed(hold(Producer, Events, N, F));
+        release ->
+            feed(settle(release(F)));
         ?RELAYED(Ref, Events, N, Dropped) ->
             Admitted = admit(N, F),
             _ = Dropped + N - Admitted > 0
@@ -388,6 +440,25 @@ feed(F = #feed{ref = Ref, mon = Mon, a = A}) ->
         {'DOWN', Mon, process, _, _} ->
             exit(normal)
     end.
+
+hold(Producer, Events, N, F = #feed{held = H, n = 0}) ->
+    _ = erlang:send_after(?MERGE_MS, self(), release),
+    F#feed{held = H#{Producer => [Events]}, n = N};
+hold(Producer, Events, N, F = #feed{held = H, n = Held}) ->
+    F#feed{held = maps:update_with(Producer, fun(L) -> [Events | L] end, [Events], H), n = Held + N}.
+
+%% The held batches go on, merged by time stamp: each producer's events
+%% keep their order, and an event caused by another (an emission, then its
+%% delivery) mostly comes after it even though their producers' batches
+%% came in either order.
+release(F = #feed{held = H, n = N, a = A}) ->
+    Runs = [lists:append(lists:reverse(Bs)) || Bs <- maps:values(H)],
+    Merged = lists:foldl(fun(Run, Acc) -> lists:merge(fun earlier/2, Acc, Run) end, [], Runs),
+    pass(Merged, N, F),
+    atomics:sub(A, ?HELD, N),
+    F#feed{held = #{}, n = 0}.
+
+earlier(A, B) -> element(2, A) =< element(2, B).
 
 %% How many of `N' relayed events fit, room taken for them.
 admit(N, #feed{a = A, max = Max}) ->

@@ -265,6 +265,8 @@ idle_subscription_costs_nothing(_Config) ->
     chain(),
     {ok, Ref} = toroco:subscribe_events(#{}),
     Feeder = toroco_tap:feeder(Ref),
+    %% Each router reports its state to a new subscription first.
+    [_, _] = [R || {router, _, R, _} <- events(Ref, 200)],
     ok = wait_until(fun() -> process_info(Feeder, status) =:= {status, waiting} end, 2000),
     1 = erlang:trace(Feeder, true, [running]),
     %% Three of the old watcher's idle periods (50 ms) without an event.
