@@ -51,10 +51,8 @@
 
 -type item() :: {event, tuple()} | {message, toroco_live_channels:key(), binary()}.
 
--record(flight, {tap :: reference() | none,
-                 %% The tap server: when it goes (the runtime restarts), so
-                 %% does the subscription, and this process subscribes again.
-                 tap_monitor = none :: reference() | none,
+-record(flight, {%% when the runtime restarts, this process subscribes again
+                 tap :: toroco_live_tap:tap(),
                  %% The window: sealed segments, oldest first, each
                  %% {FirstT, LastT, Count, Bin} where Bin is the batch's
                  %% [{T, item()}] compressed and Count its last events
@@ -122,8 +120,9 @@ init([]) ->
     MaxBytes = application:get_env(toroco_live, flight_max_bytes, ?MAX_BYTES),
     %% toroco_live_world starts before this process (toroco_live_sup).
     _ = (catch toroco_live_world:subscribe()),
-    {ok, subscribe(#flight{tap = none, window_ns = Seconds * 1000000000, max = Max,
-                             max_bytes = MaxBytes})}.
+    {_, Tap} = toroco_live_tap:on(toroco_live_tap:new(#{buffer => ?BUFFER,
+                                                        retry_ms => ?RESUBSCRIBE_MS})),
+    {ok, #flight{tap = Tap, window_ns = Seconds * 1000000000, max = Max, max_bytes = MaxBytes}}.
 
 -spec handle_call(term(), gen_server:from(), #flight{}) -> {reply, term(), #flight{}}.
 handle_call({dump, Path}, _From, F0) ->
@@ -131,12 +130,10 @@ handle_call({dump, Path}, _From, F0) ->
     {reply, write(Path, F), F};
 handle_call({record, Path, _}, _From, F = #flight{recording = R}) when R =/= none ->
     {reply, {error, {already_recording, toroco_live_recorder:path(R), Path}}, F};
-handle_call({record, _, _}, _From, F = #flight{tap = none}) ->
-    {reply, {error, no_events}, F};
-handle_call({record, Path, Opts}, _From, F) ->
-    case toroco_live_recorder:open(Path, Opts) of
-        {ok, R} -> {reply, ok, F#flight{recording = R}};
-        Err -> {reply, Err, F}
+handle_call({record, Path, Opts}, _From, F = #flight{tap = Tap}) ->
+    case toroco_live_tap:subscribed(Tap) of
+        true -> record(Path, Opts, F);
+        false -> {reply, {error, no_events}, F}
     end;
 handle_call(stop_recording, _From, F = #flight{recording = none}) ->
     {reply, {error, not_recording}, F};
@@ -153,13 +150,6 @@ handle_cast(_, F) ->
     {noreply, F}.
 
 -spec handle_info(term(), #flight{}) -> {noreply, #flight{}} | {noreply, #flight{}, hibernate}.
-handle_info({toroco_event, Tap, Event}, F = #flight{tap = Tap}) ->
-    noreply(event(Event, F));
-handle_info({'DOWN', M, process, _, _}, F = #flight{tap_monitor = M}) ->
-    erlang:send_after(?RESUBSCRIBE_MS, self(), subscribe),
-    {noreply, F#flight{tap = none, tap_monitor = none}};
-handle_info(subscribe, F = #flight{tap = none}) ->
-    {noreply, subscribe(F)};
 handle_info({toroco_live_world, changed}, F) ->
     {Msgs, Scene} = toroco_live_channels:world(toroco_live_world:latest(),
                                                erlang:system_time(nanosecond), F#flight.scene),
@@ -167,8 +157,13 @@ handle_info({toroco_live_world, changed}, F) ->
                                 keep({T, {message, K, J}},
                                      Acc#flight{recording = record_message(K, T, J, R)})
                         end, F#flight{scene = Scene}, Msgs));
-handle_info(_, F) ->
-    {noreply, F}.
+handle_info(Info, F = #flight{tap = Tap}) ->
+    case toroco_live_tap:handle(Info, Tap) of
+        {event, Event} -> noreply(event(Event, F));
+        {down, Tap1} -> {noreply, F#flight{tap = Tap1}};
+        {retry, Tap1} -> {_, Tap2} = toroco_live_tap:on(Tap1), {noreply, F#flight{tap = Tap2}};
+        _ -> {noreply, F}
+    end.
 
 -spec terminate(term(), #flight{}) -> ok.
 terminate(_, #flight{recording = none}) ->
@@ -181,16 +176,11 @@ terminate(_, #flight{recording = R}) ->
 %% Inside
 %%====================================================================
 
-subscribe(F) ->
-    try toroco:subscribe_events(#{buffer => ?BUFFER}) of
-        {ok, Ref} -> F#flight{tap = Ref, tap_monitor = monitor(process, toroco_tap)};
-        {error, _} -> retry(F)
-    catch exit:_ -> retry(F)
+record(Path, Opts, F) ->
+    case toroco_live_recorder:open(Path, Opts) of
+        {ok, R} -> {reply, ok, F#flight{recording = R}};
+        Err -> {reply, Err, F}
     end.
-
-retry(F) ->
-    erlang:send_after(?RESUBSCRIBE_MS, self(), subscribe),
-    F.
 
 event({dropped, N}, F = #flight{dropped = D, recording = R}) ->
     F#flight{dropped = D + N, recording = case R of
@@ -215,7 +205,8 @@ event(Event, F0 = #flight{recording = R}) ->
 record_message(_, _, _, none) -> none;
 record_message(K, T, J, R) -> toroco_live_recorder:message(K, T, J, R).
 
-drain(F = #flight{tap = Tap}, Until) ->
+drain(F = #flight{tap = T}, Until) ->
+    Tap = toroco_live_tap:ref(T),
     Wait = min(?QUIET_MS, max(0, Until - erlang:monotonic_time(millisecond))),
     receive
         {toroco_event, Tap, Event} -> drain(event(Event, F), Until)

@@ -43,10 +43,8 @@
 
 -record(h, {max_clients :: pos_integer(),
             clients = #{} :: #{pid() => #client{}},
-            tap = none :: reference() | none,
-            %% The tap server: when it goes (the runtime restarts), so does
-            %% the subscription, and the hub subscribes again.
-            tap_monitor = none :: reference() | none,
+            %% when the runtime restarts, the hub subscribes again
+            tap :: toroco_live_tap:tap(),
             emits = #{} :: #{{atom(), atom()} => non_neg_integer()},
             delivers = #{} :: #{{atom(), atom()} => non_neg_integer()},
             window = {#{}, #{}} :: {map(), map()},
@@ -103,8 +101,9 @@ init(Config) ->
     ok = toroco_live_world:subscribe(),
     erlang:send_after(?TICK_MS, self(), tick),
     Now = erlang:monotonic_time(millisecond),
-    {ok, subscribe(#h{max_clients = maps:get(max_clients, Config, 64),
-                      last_rate = Now, last_world = Now - ?WORLD_MS})}.
+    {_, Tap} = toroco_live_tap:on(toroco_live_tap:new(#{buffer => ?TAP_BUFFER, retry_ms => ?TICK_MS})),
+    {ok, #h{max_clients = maps:get(max_clients, Config, 64), tap = Tap,
+            last_rate = Now, last_world = Now - ?WORLD_MS}}.
 
 -spec handle_call(term(), gen_server:from(), #h{}) -> {reply, term(), #h{}}.
 handle_call({join, Pid}, _From, H = #h{clients = Cs, max_clients = Max}) ->
@@ -124,7 +123,7 @@ handle_call(stats, _From, H) ->
     {reply, #{emits => H#h.emits, delivers => H#h.delivers, clients => map_size(H#h.clients),
               skipped => H#h.skipped + lists:sum([C#client.skipped || C <- maps:values(H#h.clients)]),
               pushed => H#h.pushed, tap_dropped => H#h.tap_dropped,
-              tap => H#h.tap =/= none}, H};
+              tap => toroco_live_tap:subscribed(H#h.tap)}, H};
 handle_call(_Request, _From, H) ->
     {reply, {error, unknown_call}, H}.
 
@@ -142,47 +141,37 @@ handle_cast(_Msg, H) ->
     {noreply, H}.
 
 -spec handle_info(term(), #h{}) -> {noreply, #h{}}.
-handle_info({toroco_event, Ref, Event}, H = #h{tap = Ref}) ->
-    {noreply, event(Event, H)};
-handle_info({toroco_event, _, _}, H) ->
-    {noreply, H};
 handle_info({toroco_live_world, changed}, H) ->
     {noreply, H#h{world_dirty = true}};
 handle_info(tick, H) ->
     erlang:send_after(?TICK_MS, self(), tick),
     {noreply, tick(H)};
-handle_info({'DOWN', MRef, process, _, _}, H = #h{tap_monitor = MRef}) ->
-    {noreply, H#h{tap = none, tap_monitor = none, dirty = true}};
-handle_info({'DOWN', MRef, process, Pid, _}, H = #h{clients = Cs}) ->
+handle_info({'DOWN', MRef, process, Pid, _} = Down, H = #h{clients = Cs}) ->
     case Cs of
         #{Pid := #client{mref = MRef, skipped = S}} ->
             {noreply, H#h{clients = maps:remove(Pid, Cs), skipped = H#h.skipped + S}};
         #{} ->
-            {noreply, H}
+            handle_info_tap(Down, H)
     end;
-handle_info(_Info, H) ->
-    {noreply, H}.
+handle_info(Info, H) ->
+    handle_info_tap(Info, H).
+
+handle_info_tap(Info, H = #h{tap = Tap}) ->
+    case toroco_live_tap:handle(Info, Tap) of
+        {event, Event} -> {noreply, event(Event, H)};
+        {down, Tap1} -> {noreply, H#h{tap = Tap1, dirty = true}};
+        {retry, Tap1} -> {_, Tap2} = toroco_live_tap:on(Tap1), {noreply, H#h{tap = Tap2}};
+        _ -> {noreply, H}
+    end.
 
 -spec terminate(term(), #h{}) -> ok.
 terminate(_Reason, #h{tap = Tap}) ->
-    case Tap of
-        none -> ok;
-        Ref -> catch toroco:unsubscribe_events(Ref), ok
-    end.
+    _ = toroco_live_tap:off(Tap),
+    ok.
 
 %%====================================================================
 %% The tap
 %%====================================================================
-
-subscribe(H = #h{tap = none}) ->
-    try toroco:subscribe_events(#{buffer => ?TAP_BUFFER}) of
-        {ok, Ref} -> H#h{tap = Ref, tap_monitor = monitor(process, toroco_tap)};
-        {error, _} -> H
-    catch error:undef -> H;
-          exit:_ -> H
-    end;
-subscribe(H) ->
-    H.
 
 event({emit, _T, Src, _Kind, _V}, H = #h{emits = E}) ->
     H#h{emits = bump(Src, E), dirty = true};
@@ -201,13 +190,13 @@ bump(Key, Map) ->
 %%====================================================================
 
 tick(H0) ->
-    H = rates(subscribe(H0)),
+    H = rates(H0),
     case map_size(H#h.clients) of
         0 ->
             H;
         _ ->
             {Vs, Vw} = H#h.versions,
-            H1 = case H#h.dirty orelse H#h.tap =:= none of
+            H1 = case H#h.dirty orelse not toroco_live_tap:subscribed(H#h.tap) of
                      true -> H#h{state = state_frame(H), dirty = false, versions = {Vs + 1, Vw}};
                      false -> H
                  end,
@@ -247,7 +236,7 @@ state_frame(#h{rates = Rates, clients = Cs, skipped = S, tap_dropped = Dropped, 
             toroco_live_json:encode(Page#{<<"dashboard">> =>
                                               #{<<"clients">> => map_size(Cs),
                                                 <<"skipped">> => Skipped,
-                                                <<"tap">> => Tap =/= none,
+                                                <<"tap">> => toroco_live_tap:subscribed(Tap),
                                                 <<"tap_dropped">> => Dropped}})
     catch
         exit:Why ->
