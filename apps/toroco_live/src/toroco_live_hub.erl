@@ -3,11 +3,16 @@
 %% built. Each WebSocket client's sender process joins it.
 %%
 %% It counts the tap's events per source (emitted) and per input
-%% (delivered) for the events-per-second of each wire and for `/metrics',
-%% and at most every 50 ms, when something changed (or each
-%% second, so hold times count down), reads the runtime once
-%% (`toroco_live_state:page/1'), encodes it once, and pushes the same
-%% binary to every client. With no client it reads nothing.
+%% (delivered) for the events-per-second of each wire and for `/metrics'.
+%% While a client is connected it keeps a reading of the runtime
+%% (`toroco_live_state:readings/0'), taken at most once a second for what
+%% the tap's events do not carry (the wiring's shape, mailboxes, states,
+%% device counters), and brought up to date between readings by the events
+%% themselves (`toroco_live_state:patch/2': winners, holds, latches, last
+%% values, status, restarts). At most every 50 ms, when something changed
+%% (and each second, so hold times count down), it encodes the page's
+%% state once and pushes the same binary to every client. With no client
+%% it reads nothing.
 %%
 %% A slow browser never slows the robot: each client has at most one frame
 %% in flight (pushed, not yet acknowledged by its sender with {@link
@@ -33,6 +38,8 @@
 
 -define(TICK_MS, 50).
 -define(RATE_MS, 1000).
+%% The runtime is read at most this often.
+-define(READ_MS, 1000).
 %% The arena is redrawn at most this often (its frame carries the trajectories).
 -define(WORLD_MS, 100).
 -define(TAP_BUFFER, 10000).
@@ -50,6 +57,11 @@
             window = {#{}, #{}} :: {map(), map()},
             rates = #{emits => #{}, delivers => #{}} :: toroco_live_state:rates(),
             last_rate :: integer(),
+            %% the runtime as last read, kept up to date by the events, and
+            %% when it was read (monotonic ms)
+            reading = none :: toroco_live_state:reading() | none,
+            read_error = not_running :: term(),
+            read_at = 0 :: integer(),
             dirty = true :: boolean(),
             world_dirty = false :: boolean(),
             state = none :: binary() | none,
@@ -173,14 +185,19 @@ terminate(_Reason, #h{tap = Tap}) ->
 %% The tap
 %%====================================================================
 
-event({emit, _T, Src, _Kind, _V}, H = #h{emits = E}) ->
-    H#h{emits = bump(Src, E), dirty = true};
-event({deliver, _T, In, _V}, H = #h{delivers = D}) ->
-    H#h{delivers = bump(In, D), dirty = true};
 event({dropped, N}, H = #h{tap_dropped = D}) ->
     H#h{tap_dropped = D + N, dirty = true};
-event(_Router_or_lifecycle, H) ->
-    H#h{dirty = true}.
+event(Event, H = #h{reading = none}) ->
+    count(Event, H#h{dirty = true});
+event(Event, H = #h{reading = R}) ->
+    count(Event, H#h{reading = toroco_live_state:patch(Event, R), dirty = true}).
+
+count({emit, _T, Src, _Kind, _V}, H = #h{emits = E}) ->
+    H#h{emits = bump(Src, E)};
+count({deliver, _T, In, _V}, H = #h{delivers = D}) ->
+    H#h{delivers = bump(In, D)};
+count(_Router_or_lifecycle, H) ->
+    H.
 
 bump(Key, Map) ->
     maps:update_with(Key, fun(N) -> N + 1 end, 1, Map).
@@ -197,7 +214,9 @@ tick(H0) ->
         _ ->
             {Vs, Vw} = H#h.versions,
             H1 = case H#h.dirty orelse not toroco_live_tap:subscribed(H#h.tap) of
-                     true -> H#h{state = state_frame(H), dirty = false, versions = {Vs + 1, Vw}};
+                     true ->
+                         Hr = read(H),
+                         Hr#h{state = state_frame(Hr), dirty = false, versions = {Vs + 1, Vw}};
                      false -> H
                  end,
             Now = erlang:monotonic_time(millisecond),
@@ -229,8 +248,26 @@ rates(H = #h{last_rate = Last, emits = E, delivers = D, window = {E0, D0}}) ->
             H
     end.
 
-state_frame(#h{rates = Rates, clients = Cs, skipped = S, tap_dropped = Dropped, tap = Tap}) ->
-    try toroco_live_state:page(Rates) of
+%% The runtime read again if the reading is a second old (or there is none,
+%% or no tap keeps it up to date).
+read(H = #h{reading = R, read_at = At, tap = Tap}) ->
+    Now = erlang:monotonic_time(millisecond),
+    case R =:= none orelse Now - At >= ?READ_MS orelse not toroco_live_tap:subscribed(Tap) of
+        true ->
+            try toroco_live_state:readings() of
+                R1 -> H#h{reading = R1, read_at = Now}
+            catch
+                exit:Why -> H#h{reading = none, read_error = Why}
+            end;
+        false ->
+            H
+    end.
+
+state_frame(#h{reading = none, read_error = Why}) ->
+    not_running(Why);
+state_frame(#h{rates = Rates, clients = Cs, skipped = S, tap_dropped = Dropped, tap = Tap,
+               reading = R}) ->
+    try toroco_live_state:page(Rates, R) of
         Page ->
             Skipped = S + lists:sum([C#client.skipped || C <- maps:values(Cs)]),
             toroco_live_json:encode(Page#{<<"dashboard">> =>
@@ -239,12 +276,13 @@ state_frame(#h{rates = Rates, clients = Cs, skipped = S, tap_dropped = Dropped, 
                                                 <<"tap">> => toroco_live_tap:subscribed(Tap),
                                                 <<"tap_dropped">> => Dropped}})
     catch
-        exit:Why ->
-            %% The runtime is not running (or restarting): say so.
-            toroco_live_json:encode(#{<<"type">> => <<"state">>, <<"nodes">> => [],
-                                      <<"layers">> => [],
-                                      <<"error">> => toroco_live_json:term_text(Why)})
+        exit:Why -> not_running(Why)
     end.
+
+%% The runtime is not running (or restarting): say so.
+not_running(Why) ->
+    toroco_live_json:encode(#{<<"type">> => <<"state">>, <<"nodes">> => [], <<"layers">> => [],
+                              <<"error">> => toroco_live_json:term_text(Why)}).
 
 world_frame() ->
     case toroco_live_world:latest() of
