@@ -79,9 +79,10 @@
 -type sinks() :: #{kind() => [sink()]}.
 %% The events a producer tapped and has not sent yet, per subscription
 %% (newest first); `[]' when there are none.
-%% With each, the room taken for it and not used yet.
--type batch() :: [{reference(), pid(), atomics:atomics_ref(), pos_integer(), non_neg_integer(),
-                   [event()]}].
+%% With each, the room taken for it and not used yet, and the events
+%% dropped.
+-type batch() :: [{reference(), pid(), atomics:atomics_ref(), non_neg_integer(), non_neg_integer(),
+                   non_neg_integer(), [event()]}].
 
 -define(TABLE, toroco_tap).
 -define(SCOPE, toroco_tap_pg).
@@ -218,44 +219,47 @@ tap([], _Event, Batch) ->
     Batch;
 tap([{Ref, Feeder, A, Max} | Rest], Event, Batch) ->
     case lists:keytake(Ref, 1, Batch) of
-        {value, {_, _, _, N, Room, Evs}, Others} when Room > 0 ->
-            tap(Rest, Event, add(Ref, Feeder, A, N + 1, Room - 1, [Event | Evs], Others));
-        {value, {_, _, _, N, 0, Evs}, Others} ->
+        {value, {_, _, _, N, Room, D, Evs}, Others} when Room > 0 ->
+            tap(Rest, Event, add(Ref, Feeder, A, N + 1, Room - 1, D, [Event | Evs], Others));
+        {value, {_, _, _, N, 0, D, Evs}, Others} ->
             case reserve(A, Max) of
-                0 -> tap(Rest, Event, Batch);
-                Room -> tap(Rest, Event, add(Ref, Feeder, A, N + 1, Room - 1, [Event | Evs], Others))
+                0 -> tap(Rest, Event, [{Ref, Feeder, A, N, 0, D + 1, Evs} | Others]);
+                Room -> tap(Rest, Event, add(Ref, Feeder, A, N + 1, Room - 1, D, [Event | Evs], Others))
             end;
         false ->
             case reserve(A, Max) of
-                0 -> tap(Rest, Event, Batch);
-                Room -> tap(Rest, Event, add(Ref, Feeder, A, 1, Room - 1, [Event], Batch))
+                0 -> tap(Rest, Event, [{Ref, Feeder, A, 0, 0, 1, []} | Batch]);
+                Room -> tap(Rest, Event, add(Ref, Feeder, A, 1, Room - 1, 0, [Event], Batch))
             end
     end.
 
-%% Room for up to ?CREDIT events taken at once (0: the event is dropped,
-%% and counted).
+%% Room for up to ?CREDIT events taken at once, or 0: the event is dropped
+%% (and counted in the batch, added to the sink's count when it goes). A
+%% full sink is seen with reads alone.
 reserve(A, Max) ->
-    Over = atomics:add_get(A, ?HELD, ?CREDIT) + atomics:get(A, ?SEEN) - Max,
-    if
-        Over =< 0 -> ?CREDIT;
-        Over >= ?CREDIT ->
-            atomics:sub(A, ?HELD, ?CREDIT),
-            atomics:add(A, ?DROPPED, 1),
-            0;
+    case atomics:get(A, ?HELD) + atomics:get(A, ?SEEN) >= Max of
         true ->
-            atomics:sub(A, ?HELD, Over),
-            ?CREDIT - Over
+            0;
+        false ->
+            Over = atomics:add_get(A, ?HELD, ?CREDIT) + atomics:get(A, ?SEEN) - Max,
+            if
+                Over =< 0 -> ?CREDIT;
+                Over >= ?CREDIT -> atomics:sub(A, ?HELD, ?CREDIT), 0;
+                true -> atomics:sub(A, ?HELD, Over), ?CREDIT - Over
+            end
     end.
 
-add(Ref, Feeder, A, N, Room, Evs, Batch) when N >= ?BATCH_MAX ->
-    send({Ref, Feeder, A, N, Room, Evs}),
+add(Ref, Feeder, A, N, Room, D, Evs, Batch) when N >= ?BATCH_MAX ->
+    send({Ref, Feeder, A, N, Room, D, Evs}),
     Batch;
-add(Ref, Feeder, A, N, Room, Evs, Batch) ->
-    [{Ref, Feeder, A, N, Room, Evs} | Batch].
+add(Ref, Feeder, A, N, Room, D, Evs, Batch) ->
+    [{Ref, Feeder, A, N, Room, D, Evs} | Batch].
 
-%% A batch goes; the room it did not use is given back.
-send({Ref, Feeder, A, N, Room, Evs}) ->
-    Feeder ! ?BATCH(Ref, self(), lists:reverse(Evs), N),
+%% A batch goes; the room it did not use is given back, what it dropped is
+%% counted.
+send({Ref, Feeder, A, N, Room, D, Evs}) ->
+    _ = D > 0 andalso atomics:add(A, ?DROPPED, D),
+    _ = N > 0 andalso (Feeder ! ?BATCH(Ref, self(), lists:reverse(Evs), N)),
     _ = Room > 0 andalso atomics:sub(A, ?HELD, Room),
     ok.
 
@@ -416,6 +420,9 @@ publish(SubsMap) ->
 
 spawn_feeder(Sub, Ref, A, Max) ->
     spawn_link(fun() ->
+                       %% The robot first: under load the feeder waits, its
+                       %% credit runs out, and the producers drop (cheaply).
+                       process_flag(priority, low),
                        Mon = erlang:monitor(process, Sub),
                        feed(#feed{sub = Sub, mon = Mon, ref = Ref, a = A, max = Max})
                end).
