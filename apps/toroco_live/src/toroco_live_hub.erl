@@ -60,6 +60,11 @@
             %% the runtime as last read, kept up to date by the events, and
             %% when it was read (monotonic ms)
             reading = none :: toroco_live_state:reading() | none,
+            %% the events since the page was last built: the latest per
+            %% input, delivery and output, every lifecycle event (newest
+            %% first)
+            latest = #{} :: #{term() => tuple()},
+            lifecycle = [] :: [tuple()],
             read_error = not_running :: term(),
             read_at = 0 :: integer(),
             dirty = true :: boolean(),
@@ -110,6 +115,8 @@ stats() ->
 
 -spec init(map()) -> {ok, #h{}}.
 init(Config) ->
+    %% The robot first: under load the hub waits (the tap drops, and counts).
+    process_flag(priority, low),
     ok = toroco_live_world:subscribe(),
     erlang:send_after(?TICK_MS, self(), tick),
     Now = erlang:monotonic_time(millisecond),
@@ -187,10 +194,14 @@ terminate(_Reason, #h{tap = Tap}) ->
 
 event({dropped, N}, H = #h{tap_dropped = D}) ->
     H#h{tap_dropped = D + N, dirty = true};
-event(Event, H = #h{reading = none}) ->
-    count(Event, H#h{dirty = true});
-event(Event, H = #h{reading = R}) ->
-    count(Event, H#h{reading = toroco_live_state:patch(Event, R), dirty = true}).
+event(Event = {lifecycle, _, _, _}, H = #h{lifecycle = L}) ->
+    H#h{lifecycle = [Event | L], dirty = true};
+event(Event = {Kind, _T, Key, _}, H = #h{latest = M}) ->
+    count(Event, H#h{latest = M#{{Kind, Key} => Event}, dirty = true});
+event(Event = {emit, _T, Src, _, _}, H = #h{latest = M}) ->
+    count(Event, H#h{latest = M#{{emit, Src} => Event}, dirty = true});
+event(_Event, H) ->
+    H.
 
 count({emit, _T, Src, _Kind, _V}, H = #h{emits = E}) ->
     H#h{emits = bump(Src, E)};
@@ -210,12 +221,13 @@ tick(H0) ->
     H = rates(H0),
     case map_size(H#h.clients) of
         0 ->
-            H;
+            %% No page: nothing kept; the next one starts from a reading.
+            H#h{reading = none, latest = #{}, lifecycle = []};
         _ ->
             {Vs, Vw} = H#h.versions,
             H1 = case H#h.dirty orelse not toroco_live_tap:subscribed(H#h.tap) of
                      true ->
-                         Hr = read(H),
+                         Hr = patched(read(H)),
                          Hr#h{state = state_frame(Hr), dirty = false, versions = {Vs + 1, Vw}};
                      false -> H
                  end,
@@ -248,14 +260,22 @@ rates(H = #h{last_rate = Last, emits = E, delivers = D, window = {E0, D0}}) ->
             H
     end.
 
+%% The events since the last page brought into the reading.
+patched(H = #h{reading = none}) ->
+    H#h{latest = #{}, lifecycle = []};
+patched(H = #h{reading = R, latest = M, lifecycle = L}) ->
+    Patch = fun toroco_live_state:patch/2,
+    R1 = lists:foldl(Patch, lists:foldl(Patch, R, lists:reverse(L)), maps:values(M)),
+    H#h{reading = R1, latest = #{}, lifecycle = []}.
+
 %% The runtime read again if the reading is a second old (or there is none,
-%% or no tap keeps it up to date).
+%% or no tap keeps it up to date); the events kept so far are in it.
 read(H = #h{reading = R, read_at = At, tap = Tap}) ->
     Now = erlang:monotonic_time(millisecond),
     case R =:= none orelse Now - At >= ?READ_MS orelse not toroco_live_tap:subscribed(Tap) of
         true ->
             try toroco_live_state:readings() of
-                R1 -> H#h{reading = R1, read_at = Now}
+                R1 -> H#h{reading = R1, read_at = Now, latest = #{}, lifecycle = []}
             catch
                 exit:Why -> H#h{reading = none, read_error = Why}
             end;
