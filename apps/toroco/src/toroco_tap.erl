@@ -102,6 +102,8 @@
 -define(SEEN, 3).
 %% producer -> feeder: events in emission order, N of them.
 -define(BATCH(Ref, Producer, Events, N), {'$toroco_tap_batch', Ref, Producer, Events, N}).
+%% producer -> feeder: drops wait to be reported.
+-define(NUDGE, '$toroco_tap_nudge').
 %% relay -> feeder: events of another node, and what was dropped there.
 -define(RELAYED(Ref, Events, N, Dropped), {'$toroco_tap_relayed', Ref, Events, N, Dropped}).
 
@@ -258,7 +260,10 @@ add(Ref, Feeder, A, N, Room, D, Evs, Batch) ->
 %% A batch goes; the room it did not use is given back, what it dropped is
 %% counted.
 send({Ref, Feeder, A, N, Room, D, Evs}) ->
-    _ = D > 0 andalso atomics:add(A, ?DROPPED, D),
+    %% The first drops since the feeder last reported: it may have stopped
+    %% looking, so it is told (while drops wait it keeps looking).
+    _ = D > 0 andalso atomics:add_get(A, ?DROPPED, D) =:= D andalso N =:= 0
+        andalso (Feeder ! ?NUDGE),
     _ = N > 0 andalso (Feeder ! ?BATCH(Ref, self(), lists:reverse(Evs), N)),
     _ = Room > 0 andalso atomics:sub(A, ?HELD, Room),
     ok.
@@ -444,6 +449,8 @@ feed(F = #feed{ref = Ref, mon = Mon, a = A}) ->
             feed(settle(F));
         look ->
             feed(look(F#feed{timer = off}));
+        ?NUDGE ->
+            feed(look(F));
         {'DOWN', Mon, process, _, _} ->
             exit(normal)
     end.

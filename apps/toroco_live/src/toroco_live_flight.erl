@@ -41,10 +41,11 @@
 -define(SEGMENT_NS, 1000000000).
 -define(SEGMENT_EVENTS, 1000).
 -define(SEGMENTS_IN_BYTES, 16).
-%% A dump, and stopping a recording, take the events still on their way (the tap's
+%% A dump, and stopping a recording, take the events still on their way (the
+%% producers send theirs in batches within a few milliseconds, the tap's
 %% relay forwards them a little later) until the tap is quiet this long,
 %% and waits at most the next.
--define(QUIET_MS, 30).
+-define(QUIET_MS, 100).
 -define(MAX_DRAIN_MS, 2000).
 %% How soon to subscribe again when the runtime's tap went away.
 -define(RESUBSCRIBE_MS, 500).
