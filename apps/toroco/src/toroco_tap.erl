@@ -21,7 +21,7 @@
 %%     per event, and the scheduler that runs the subscriber is not woken at
 %%     each event. A behavior whose callback just set an event timeout
 %%     (which any event would cancel) sends its batch at once instead; in
-%%     lockstep a batch goes when the producer's mailbox is empty (no real
+%%     lockstep a batch goes at the end of the event that made it (no real
 %%     timer: SPEC §14);</li>
 %% <li>one feeder process per subscription, beside the subscriber: it holds
 %%     the batches that come within `?MERGE_MS' of each other, merges them by
@@ -277,19 +277,13 @@ send({Ref, Feeder, A, N, Room, D, Evs}) ->
 -spec after_event(boolean(), batch(), boolean()) -> keep | {batch(), [gen_statem:action()]}.
 after_event(_Was, [], _Hurry) ->
     keep;
-after_event(Was, Batch, Hurry) ->
+after_event(true, _Batch, false) ->
+    keep;                                       % its timer is set
+after_event(_Was, Batch, Hurry) ->
     case toroco_clock:lockstep_server() of
         none when Hurry -> {flush(Batch), [{?FLUSH_TIMER, cancel}]};
-        none when Was -> keep;
         none -> {Batch, [{?FLUSH_TIMER, ?FLUSH_MS, flush}]};
-        _ -> {idle(Batch), []}
-    end.
-
-%% In lockstep: the batch goes if the producer has nothing else to handle.
-idle(Batch) ->
-    case erlang:process_info(self(), message_queue_len) of
-        {message_queue_len, 0} -> flush(Batch);
-        _ -> Batch
+        _ -> {flush(Batch), []}
     end.
 
 %% @doc Sends the producer's batch now.
