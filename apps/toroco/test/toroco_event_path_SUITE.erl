@@ -269,10 +269,15 @@ idle_subscription_costs_nothing(_Config) ->
     [_, _] = [R || {router, _, R, _} <- events(Ref, 200)],
     ok = wait_until(fun() -> process_info(Feeder, status) =:= {status, waiting} end, 2000),
     1 = erlang:trace(Feeder, true, [running]),
-    %% Three of the old watcher's idle periods (50 ms) without an event.
-    receive {trace, Feeder, _, _} = T -> ct:fail({feeder_ran, T})
-    after 300 -> ok
-    end,
+    %% Three of the old watcher's idle periods (50 ms) without an event: at
+    %% most the one scheduling that takes the trace flags in.
+    Ins = fun Count(N) ->
+                  receive {trace, Feeder, in, _} -> Count(N + 1);
+                          {trace, Feeder, out, _} -> Count(N)
+                  after 300 -> N
+                  end
+          end(0),
+    true = Ins =< 1,
     _ = erlang:trace(Feeder, false, [running]),
     ok = toroco:inject({s, v}, x),
     {deliver, _, {a, in}, x} = await_event(Ref, fun(E) -> element(1, E) =:= deliver andalso
