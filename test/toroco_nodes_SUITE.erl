@@ -13,7 +13,7 @@ all() ->
      hierarchy_uses_remote_layers, reset_from_another_node, remote_emitter_restart_caught_up,
      stale_source_dropped_and_back, stale_gate_default_max_age, node_killed_and_restarted, partition_heals_with_wiring_as_before,
      wiring_file_places_on_nodes, clash_after_partition_reported, over_tls,
-     remote_behavior_shows_running_with_restarts].
+     remote_behavior_shows_running_with_restarts, remote_events_bounded_and_counted].
 
 init_per_suite(Config) ->
     _ = application:stop(toroco_hw),
@@ -327,6 +327,50 @@ top_and_watch_cover_nodes(Config) ->
     Io ! {get, self()},
     receive {Io, Out} -> true = nomatch =/= string:find(Out, "act.in <- 42") after 1000 -> ct:fail(no_output) end,
     end_per_testcase(x, [{peers, Ps} | Config]).
+
+remote_events_bounded_and_counted() -> [{doc, "A subscriber that does not read keeps at most about `buffer' of another node's events too; each is received, in order, or counted in {dropped, N}"}].
+remote_events_bounded_and_counted(Config) ->
+    [{PA, A}, {PB, B}] = [start_peer(peer_name(T)) || T <- [a, b]],
+    pong = erpc:call(A, net_adm, ping, [B]),
+    await_peers([A, B]),
+    sensor(B, s),
+    Me = self(),
+    N = 1000,
+    Buffer = 50,
+    Sub = erpc:call(A, erlang, spawn,
+                    [fun() ->
+                             {ok, Ref} = toroco:subscribe_events(#{kinds => [emit], names => [s],
+                                                                   buffer => Buffer}),
+                             Me ! {subscribed, self()},
+                             receive read -> ok end,
+                             Me ! {counted, self(), remote_count(Ref, N, 0, 0, [])}
+                     end]),
+    receive {subscribed, Sub} -> ok after 5000 -> ct:fail(no_subscription) end,
+    [ok = t(B, inject, [{s, out}, I, #{}]) || I <- lists:seq(1, N)],
+    wait(fun() -> queue_len(A, Sub) > 0 end, 3000),
+    true = queue_len(A, Sub) =< Buffer + 1,
+    Sub ! read,
+    receive {counted, Sub, {Received, Dropped, Seq}} ->
+            ct:pal("received ~b, dropped ~b of ~b (buffer ~b)", [Received, Dropped, N, Buffer]),
+            N = Received + Dropped,
+            true = Dropped > 0,
+            Seq = lists:sort(Seq)
+    after 10000 -> ct:fail(no_count)
+    end,
+    end_per_testcase(x, [{peers, [PA, PB]} | Config]).
+
+queue_len(Node, Pid) ->
+    {message_queue_len, L} = erpc:call(Node, erlang, process_info, [Pid, message_queue_len]),
+    L.
+
+remote_count(_Ref, N, R, D, Seq) when R + D >= N ->
+    {R, D, lists:reverse(Seq)};
+remote_count(Ref, N, R, D, Seq) ->
+    receive
+        {toroco_event, Ref, {dropped, K}} -> remote_count(Ref, N, R, D + K, Seq);
+        {toroco_event, Ref, {emit, _, _, send, I}} -> remote_count(Ref, N, R + 1, D, [I | Seq])
+    after 3000 -> {R, D, lists:reverse(Seq)}
+    end.
 
 capture() ->
     spawn(fun() -> capture([]) end).

@@ -386,7 +386,8 @@ subscribe_events(Opts) ->
         {ok, Ref} ->
             _ = case [N || N <- toroco_wiring:peers(), N =/= node()] of
                     [] -> ok;
-                    Others -> erpc:multicall(Others, toroco_tap_relay, start, [self(), Ref, Opts], 6000)
+                    Others -> erpc:multicall(Others, toroco_tap_relay, start,
+                                             [toroco_tap:feeder(Ref), Ref, Opts], 6000)
                 end,
             {ok, Ref};
         Err -> Err

@@ -119,6 +119,8 @@
             vtimers = #{} :: #{term() => integer()},
             %% the observer tap's sinks that concern this process (SPEC §10)
             tap = #{} :: toroco_tap:sinks(),
+            %% the tapped events not sent yet (toroco_tap:after_event/3)
+            batch = [] :: toroco_tap:batch(),
             idle = off :: toroco_wire:idle(),
             %% names of the generic timeouts the callback module has set, so
             %% that a reset cancels them
@@ -212,6 +214,7 @@ init(#{kind := Kind, name := Name, module := M, layer := Layer, args := Args}) -
     process_flag(trap_exit, true),
     case interface(Kind, M, Args) of
         {ok, #{inputs := Ins, outputs := Outs}} ->
+            ok = toroco_tap:join(),
             Planned = toroco_wiring:subs_of(Name),
             Subs = maps:from_list([{O, [toroco_wire:address(R) || R <- maps:get(O, Planned, [])]}
                                    || O <- Outs]),
@@ -221,7 +224,11 @@ init(#{kind := Kind, name := Name, module := M, layer := Layer, args := Args}) -
                    tap = tap(toroco_tap:current(), Name), idle = toroco_wire:idle_arm()},
             toroco_tap:lifecycle(E#e.tap, Name, toroco_restarts:started(Name)),
             announce(E),
-            start_user(E);
+            case start_user(E) of
+                {ok, S, E1} -> {ok, S, E1#e{batch = toroco_tap:flush(E1#e.batch)}};
+                {ok, S, E1, A} -> {ok, S, E1#e{batch = toroco_tap:flush(E1#e.batch)}, A};
+                Stop -> Stop
+            end;
         {error, Reason} ->
             {stop, Reason}
     end.
@@ -263,38 +270,46 @@ start_user(E = #e{kind = Kind, module = M, args = Args, name = Name}) ->
 
 -spec handle_event(gen_statem:event_type(), term(), term(), #e{}) ->
           gen_statem:event_handler_result(term()).
+%% Every event, then what becomes of the observer tap's batch
+%% (toroco_tap:after_event/3).
+handle_event(Type, Content, S, E) ->
+    tap_after(event(Type, Content, S, E), E).
+
 %% Lockstep (toroco_lockstep): one message of the event path, or a timer,
 %% handled as it would be in real time; the step is done once the events
 %% it inserts are handled too.
-handle_event(info, ?WIRE_STEP(Token, Msg), S, E) ->
+event(info, ?WIRE_STEP(Token, Msg), S, E) ->
     toroco_wire:step_done(Token, step(Msg, S, E));
-handle_event(internal, ?WIRE_STEP_DONE(Token), _S, _E) ->
+event(internal, ?WIRE_STEP_DONE(Token), _S, _E) ->
     toroco_lockstep:done(Token),
     keep_state_and_data;
 %% The idle tick (toroco_wire:idle_arm/0), whatever the callback module's
 %% state; the first event after hibernating arms it again.
-handle_event(info, ?WIRE_IDLE, _S, E = #e{idle = Idle}) ->
+event(info, ?WIRE_IDLE, _S, E = #e{idle = Idle}) ->
     {Idle1, Actions} = toroco_wire:idle_tick(Idle),
     {keep_state, E#e{idle = Idle1}, Actions};
-handle_event(Type, Content, S, E = #e{idle = off}) ->
-    handle_event(Type, Content, S, E#e{idle = toroco_wire:idle_arm()});
+event(Type, Content, S, E = #e{idle = off}) ->
+    event(Type, Content, S, E#e{idle = toroco_wire:idle_arm()});
+%% The observer tap's batch is due (toroco_tap:after_event/3).
+event({timeout, '$toroco_tap'}, flush, _S, E = #e{batch = B}) ->
+    {keep_state, E#e{batch = toroco_tap:flush(B)}};
 %% The observer tap changed: keep the sinks that concern this process.
-handle_event(info, ?WIRE_TAP(Subs), _S, E = #e{name = Name}) ->
+event(info, ?WIRE_TAP(Subs), _S, E = #e{name = Name}) ->
     {keep_state, E#e{tap = tap(Subs, Name)}};
 %% The event path: one input delivered by a router.
-handle_event(info, ?WIRE_IN(Input, V), S, E = #e{suspended = false}) ->
+event(info, ?WIRE_IN(Input, V), S, E = #e{suspended = false}) ->
     input(Input, V, S, E);
-handle_event(info, ?WIRE_IN(Input, V, Router), S, E = #e{suspended = false}) ->
+event(info, ?WIRE_IN(Input, V, Router), S, E = #e{suspended = false}) ->
     Result = input(Input, V, S, E),
     toroco_wire:send(Router, ?WIRE_ACK(Input)),
     Result;
-handle_event(info, ?WIRE_IN(_Input, _V), _S, _E) ->
+event(info, ?WIRE_IN(_Input, _V), _S, _E) ->
     keep_state_and_data;                      % suspended: inputs are dropped
-handle_event(info, ?WIRE_IN(Input, _V, Router), _S, _E) ->
+event(info, ?WIRE_IN(Input, _V, Router), _S, _E) ->
     toroco_wire:send(Router, ?WIRE_ACK(Input)),
     keep_state_and_data;
 %% Wiring: consumers attach and detach (see toroco_wire).
-handle_event(info, ?WIRE_SUB({_, Out} = Src, Consumer), _S, E = #e{outputs = Outs}) ->
+event(info, ?WIRE_SUB({_, Out} = Src, Consumer), _S, E = #e{outputs = Outs}) ->
     case Outs of
         #{Out := Consumers} ->
             toroco_wire:send(Consumer, ?WIRE_STATE(emitter, Src, self(), latch(Out, E))),
@@ -307,7 +322,7 @@ handle_event(info, ?WIRE_SUB({_, Out} = Src, Consumer), _S, E = #e{outputs = Out
             toroco_wire:send(Consumer, ?WIRE_STATE(emitter, Src, self(), none)),
             keep_state_and_data
     end;
-handle_event(info, ?WIRE_UNSUB({_, Out}, Consumer), _S, E = #e{outputs = Outs}) ->
+event(info, ?WIRE_UNSUB({_, Out}, Consumer), _S, E = #e{outputs = Outs}) ->
     case Outs of
         #{Out := Consumers} ->
             {keep_state, E#e{outputs = Outs#{Out := lists:delete(Consumer, Consumers)}}};
@@ -315,7 +330,7 @@ handle_event(info, ?WIRE_UNSUB({_, Out}, Consumer), _S, E = #e{outputs = Outs}) 
     end;
 %% Consumers on other nodes hear from each output now and then, with its
 %% latch, so they can tell a silent node from a quiet output (SPEC §13).
-handle_event({timeout, '$toroco_alive'}, beat, _S, E = #e{outputs = Outs, name = Name}) ->
+event({timeout, '$toroco_alive'}, beat, _S, E = #e{outputs = Outs, name = Name}) ->
     maps:foreach(fun(Out, Consumers) ->
                          Msg = ?WIRE_ALIVE(emitter, {Name, Out}, latch(Out, E)),
                          [toroco_wire:send(C, Msg) || C <- Consumers, toroco_wire:remote(C)]
@@ -324,32 +339,30 @@ handle_event({timeout, '$toroco_alive'}, beat, _S, E = #e{outputs = Outs, name =
         true -> {keep_state_and_data, [alive_timer()]};
         false -> keep_state_and_data
     end;
-handle_event({call, From}, {'$toroco_inject', Out, Op}, _S, E = #e{outputs = Outs, name = N}) ->
+event({call, From}, {'$toroco_inject', Out, Op}, _S, E = #e{outputs = Outs, name = N}) ->
     case Outs of
         #{Out := _} -> {keep_state, emit(Out, Op, E), [{reply, From, ok}]};
         #{} -> {keep_state_and_data, [{reply, From, {error, {unknown_output, {N, Out}}}}]}
     end;
-handle_event({call, From}, '$toroco_reset', _S, E = #e{kind = behavior}) ->
+event({call, From}, '$toroco_reset', _S, E = #e{kind = behavior}) ->
     case reset(E) of
         {next_state, S1, E1, Actions} -> {next_state, S1, E1, [{reply, From, ok} | Actions]};
         {stop, Reason, E1} -> {stop_and_reply, Reason, [{reply, From, ok}], E1}
     end;
-handle_event({call, From}, '$toroco_info', S, E) ->
+event({call, From}, '$toroco_info', S, E) ->
     {keep_state_and_data, [{reply, From, describe(S, E)}]};
-handle_event({call, From}, '$toroco_suspend', _S, E = #e{name = Name, tap = Tap}) ->
-    toroco_tap:lifecycle(Tap, Name, suspended),
-    {keep_state, E#e{suspended = true}, [{reply, From, ok}]};
-handle_event({call, From}, '$toroco_resume', _S, E = #e{suspended = false}) ->
+event({call, From}, '$toroco_suspend', _S, E) ->
+    {keep_state, lifecycle(suspended, E#e{suspended = true}), [{reply, From, ok}]};
+event({call, From}, '$toroco_resume', _S, E = #e{suspended = false}) ->
     {keep_state, E, [{reply, From, ok}]};
-handle_event({call, From}, '$toroco_resume', _S, E = #e{name = Name, inputs = Ins, queued = Q}) ->
+event({call, From}, '$toroco_resume', _S, E = #e{name = Name, inputs = Ins, queued = Q}) ->
     %% Routers forget the last value and re-deliver each input's winner; the
     %% callbacks held back while suspended run now, in order.
     receiver_up(Name, Ins),
-    toroco_tap:lifecycle(E#e.tap, Name, resumed),
-    {keep_state, E#e{suspended = false, queued = []},
+    {keep_state, lifecycle(resumed, E#e{suspended = false, queued = []}),
      [{reply, From, ok} | [{next_event, T, C} || {T, C} <- lists:reverse(Q)]]};
 %% Everything else belongs to the user module.
-handle_event(Type, Content, _S, E = #e{suspended = true, queued = Q, name = Name}) ->
+event(Type, Content, _S, E = #e{suspended = true, queued = Q, name = Name}) ->
     case length(Q) < ?MAX_QUEUED of
         true -> {keep_state, E#e{queued = [{Type, Content} | Q]}};
         false ->
@@ -357,7 +370,7 @@ handle_event(Type, Content, _S, E = #e{suspended = true, queued = Q, name = Name
                            ?LOG#{name => Name}),
             keep_state_and_data
     end;
-handle_event(Type, Content, S, E = #e{user_events = true, module = M, user = UD}) ->
+event(Type, Content, S, E = #e{user_events = true, module = M, user = UD}) ->
     %% A callback module's handle_event/4 with no clause for this event
     %% falls through to the engine's default below.
     try M:handle_event(Type, Content, S, UD) of
@@ -369,7 +382,7 @@ handle_event(Type, Content, S, E = #e{user_events = true, module = M, user = UD}
                 _ -> erlang:raise(error, function_clause, Stack)
             end
     end;
-handle_event(Type, Content, _S, E) ->
+event(Type, Content, _S, E) ->
     default_event(Type, Content, E).
 
 %% What the engine does with an event nobody handles: a call is answered
@@ -387,8 +400,8 @@ default_event(Type, Content, #e{name = Name}) ->
 -spec terminate(term(), term(), #e{}) -> any().
 terminate(Reason, S, E = #e{module = M, user = UD, name = Name}) ->
     case erlang:function_exported(M, terminate, 3) andalso M:terminate(Reason, S, UD) of
-        {emit, Actions} -> _ = actions(Actions, E), ok;
-        _ -> ok
+        {emit, Actions} -> {_, E1} = actions(Actions, E), toroco_tap:flush(E1#e.batch);
+        _ -> toroco_tap:flush(E#e.batch)
     end,
     toroco_tap:lifecycle(E#e.tap, Name, stopped).
 
@@ -415,19 +428,19 @@ input(Input, V, S, E = #e{module = M, user = UD}) ->
 %% event ends an event timeout, as gen_statem's own would end.
 step(?WIRE_TIMER(Kind, Msg), S, E = #e{vtimers = VT}) ->
     case VT of
-        #{Kind := _} -> handle_event(Kind, Msg, S, E#e{vtimers = maps:remove(Kind, VT)});
+        #{Kind := _} -> event(Kind, Msg, S, E#e{vtimers = maps:remove(Kind, VT)});
         #{} -> keep_state_and_data
     end;
 step(Msg, S, E = #e{vtimers = #{timeout := _}}) ->
     {none, E1} = virtual({timeout, cancel}, E),
-    handle_event(info, Msg, S, E1);
+    event(info, Msg, S, E1);
 step(Msg, S, E) ->
-    handle_event(info, Msg, S, E).
+    event(info, Msg, S, E).
 
 %% Brooks' reset: the behavior's latches and holds are cleared, then it starts
 %% again from init/1 in the same process.
-reset(E = #e{outputs = Outs, name = Name, tap = Tap}) ->
-    toroco_tap:lifecycle(Tap, Name, reset),
+reset(E0 = #e{outputs = Outs}) ->
+    E = lifecycle(reset, E0),
     E1 = lists:foldl(fun(Out, Acc) -> emit(Out, unset, Acc) end, E, maps:keys(Outs)),
     {Cancel, E1a} = actions([{state_timeout, cancel} | [{{timeout, T}, cancel} || T <- E1#e.timers]],
                             E1),
@@ -590,10 +603,12 @@ emit(Out, Op, E = #e{outputs = Outs, name = Name}) ->
         #{Out := Consumers} ->
             send_all(Consumers, ?WIRE_EVENT({Name, Out}, Op)),
             case E#e.tap of
-                #{emit := Sinks} -> toroco_tap:notify(Sinks, emit_event(Name, Out, Op));
-                #{} -> ok
-            end,
-            relatch(Out, Op, E);
+                #{emit := Sinks} ->
+                    relatch(Out, Op, E#e{batch = toroco_tap:tap(Sinks, emit_event(Name, Out, Op),
+                                                                E#e.batch)});
+                #{} ->
+                    relatch(Out, Op, E)
+            end;
         #{} ->
             undeclared(Out, E)
     end.
@@ -620,6 +635,43 @@ emit_event(Name, Out, unset) -> {emit, toroco_tap:timestamp(), {Name, Out}, unse
 
 tap(Subs, Name) ->
     toroco_tap:select(Subs, [emit, lifecycle], Name).
+
+%% A lifecycle event of this process into its batch.
+lifecycle(What, E = #e{tap = Tap, name = Name, batch = B}) ->
+    E#e{batch = toroco_tap:lifecycle(Tap, Name, What, B)}.
+
+%% After an event, with the data the result carries (or the data before
+%% the event if it carries none): what becomes of the batch
+%% (toroco_tap:after_event/3).
+tap_after(R, E0) ->
+    case R of
+        {keep_state, E} -> tapped(keep_state, none, E, [], E0, R);
+        {keep_state, E, A} -> tapped(keep_state, none, E, A, E0, R);
+        {next_state, S, E} -> tapped(next_state, S, E, [], E0, R);
+        {next_state, S, E, A} -> tapped(next_state, S, E, A, E0, R);
+        {repeat_state, E} -> tapped(repeat_state, none, E, [], E0, R);
+        {repeat_state, E, A} -> tapped(repeat_state, none, E, A, E0, R);
+        keep_state_and_data -> tapped(keep_state, none, E0, [], E0, R);
+        {keep_state_and_data, A} -> tapped(keep_state, none, E0, A, E0, R);
+        repeat_state_and_data -> tapped(repeat_state, none, E0, [], E0, R);
+        {repeat_state_and_data, A} -> tapped(repeat_state, none, E0, A, E0, R);
+        _ -> R                                  % stopping: terminate/3 sends it
+    end.
+
+tapped(_How, _S, #e{batch = []}, _A, _E0, R) ->
+    R;
+tapped(How, S, E = #e{batch = B}, A0, #e{batch = B0}, R) ->
+    A = case is_list(A0) of true -> A0; false -> [A0] end,
+    case toroco_tap:after_event(B0 =/= [], B, lists:any(fun event_timeout/1, A)) of
+        keep -> R;
+        {B1, More} when How =:= next_state -> {next_state, S, E#e{batch = B1}, More ++ A};
+        {B1, More} -> {How, E#e{batch = B1}, More ++ A}
+    end.
+
+event_timeout(T) when is_integer(T) -> true;
+event_timeout({timeout, _, _}) -> true;
+event_timeout({timeout, _, _, _}) -> true;
+event_timeout(_) -> false.
 
 send_all([], _Msg) -> ok;
 send_all([C | Cs], Msg) ->

@@ -68,6 +68,9 @@
     {events, [core_event()], kind_data()} | {reply, term(), [core_event()], kind_data()} | unknown.
 %% The inspection view.
 -callback info(Now :: integer(), kind_data()) -> term().
+%% The observer tap's events it keeps, not sent yet (toroco_tap:after_event/3).
+-callback tap_batch(kind_data()) -> toroco_tap:batch().
+-callback tap_batch(toroco_tap:batch(), kind_data()) -> kind_data().
 
 -record(c, {mod :: module(),
             key :: key(),
@@ -145,49 +148,54 @@ init({Mod, Key, Caller}) ->
 
 -spec handle_event(gen_statem:event_type(), term(), ready | syncing | gone, #c{} | none) ->
           gen_statem:event_handler_result(ready | syncing | gone).
-handle_event(internal, gone, gone, none) ->
+%% Every event, then what becomes of the kind's tapped events
+%% (toroco_tap:after_event/3).
+handle_event(Type, Content, St, C) ->
+    tap_after(event(Type, Content, St, C), C).
+
+event(internal, gone, gone, none) ->
     {stop, normal};
 %% Lockstep (toroco_lockstep): one message of the event path, or the hold
 %% timer, as a step; the step is done once the events it inserts are handled.
-handle_event(info, ?WIRE_STEP(Token, ?WIRE_TIMER(Kind, Msg)), St, C) ->
-    toroco_wire:step_done(Token, handle_event(Kind, Msg, St, C));
-handle_event(info, ?WIRE_STEP(Token, Msg), St, C) ->
-    toroco_wire:step_done(Token, handle_event(info, Msg, St, C));
-handle_event(internal, ?WIRE_STEP_DONE(Token), _, _) ->
+event(info, ?WIRE_STEP(Token, ?WIRE_TIMER(Kind, Msg)), St, C) ->
+    toroco_wire:step_done(Token, event(Kind, Msg, St, C));
+event(info, ?WIRE_STEP(Token, Msg), St, C) ->
+    toroco_wire:step_done(Token, event(info, Msg, St, C));
+event(internal, ?WIRE_STEP_DONE(Token), _, _) ->
     toroco_lockstep:done(Token),
     keep_state_and_data;
 %% The idle tick (toroco_wire:idle_arm/0); the first event after
 %% hibernating arms it again.
-handle_event(info, ?WIRE_IDLE, _, C = #c{idle = Idle}) ->
+event(info, ?WIRE_IDLE, _, C = #c{idle = Idle}) ->
     {Idle1, Actions} = toroco_wire:idle_tick(Idle),
     {keep_state, C#c{idle = Idle1}, Actions};
-handle_event(Type, Content, St, C = #c{idle = off}) ->
-    handle_event(Type, Content, St, C#c{idle = toroco_wire:idle_arm()});
+event(Type, Content, St, C = #c{idle = off}) ->
+    event(Type, Content, St, C#c{idle = toroco_wire:idle_arm()});
 %% The event path.
-handle_event(info, ?WIRE_EVENT(Src, Op), St, C = #c{heard = H}) when map_size(H) =:= 0 ->
+event(info, ?WIRE_EVENT(Src, Op), St, C = #c{heard = H}) when map_size(H) =:= 0 ->
     op(emitter, Src, Op, St, C);
-handle_event(info, ?WIRE_GATED(Src, Op), St, C = #c{heard = H}) when map_size(H) =:= 0 ->
+event(info, ?WIRE_GATED(Src, Op), St, C = #c{heard = H}) when map_size(H) =:= 0 ->
     op(gate, Src, Op, St, C);
-handle_event(info, ?WIRE_EVENT(Src, Op), St, C) ->
+event(info, ?WIRE_EVENT(Src, Op), St, C) ->
     with_heard(Src, fun(C1) -> op(emitter, Src, Op, St, C1) end, C);
-handle_event(info, ?WIRE_GATED(Src, Op), St, C) ->
+event(info, ?WIRE_GATED(Src, Op), St, C) ->
     with_heard(Src, fun(C1) -> op(gate, Src, Op, St, C1) end, C);
-handle_event(info, ?WIRE_ALIVE(Tag, Src, Latch), _, C = #c{links = L, stale = Stale, mod = Mod}) ->
+event(info, ?WIRE_ALIVE(Tag, Src, Latch), _, C = #c{links = L, stale = Stale, mod = Mod}) ->
     case toroco_wire:carries(Tag, Src, L) andalso lists:member(Src, Stale) of
         %% Heard again after its silence: its latch comes back.
         true -> with_heard(Src, fun(C1) -> steps(Mod:late(Src, Latch), C1) end, C);
         false -> {keep_state, heard(Src, C)}
     end;
-handle_event({timeout, stale}, check, _, C) ->
+event({timeout, stale}, check, _, C) ->
     silent(C#c{stale_at = infinity});
-handle_event({timeout, resub}, again, _, C) ->
+event({timeout, resub}, again, _, C) ->
     resubscribe(C);
-handle_event(info, ?WIRE_RESUBSCRIBE, _, C) ->
+event(info, ?WIRE_RESUBSCRIBE, _, C) ->
     resubscribe(C#c{tries = 0});
-handle_event({timeout, hold}, expire, _, C) ->
+event({timeout, hold}, expire, _, C) ->
     steps([tick], C#c{timer = infinity});
 %% Upstreams: answers, new incarnations, deaths.
-handle_event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C = #c{sync = {Sync, From, Cfg}}) ->
+event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C = #c{sync = {Sync, From, Cfg}}) ->
     case toroco_wire:sync_answer(Tag, Src, Pid, Latch, Sync) of
         {ok, Sync1} ->
             maybe_finish(C#c{sync = {Sync1, From, Cfg}});
@@ -199,9 +207,9 @@ handle_event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C = #c{sync = {Sync, F
                 false -> late(Tag, Src, Pid, Latch, St, C)
             end
     end;
-handle_event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C) ->
+event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C) ->
     late(Tag, Src, Pid, Latch, St, C);
-handle_event(info, ?WIRE_HELLO(Tag, Src, Pid), St, C = #c{links = L}) ->
+event(info, ?WIRE_HELLO(Tag, Src, Pid), St, C = #c{links = L}) ->
     case St =:= syncing andalso toroco_wire:sync_fresh(Tag, Src, element(1, C#c.sync)) of
         true ->
             {keep_state_and_data, [postpone]};
@@ -211,7 +219,7 @@ handle_event(info, ?WIRE_HELLO(Tag, Src, Pid), St, C = #c{links = L}) ->
                 ignore -> keep_state_and_data
             end
     end;
-handle_event(info, {'DOWN', Ref, process, Pid, _} = Down, _, C = #c{links = L, sync = Sync}) ->
+event(info, {'DOWN', Ref, process, Pid, _} = Down, _, C = #c{links = L, sync = Sync}) ->
     case Sync =/= none andalso toroco_wire:sync_down(Ref, element(1, Sync)) of
         {ok, Sync1} ->
             maybe_finish(C#c{sync = setelement(1, Sync, Sync1)});
@@ -224,30 +232,34 @@ handle_event(info, {'DOWN', Ref, process, Pid, _} = Down, _, C = #c{links = L, s
                 ignore -> kind(info, Down, C)
             end
     end;
-handle_event({timeout, sync}, expire, syncing, C = #c{sync = {Sync, From, Cfg}}) ->
+event({timeout, sync}, expire, syncing, C = #c{sync = {Sync, From, Cfg}}) ->
     {ready, C1, Actions} = finish(C#c{sync = {toroco_wire:sync_expire(Sync), From, Cfg}}),
     {next_state, ready, C1, Actions};
 %% The wiring server, and inspection: answered once the change is in (a
 %% consumer that just restarted answers with its sources' state recovered).
-handle_event({call, _}, _Req, syncing, _C) ->
+event({call, _}, _Req, syncing, _C) ->
     {keep_state_and_data, [postpone]};
-handle_event({call, From}, info, ready, #c{mod = Mod, data = D}) ->
+event({call, From}, info, ready, #c{mod = Mod, data = D}) ->
     {keep_state_and_data, [{reply, From, Mod:info(toroco_clock:now_ms(), D)}]};
-handle_event({call, From}, {rewire, Cfg, Caller}, ready, C) ->
+event({call, From}, {rewire, Cfg, Caller}, ready, C) ->
     case start_sync(Cfg, Caller, From, C) of
         {syncing, C1, Actions} -> {next_state, syncing, C1, Actions};
         {ready, C1, Actions} -> {keep_state, C1, Actions}
     end;
-handle_event({call, From}, ready, ready, _C) ->
+event({call, From}, ready, ready, _C) ->
     {keep_state_and_data, [{reply, From, ok}]};
+%% The kind's tapped events are due (toroco_tap:after_event/3).
+event({timeout, '$toroco_tap'}, flush, _, C = #c{mod = Mod, data = D}) ->
+    {keep_state, C#c{data = Mod:tap_batch(toroco_tap:flush(Mod:tap_batch(D)), D)}};
 %% The observer tap, and whatever is the kind's own.
-handle_event(Type, Content, _, C) ->
+event(Type, Content, _, C) ->
     kind(Type, Content, C).
 
 -spec terminate(term(), ready | syncing | gone, #c{} | none) -> ok.
 terminate(_Reason, gone, none) ->
     ok;
-terminate(_Reason, _, C = #c{links = L}) ->
+terminate(_Reason, _, C = #c{links = L, mod = Mod, data = D}) ->
+    _ = toroco_tap:flush(Mod:tap_batch(D)),
     toroco_wire:detach_all(L, me(C)).
 
 %%====================================================================
@@ -303,6 +315,34 @@ settle(D0, C = #c{mod = Mod}) ->
 timer(C = #c{mod = Mod, data = D, timer = T}) ->
     {T1, Actions} = toroco_wire:hold_timer(Mod:deadline(D), T),
     {C#c{timer = T1}, Actions}.
+
+%% After an event, with the data the result carries (or the data before
+%% the event if it carries none).
+tap_after({keep_state, C}, C0) -> tapped(none, C, [], C0, {keep_state, C});
+tap_after({keep_state, C, A}, C0) -> tapped(none, C, A, C0, {keep_state, C, A});
+tap_after({next_state, St, C}, C0) -> tapped(St, C, [], C0, {next_state, St, C});
+tap_after({next_state, St, C, A}, C0) -> tapped(St, C, A, C0, {next_state, St, C, A});
+tap_after(keep_state_and_data = R, C0 = #c{}) -> tapped(none, C0, [], C0, R);
+tap_after({keep_state_and_data, A} = R, C0 = #c{}) -> tapped(none, C0, A, C0, R);
+tap_after(R, _) -> R.
+
+tapped(St, C = #c{mod = Mod, data = D}, A0, C0, R) ->
+    case Mod:tap_batch(D) of
+        [] -> R;
+        B ->
+            case toroco_tap:after_event(Mod:tap_batch(C0#c.data) =/= [], B, false) of
+                keep -> R;
+                {B1, More} ->
+                    C1 = C#c{data = Mod:tap_batch(B1, D)},
+                    A = case is_list(A0) of true -> A0; false -> [A0] end,
+                    case St of
+                        none -> {keep_state, C1, More ++ A};
+                        _ -> {next_state, St, C1, More ++ A}
+                    end
+            end
+    end;
+tapped(_St, _C, _A, _C0, R) ->
+    R.
 
 add_actions(More, {keep_state, C}) -> {keep_state, C, More};
 add_actions(More, {keep_state, C, Actions}) -> {keep_state, C, More ++ Actions}.

@@ -17,6 +17,7 @@
 -include("toroco_wire.hrl").
 
 -export([info/1]).
+-export([tap_batch/1, tap_batch/2]).
 -export([kind/0, reg/1, init/2, run/3, settled/1, deadline/1, rewired/5, late/2, handle/3,
          info/2]).
 
@@ -65,6 +66,13 @@ run(Event, Now, D = #g{core = C, subs = Subs}) ->
 
 -spec settled(#g{}) -> #g{}.
 settled(D) -> D.
+
+%% A gate taps nothing.
+-spec tap_batch(#g{}) -> [].
+tap_batch(_D) -> [].
+
+-spec tap_batch(toroco_tap:batch(), #g{}) -> #g{}.
+tap_batch(_B, D) -> D.
 
 -spec deadline(#g{}) -> infinity | integer().
 deadline(#g{core = C}) -> toroco_gate_core:next_deadline(C).

@@ -20,7 +20,7 @@
 
 -export([unwire/1, info/1]).
 -export([kind/0, reg/1, init/2, run/3, settled/1, deadline/1, rewired/5, late/2, handle/3,
-         info/2]).
+         info/2, tap_batch/1, tap_batch/2]).
 
 -record(r, {key :: {atom(), atom()},
             input :: atom(),
@@ -33,7 +33,9 @@
             %% the observer tap's sinks about this input's receiver, and
             %% what it last reported of the router's state
             tap = #{} :: toroco_tap:sinks(),
-            view = none :: term()}).
+            view = none :: term(),
+            %% the tapped events not sent yet (toroco_tap:after_event/3)
+            batch = [] :: toroco_tap:batch()}).
 
 %%====================================================================
 %% API
@@ -64,6 +66,7 @@ reg({R, I}) -> toroco_names:router(R, I).
 
 -spec init({atom(), atom()}, map()) -> #r{}.
 init(Key = {R, I}, _Cfg) ->
+    ok = toroco_tap:join(),
     D = #r{key = Key, input = I, tap = tap(toroco_tap:current(), R)},
     case whereis(toroco_names:process(R)) of
         undefined -> D;
@@ -83,9 +86,8 @@ settled(D = #r{tap = #{router := Sinks}, core = C, view = Old, key = Key}) ->
         Old -> D;
         View ->
             Info = toroco_router_core:info(C, toroco_clock:now_ms()),
-            toroco_tap:notify(Sinks, {router, toroco_tap:timestamp(), Key,
-                                      maps:with([winner, holds, latches], Info)}),
-            D#r{view = View}
+            Event = {router, toroco_tap:timestamp(), Key, maps:with([winner, holds, latches], Info)},
+            D#r{view = View, batch = toroco_tap:tap(Sinks, Event, D#r.batch)}
     end;
 settled(D) ->
     D.
@@ -107,8 +109,7 @@ late(Src, Latch) -> [{sync, [{Src, Latch}]}].
 handle(info, ?WIRE_ACK(_Input), D = #r{pending = {value, V}, rx = Rx, input = I})
   when is_pid(Rx) ->
     toroco_wire:send(Rx, ?WIRE_IN(I, V, self())),
-    delivered(D, V),
-    {events, [], D#r{pending = none}};
+    {events, [], delivered(D#r{pending = none}, V)};
 handle(info, ?WIRE_ACK(_Input), D) ->
     {events, [], D#r{inflight = false}};
 handle(info, ?WIRE_RX(_Input, Pid), D) ->
@@ -124,6 +125,13 @@ handle({call, _}, unwire, D) ->
 handle(_Type, _Content, _D) ->
     unknown.
 
+%% @doc The tapped events not sent yet (toroco_tap:after_event/3).
+-spec tap_batch(#r{}) -> toroco_tap:batch().
+tap_batch(#r{batch = B}) -> B.
+
+-spec tap_batch(toroco_tap:batch(), #r{}) -> #r{}.
+tap_batch(B, D) -> D#r{batch = B}.
+
 -spec info(integer(), #r{}) -> map().
 info(Now, #r{core = C, buffer = B, rx = Rx}) ->
     Info = toroco_router_core:info(C, Now),
@@ -137,16 +145,15 @@ deliver([], D) ->
     D;
 deliver(_Values, D = #r{rx = undefined}) ->
     D;                                          % receiver down: lost, as specified
-deliver(Values, D = #r{buffer = all, rx = Rx, input = I}) ->
-    _ = [begin toroco_wire:send(Rx, ?WIRE_IN(I, V)), delivered(D, V) end || V <- Values],
-    D;
+deliver([V | Vs], D = #r{buffer = all, rx = Rx, input = I}) ->
+    toroco_wire:send(Rx, ?WIRE_IN(I, V)),
+    deliver(Vs, delivered(D, V));
 deliver(Values, D = #r{buffer = latest, inflight = true}) ->
     D#r{pending = {value, lists:last(Values)}};
 deliver(Values, D = #r{buffer = latest, rx = Rx, input = I}) ->
     V = lists:last(Values),
     toroco_wire:send(Rx, ?WIRE_IN(I, V, self())),
-    delivered(D, V),
-    D#r{inflight = true}.
+    delivered(D#r{inflight = true}, V).
 
 attach_receiver(Pid, D = #r{rx_mon = Old}) ->
     _ = Old =/= undefined andalso erlang:demonitor(Old, [flush]),
@@ -156,7 +163,7 @@ attach_receiver(Pid, D = #r{rx_mon = Old}) ->
 tap(Subs, Receiver) ->
     toroco_tap:select(Subs, [deliver, router], Receiver).
 
-delivered(#r{tap = #{deliver := Sinks}, key = Key}, V) ->
-    toroco_tap:notify(Sinks, {deliver, toroco_tap:timestamp(), Key, V});
-delivered(#r{}, _V) ->
-    ok.
+delivered(D = #r{tap = #{deliver := Sinks}, key = Key, batch = B}, V) ->
+    D#r{batch = toroco_tap:tap(Sinks, {deliver, toroco_tap:timestamp(), Key, V}, B)};
+delivered(D, _V) ->
+    D.

@@ -4,6 +4,7 @@
 %% toroco_sup (rest_for_one)
 %% ├── toroco_store          owns the tables (wiring, lives): they outlive their writers
 %% ├── toroco_tap            the observer tap's subscriptions (SPEC §10)
+%% ├── pg (scope toroco_tap_pg) where the network's processes hear of subscription changes
 %% ├── toroco_lockstep       the clock of a simulated world in lockstep (SPEC §14)
 %% ├── toroco_routers_sup    one router per wired input, one gate per inhibited output
 %% ├── toroco_devices_sup    sensors and actuators (layer 0)
@@ -54,6 +55,8 @@ init([]) ->
                            shutdown => 5000, modules => [Mod]} end,
     {ok, {Flags, [Worker(toroco_store),
                   Worker(toroco_tap),
+                  #{id => pg_tap, start => {pg, start_link, [toroco_tap_pg]}, type => worker,
+                    shutdown => 5000, modules => [pg]},
                   Worker(toroco_lockstep),
                   Sup(toroco_routers_sup),
                   Sup(toroco_devices_sup),

@@ -3,27 +3,33 @@
 %%
 %% `toroco:subscribe_events/1' subscribes the caller to its own node's tap
 %% and starts one relay on each other node whose wiring server this node
-%% knows. A relay is a subscriber of its node's tap with the same options
-%% and sends what it gets on, under the caller's reference (a `{dropped, N}'
-%% of its own included); per source, events keep their order. The bound
-%% of SPEC §10 holds at the relay, which keeps up unless the connection
-%% is congested: a subscriber slower than the other nodes' events lets its
-%% own mailbox grow. It goes when the subscriber goes (it
-%% monitors it) or when `toroco:unsubscribe_events/1' stops it; relays find
-%% each other in the `pg' scope `toroco', group `{tap_relay, Ref}'. A node
-%% that connects after the subscription is not covered: subscribe again.
+%% knows. A relay is a subscriber of its node's tap with the same options;
+%% it hands what it gets, in batches, to the subscription's feeder on the
+%% subscriber's node (`toroco_tap:relayed/4'), which bounds them as it
+%% bounds the local producers: past `buffer' pending, events are dropped and
+%% counted into the subscriber's one `{dropped, N}', with those the relay's
+%% own tap dropped and those a congested connection would not take (the
+%% relay never waits for the other node). Per source, events keep their
+%% order. A relay goes when the subscription's feeder goes (the subscriber
+%% died or unsubscribed: it monitors it) or when
+%% `toroco:unsubscribe_events/1' stops it; relays find each other in the
+%% `pg' scope `toroco', group `{tap_relay, Ref}'. A node that connects after
+%% the subscription is not covered: subscribe again.
 -module(toroco_tap_relay).
 
 -export([start/3, stop/1]).
 
 -define(SCOPE, toroco).
+-define(BATCH_MAX, 64).
+%% How soon a relay tries again to report drops the connection refused.
+-define(RETRY_MS, 50).
 
-%% @doc Starts a relay on this node for subscriber `Sub' (on another node)
-%% of subscription `Ref'.
+%% @doc Starts a relay on this node for subscription `Ref', whose feeder
+%% (on another node) is `Feeder'.
 -spec start(pid(), reference(), toroco_tap:opts()) -> ok | {error, term()}.
-start(Sub, Ref, Opts) ->
+start(Feeder, Ref, Opts) ->
     Caller = self(),
-    {Pid, Mon} = spawn_monitor(fun() -> init(Caller, Sub, Ref, Opts) end),
+    {Pid, Mon} = spawn_monitor(fun() -> init(Caller, Feeder, Ref, Opts) end),
     receive
         {Pid, Answer} -> erlang:demonitor(Mon, [flush]), Answer;
         {'DOWN', Mon, process, Pid, Why} -> {error, {relay_failed, Why}}
@@ -41,24 +47,47 @@ stop(Ref) ->
     _ = [Pid ! {stop, Ref} || Pid <- Relays],
     ok.
 
-init(Caller, Sub, Ref, Opts) ->
+init(Caller, Feeder, Ref, Opts) ->
     case toroco_tap:subscribe(Opts) of
         {ok, Local} ->
             ok = pg:join(?SCOPE, {tap_relay, Ref}, self()),
-            Mon = erlang:monitor(process, Sub),
+            Mon = erlang:monitor(process, Feeder),
             Caller ! {self(), ok},
-            relay(Sub, Ref, Local, Mon);
+            relay({Feeder, Ref, Local, Mon}, 0);
         Err ->
             Caller ! {self(), Err}
     end.
 
-relay(Sub, Ref, Local, Mon) ->
+%% `Dropped': events lost on this side not reported yet.
+relay(R = {_, Ref, Local, Mon}, Dropped) ->
     receive
         {toroco_event, Local, Event} ->
-            Sub ! {toroco_event, Ref, Event},
-            relay(Sub, Ref, Local, Mon);
-        {'DOWN', Mon, process, Sub, _} ->
+            relay(R, pass(R, take(Local, [Event], 1, Dropped)));
+        {'DOWN', Mon, process, _, _} ->
             toroco_tap:unsubscribe(Local);
         {stop, Ref} ->
             toroco_tap:unsubscribe(Local)
+    after case Dropped of 0 -> infinity; _ -> ?RETRY_MS end ->
+            relay(R, pass(R, {[], Dropped}))
+    end.
+
+%% What else is already here, up to a batch.
+take(_Local, Events, ?BATCH_MAX, Dropped) ->
+    {lists:reverse(Events), Dropped};
+take(Local, Events, N, Dropped) ->
+    receive
+        {toroco_event, Local, {dropped, K}} -> take(Local, Events, N, Dropped + K);
+        {toroco_event, Local, Event} -> take(Local, [Event | Events], N + 1, Dropped)
+    after 0 ->
+            {lists:reverse(Events), Dropped}
+    end.
+
+pass({Feeder, Ref, _, _}, {Events0, Dropped0}) ->
+    {Events, Dropped} = case Events0 of
+                            [{dropped, K} | Rest] -> {Rest, Dropped0 + K};
+                            _ -> {Events0, Dropped0}
+                        end,
+    case toroco_tap:relayed(Feeder, Ref, Events, Dropped) of
+        ok -> 0;
+        busy -> Dropped + length(Events)
     end.

@@ -45,7 +45,8 @@
 %%     <td>a `latest' delivery was handled</td><td>the newest pending value, if any</td></tr>
 %% <tr><td>`WIRE_IDLE'</td><td>a process → itself</td>
 %%     <td>the idle tick (see `idle_arm/0')</td><td>none</td></tr>
-%% <tr><td>`WIRE_TAP(Subs)'</td><td>`toroco_tap' → emitters, routers</td>
+%% <tr><td>`WIRE_TAP(Subs)'</td><td>`toroco_tap' → emitters, routers (the
+%%     members of its `pg' group)</td>
 %%     <td>observer subscriptions change</td><td>none</td></tr>
 %% <tr><td>`WIRE_RESUBSCRIBE'</td><td>wiring server → consumers</td>
 %%     <td>a node of the robot came back</td>

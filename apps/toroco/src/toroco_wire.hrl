@@ -29,8 +29,8 @@
 %% whose reductions grew by no more than IDLE_REDUCTIONS since (a tick of its
 %% own costs 34 to 42 here, the lightest event about 30 more) did nothing.
 -define(WIRE_IDLE, '$toroco_idle').
-%% toroco_tap -> emitters and routers: the observer tap's subscriptions
-%% changed (SPEC §10); each keeps the sinks that concern it.
+%% toroco_tap -> emitters and routers (its pg group): the observer tap's
+%% subscriptions changed (SPEC §10); each keeps the sinks that concern it.
 -define(WIRE_TAP(Subs), {'$toroco_tap', Subs}).
 %% the wiring server -> consumers: a node came back, subscribe again to
 %% the remote sources no incarnation answers for (SPEC §13).

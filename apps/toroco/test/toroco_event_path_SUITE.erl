@@ -14,7 +14,8 @@ groups() ->
     [{tap, [], [event_shapes, names_filter, kinds_filter, lifecycle_events,
                 slow_subscriber_loses_and_counts, dropped_reported_without_later_events,
                 per_source_order, unsubscribe_stops_events, dead_subscriber_is_unsubscribed,
-                bad_options_refused, no_subscriber_no_tap_state]},
+                bad_options_refused, no_subscriber_no_tap_state, burst_goes_in_batches,
+                idle_subscription_costs_nothing, network_hears_through_pg]},
      {resilience, [], [wiring_server_crashes_100_times_under_load, inject_into_own_output_is_refused,
                        inject_unknown_and_stopped_names, restarts_counted_from_lifecycle,
                        reset_cancels_named_timeouts, unknown_events_fall_to_the_engine,
@@ -234,6 +235,66 @@ no_subscriber_no_tap_state(_Config) ->
     ok = wait_until(fun() -> map_size(tap_of(b)) > 0 end, 2000),
     ok = toroco:unsubscribe_events(Ref),
     ok = wait_until(fun() -> tap_of(b) =:= #{} end, 2000).
+
+burst_goes_in_batches() ->
+    [{doc, "A burst of 500 emissions reaches the subscription's feeder in at most 10 messages; the subscriber gets all 500, in order."}].
+burst_goes_in_batches(_Config) ->
+    sensor(s, [v]),
+    ok = toroco:add_behavior(burst, tb_burst, #{layer => 1}),
+    ok = toroco:set_inputs(burst, #{in => [{s, v}]}),
+    {ok, Ref} = toroco:subscribe_events(#{kinds => [emit], names => [burst]}),
+    Feeder = toroco_tap:feeder(Ref),
+    1 = erlang:trace(Feeder, true, ['receive']),
+    ok = toroco:inject({s, v}, 500),
+    Values = [V || {emit, _, {burst, out}, send, V} <- events(Ref, 500)],
+    Values = lists:seq(1, 500),
+    _ = erlang:trace(Feeder, false, ['receive']),
+    Batches = length([M || {trace, F, 'receive', M} <- traces(), F =:= Feeder,
+                           element(1, M) =:= '$toroco_tap_batch']),
+    ct:pal("~b messages to the feeder for 500 events", [Batches]),
+    true = Batches >= 1 andalso Batches =< 10.
+
+traces() ->
+    receive {trace, _, _, _} = T -> [T | traces()]
+    after 0 -> []
+    end.
+
+idle_subscription_costs_nothing() ->
+    [{doc, "A subscription with nothing to carry costs no polling: its feeder is not scheduled at all."}].
+idle_subscription_costs_nothing(_Config) ->
+    chain(),
+    {ok, Ref} = toroco:subscribe_events(#{}),
+    Feeder = toroco_tap:feeder(Ref),
+    %% Each router reports its state to a new subscription first.
+    [_, _] = [R || {router, _, R, _} <- events(Ref, 200)],
+    ok = wait_until(fun() -> process_info(Feeder, status) =:= {status, waiting} end, 2000),
+    1 = erlang:trace(Feeder, true, [running]),
+    %% Three of the old watcher's idle periods (50 ms) without an event: at
+    %% most the one scheduling that takes the trace flags in.
+    Ins = fun Count(N) ->
+                  receive {trace, Feeder, in, _} -> Count(N + 1);
+                          {trace, Feeder, out, _} -> Count(N)
+                  after 300 -> N
+                  end
+          end(0),
+    true = Ins =< 1,
+    _ = erlang:trace(Feeder, false, [running]),
+    ok = toroco:inject({s, v}, x),
+    {deliver, _, {a, in}, x} = await_event(Ref, fun(E) -> element(1, E) =:= deliver andalso
+                                                          element(3, E) =:= {a, in} end, 2000).
+
+network_hears_through_pg() ->
+    [{doc, "Behaviors, devices and routers are the members of the tap's pg group, so a subscription change reaches each of them and nothing else."}].
+network_hears_through_pg(_Config) ->
+    chain(),
+    Members = lists:sort(pg:get_local_members(toroco_tap_pg, network)),
+    Expected = lists:sort([whereis(toroco_names:process(N)) || N <- [s, b, a]] ++
+                          [whereis(toroco_names:router(R, I)) || {R, I} <- [{b, in}, {a, in}]]),
+    Expected = Members,
+    B = whereis(toroco_names:process(b)),
+    ok = toroco:remove_behavior(b),
+    ok = wait_until(fun() -> not lists:member(B, pg:get_local_members(toroco_tap_pg, network)) end,
+                    2000).
 
 %% The sinks the engine of `Name' holds (the engine's record, field `tap').
 tap_of(Name) ->

@@ -41,20 +41,19 @@
 -define(SEGMENT_NS, 1000000000).
 -define(SEGMENT_EVENTS, 1000).
 -define(SEGMENTS_IN_BYTES, 16).
-%% A dump, and stopping a recording, take the events still on their way (the tap's
+%% A dump, and stopping a recording, take the events still on their way (the
+%% producers send theirs in batches within a few milliseconds, the tap's
 %% relay forwards them a little later) until the tap is quiet this long,
 %% and waits at most the next.
--define(QUIET_MS, 30).
+-define(QUIET_MS, 100).
 -define(MAX_DRAIN_MS, 2000).
 %% How soon to subscribe again when the runtime's tap went away.
 -define(RESUBSCRIBE_MS, 500).
 
 -type item() :: {event, tuple()} | {message, toroco_live_channels:key(), binary()}.
 
--record(flight, {tap :: reference() | none,
-                 %% The tap server: when it goes (the runtime restarts), so
-                 %% does the subscription, and this process subscribes again.
-                 tap_monitor = none :: reference() | none,
+-record(flight, {%% when the runtime restarts, this process subscribes again
+                 tap :: toroco_live_tap:tap(),
                  %% The window: sealed segments, oldest first, each
                  %% {FirstT, LastT, Count, Bin} where Bin is the batch's
                  %% [{T, item()}] compressed and Count its last events
@@ -123,8 +122,9 @@ init([]) ->
     MaxBytes = application:get_env(toroco_live, flight_max_bytes, ?MAX_BYTES),
     %% toroco_live_world starts before this process (toroco_live_sup).
     _ = (catch toroco_live_world:subscribe()),
-    {ok, subscribe(#flight{tap = none, window_ns = Seconds * 1000000000, max = Max,
-                             max_bytes = MaxBytes})}.
+    {_, Tap} = toroco_live_tap:on(toroco_live_tap:new(#{buffer => ?BUFFER,
+                                                        retry_ms => ?RESUBSCRIBE_MS})),
+    {ok, #flight{tap = Tap, window_ns = Seconds * 1000000000, max = Max, max_bytes = MaxBytes}}.
 
 -spec handle_call(term(), gen_server:from(), #flight{}) -> {reply, term(), #flight{}}.
 handle_call({dump, Path}, _From, F0) ->
@@ -132,12 +132,10 @@ handle_call({dump, Path}, _From, F0) ->
     {reply, write(Path, F), F};
 handle_call({record, Path, _}, _From, F = #flight{recording = R}) when R =/= none ->
     {reply, {error, {already_recording, toroco_live_recorder:path(R), Path}}, F};
-handle_call({record, _, _}, _From, F = #flight{tap = none}) ->
-    {reply, {error, no_events}, F};
-handle_call({record, Path, Opts}, _From, F) ->
-    case toroco_live_recorder:open(Path, Opts) of
-        {ok, R} -> {reply, ok, F#flight{recording = R}};
-        Err -> {reply, Err, F}
+handle_call({record, Path, Opts}, _From, F = #flight{tap = Tap}) ->
+    case toroco_live_tap:subscribed(Tap) of
+        true -> record(Path, Opts, F);
+        false -> {reply, {error, no_events}, F}
     end;
 handle_call(stop_recording, _From, F = #flight{recording = none}) ->
     {reply, {error, not_recording}, F};
@@ -154,13 +152,6 @@ handle_cast(_, F) ->
     {noreply, F}.
 
 -spec handle_info(term(), #flight{}) -> {noreply, #flight{}} | {noreply, #flight{}, hibernate}.
-handle_info({toroco_event, Tap, Event}, F = #flight{tap = Tap}) ->
-    noreply(event(Event, F));
-handle_info({'DOWN', M, process, _, _}, F = #flight{tap_monitor = M}) ->
-    erlang:send_after(?RESUBSCRIBE_MS, self(), subscribe),
-    {noreply, F#flight{tap = none, tap_monitor = none}};
-handle_info(subscribe, F = #flight{tap = none}) ->
-    {noreply, subscribe(F)};
 handle_info({toroco_live_world, changed}, F = #flight{recording = R}) ->
     Snapshot = toroco_live_world:latest(),
     Now = erlang:system_time(nanosecond),
@@ -171,8 +162,13 @@ handle_info({toroco_live_world, changed}, F = #flight{recording = R}) ->
          end,
     noreply(lists:foldl(fun({K, T, J}, Acc) -> keep({T, {message, K, J}}, Acc) end,
                         F#flight{scene = Scene, recording = R1}, Msgs));
-handle_info(_, F) ->
-    {noreply, F}.
+handle_info(Info, F = #flight{tap = Tap}) ->
+    case toroco_live_tap:handle(Info, Tap) of
+        {event, Event} -> noreply(event(Event, F));
+        {down, Tap1} -> {noreply, F#flight{tap = Tap1}};
+        {retry, Tap1} -> {_, Tap2} = toroco_live_tap:on(Tap1), {noreply, F#flight{tap = Tap2}};
+        _ -> {noreply, F}
+    end.
 
 -spec terminate(term(), #flight{}) -> ok.
 terminate(_, #flight{recording = none}) ->
@@ -185,16 +181,11 @@ terminate(_, #flight{recording = R}) ->
 %% Inside
 %%====================================================================
 
-subscribe(F) ->
-    try toroco:subscribe_events(#{buffer => ?BUFFER}) of
-        {ok, Ref} -> F#flight{tap = Ref, tap_monitor = monitor(process, toroco_tap)};
-        {error, _} -> retry(F)
-    catch exit:_ -> retry(F)
+record(Path, Opts, F) ->
+    case toroco_live_recorder:open(Path, Opts) of
+        {ok, R} -> {reply, ok, F#flight{recording = R}};
+        Err -> {reply, Err, F}
     end.
-
-retry(F) ->
-    erlang:send_after(?RESUBSCRIBE_MS, self(), subscribe),
-    F.
 
 event({dropped, N}, F = #flight{dropped = D, recording = R}) ->
     F#flight{dropped = D + N, recording = case R of
@@ -216,7 +207,8 @@ event(Event, F0 = #flight{recording = R}) ->
     end,
     F1.
 
-drain(F = #flight{tap = Tap}, Until) ->
+drain(F = #flight{tap = T}, Until) ->
+    Tap = toroco_live_tap:ref(T),
     Wait = min(?QUIET_MS, max(0, Until - erlang:monotonic_time(millisecond))),
     receive
         {toroco_event, Tap, Event} -> drain(event(Event, F), Until)

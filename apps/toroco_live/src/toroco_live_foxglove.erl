@@ -66,10 +66,10 @@
               conns = #{} :: #{pid() => reference()},
               subs = #{} :: #{pos_integer() => [pid()]},
               dropped = #{} :: #{pid() => pos_integer()},
-              tap = none :: none | reference(),
-              %% The tap server: when it goes (the runtime restarts), so
-              %% does the subscription, and the hub subscribes again.
-              tap_monitor = none :: none | reference()}).
+              %% taken while clients are connected; when the runtime
+              %% restarts, the hub subscribes again
+              tap = toroco_live_tap:new(#{buffer => ?TAP_BUFFER, retry_ms => ?REFRESH_MS})
+                  :: toroco_live_tap:tap()}).
 
 %%====================================================================
 %% API
@@ -169,10 +169,6 @@ handle_cast(_, H) ->
     {noreply, H}.
 
 -spec handle_info(term(), #hub{}) -> {noreply, #hub{}} | {stop, term(), #hub{}}.
-handle_info({toroco_event, Ref, Event}, H = #hub{tap = Ref}) ->
-    {noreply, event(Event, H)};
-handle_info({toroco_event, _, _}, H) ->
-    {noreply, H};
 handle_info({toroco_live_world, changed}, H) ->
     {Msgs, Scene} = toroco_live_channels:world(toroco_live_world:latest(),
                                                erlang:system_time(nanosecond), H#hub.scene),
@@ -184,53 +180,55 @@ handle_info({toroco_live_world, changed}, H) ->
 handle_info(refresh, H) ->
     erlang:send_after(?REFRESH_MS, self(), refresh),
     {noreply, refresh(H)};
-handle_info({'DOWN', M, process, _, _}, H = #hub{tap_monitor = M}) ->
-    erlang:send_after(?REFRESH_MS, self(), retap),
-    {noreply, H#hub{tap = none, tap_monitor = none}};
-handle_info(retap, H = #hub{tap = none, conns = Conns}) when map_size(Conns) > 0 ->
-    {noreply, refresh(tap_on(H))};
-handle_info({'DOWN', _, process, Conn, _}, H = #hub{conns = Conns, subs = Subs}) ->
+handle_info({'DOWN', _, process, Conn, _}, H = #hub{conns = Conns, subs = Subs})
+  when is_map_key(Conn, Conns) ->
     H1 = unsubscribe_all(Conn, maps:keys(Subs),
                          H#hub{conns = maps:remove(Conn, Conns),
                                dropped = maps:remove(Conn, H#hub.dropped)}),
     {noreply, tap_off(H1)};
 handle_info({'EXIT', L, Why}, H = #hub{listener = L}) ->
     {stop, {listener, Why}, H};
-handle_info(_, H) ->
-    {noreply, H}.
+handle_info(Info, H = #hub{tap = Tap, conns = Conns}) ->
+    case toroco_live_tap:handle(Info, Tap) of
+        {event, Event} -> {noreply, event(Event, H)};
+        {down, Tap1} -> {noreply, H#hub{tap = Tap1}};
+        {retry, Tap1} when map_size(Conns) > 0 -> {noreply, refresh(tap_on(H#hub{tap = Tap1}))};
+        {retry, Tap1} -> {noreply, H#hub{tap = Tap1}};
+        _ -> {noreply, H}
+    end.
 
 -spec terminate(term(), #hub{}) -> ok.
 terminate(_, #hub{listener = L, tap = Tap}) ->
-    Tap =:= none orelse toroco:unsubscribe_events(Tap),
+    _ = toroco_live_tap:off(Tap),
     toroco_live_listener:stop(L).
 
 %%====================================================================
 %% Inside
 %%====================================================================
 
-tap_on(H = #hub{tap = none}) ->
-    try toroco:subscribe_events(#{buffer => ?TAP_BUFFER}) of
-        {ok, Ref} ->
-            world_subscribe(subscribe),
-            H#hub{tap = Ref, tap_monitor = monitor(process, toroco_tap)};
-        {error, Why} ->
-            no_tap(Why, H)
-    catch exit:Why ->
-            no_tap(Why, H)
+tap_on(H = #hub{tap = Tap}) ->
+    case toroco_live_tap:subscribed(Tap) of
+        true -> H;
+        false ->
+            case toroco_live_tap:on(Tap) of
+                {ok, Tap1} ->
+                    world_subscribe(subscribe),
+                    H#hub{tap = Tap1};
+                {error, Why, Tap1} ->
+                    logger:warning("Foxglove bridge: no events from the runtime yet: ~0p", [Why],
+                                   #{domain => [toroco, live]}),
+                    H#hub{tap = Tap1}
+            end
+    end.
+
+tap_off(H = #hub{tap = Tap, conns = Conns}) when map_size(Conns) =:= 0 ->
+    case toroco_live_tap:subscribed(Tap) of
+        true ->
+            world_subscribe(unsubscribe),
+            H#hub{tap = toroco_live_tap:off(Tap), subs = #{}};
+        false ->
+            H
     end;
-tap_on(H) -> H.
-
-no_tap(Why, H) ->
-    logger:warning("Foxglove bridge: no events from the runtime yet: ~0p", [Why],
-                   #{domain => [toroco, live]}),
-    erlang:send_after(?REFRESH_MS, self(), retap),
-    H.
-
-tap_off(H = #hub{tap = Ref, conns = Conns}) when Ref =/= none, map_size(Conns) =:= 0 ->
-    toroco:unsubscribe_events(Ref),
-    world_subscribe(unsubscribe),
-    demonitor(H#hub.tap_monitor, [flush]),
-    H#hub{tap = none, tap_monitor = none, subs = #{}};
 tap_off(H) -> H.
 
 %% The simulated world's snapshots (`toroco_live_world'), when a world runs.

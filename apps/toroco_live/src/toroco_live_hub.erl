@@ -3,11 +3,16 @@
 %% built. Each WebSocket client's sender process joins it.
 %%
 %% It counts the tap's events per source (emitted) and per input
-%% (delivered) for the events-per-second of each wire and for `/metrics',
-%% and at most every 50 ms, when something changed (or each
-%% second, so hold times count down), reads the runtime once
-%% (`toroco_live_state:page/1'), encodes it once, and pushes the same
-%% binary to every client. With no client it reads nothing.
+%% (delivered) for the events-per-second of each wire and for `/metrics'.
+%% While a client is connected it keeps a reading of the runtime
+%% (`toroco_live_state:readings/0'), taken at most once a second for what
+%% the tap's events do not carry (the wiring's shape, mailboxes, states,
+%% device counters), and brought up to date between readings by the events
+%% themselves (`toroco_live_state:patch/2': winners, holds, latches, last
+%% values, status, restarts). At most every 50 ms, when something changed
+%% (and each second, so hold times count down), it encodes the page's
+%% state once and pushes the same binary to every client. With no client
+%% it reads nothing.
 %%
 %% A slow browser never slows the robot: each client has at most one frame
 %% in flight (pushed, not yet acknowledged by its sender with {@link
@@ -33,6 +38,8 @@
 
 -define(TICK_MS, 50).
 -define(RATE_MS, 1000).
+%% The runtime is read at most this often.
+-define(READ_MS, 1000).
 %% The arena is redrawn at most this often (its frame carries the trajectories).
 -define(WORLD_MS, 100).
 -define(TAP_BUFFER, 10000).
@@ -43,15 +50,23 @@
 
 -record(h, {max_clients :: pos_integer(),
             clients = #{} :: #{pid() => #client{}},
-            tap = none :: reference() | none,
-            %% The tap server: when it goes (the runtime restarts), so does
-            %% the subscription, and the hub subscribes again.
-            tap_monitor = none :: reference() | none,
+            %% when the runtime restarts, the hub subscribes again
+            tap :: toroco_live_tap:tap(),
             emits = #{} :: #{{atom(), atom()} => non_neg_integer()},
             delivers = #{} :: #{{atom(), atom()} => non_neg_integer()},
             window = {#{}, #{}} :: {map(), map()},
             rates = #{emits => #{}, delivers => #{}} :: toroco_live_state:rates(),
             last_rate :: integer(),
+            %% the runtime as last read, kept up to date by the events, and
+            %% when it was read (monotonic ms)
+            reading = none :: toroco_live_state:reading() | none,
+            %% the events since the page was last built: the latest per
+            %% input, delivery and output, every lifecycle event (newest
+            %% first)
+            latest = #{} :: #{term() => tuple()},
+            lifecycle = [] :: [tuple()],
+            read_error = not_running :: term(),
+            read_at = 0 :: integer(),
             dirty = true :: boolean(),
             world_dirty = false :: boolean(),
             state = none :: binary() | none,
@@ -100,11 +115,14 @@ stats() ->
 
 -spec init(map()) -> {ok, #h{}}.
 init(Config) ->
+    %% The robot first: under load the hub waits (the tap drops, and counts).
+    process_flag(priority, low),
     ok = toroco_live_world:subscribe(),
     erlang:send_after(?TICK_MS, self(), tick),
     Now = erlang:monotonic_time(millisecond),
-    {ok, subscribe(#h{max_clients = maps:get(max_clients, Config, 64),
-                      last_rate = Now, last_world = Now - ?WORLD_MS})}.
+    {_, Tap} = toroco_live_tap:on(toroco_live_tap:new(#{buffer => ?TAP_BUFFER, retry_ms => ?TICK_MS})),
+    {ok, #h{max_clients = maps:get(max_clients, Config, 64), tap = Tap,
+            last_rate = Now, last_world = Now - ?WORLD_MS}}.
 
 -spec handle_call(term(), gen_server:from(), #h{}) -> {reply, term(), #h{}}.
 handle_call({join, Pid}, _From, H = #h{clients = Cs, max_clients = Max}) ->
@@ -124,7 +142,7 @@ handle_call(stats, _From, H) ->
     {reply, #{emits => H#h.emits, delivers => H#h.delivers, clients => map_size(H#h.clients),
               skipped => H#h.skipped + lists:sum([C#client.skipped || C <- maps:values(H#h.clients)]),
               pushed => H#h.pushed, tap_dropped => H#h.tap_dropped,
-              tap => H#h.tap =/= none}, H};
+              tap => toroco_live_tap:subscribed(H#h.tap)}, H};
 handle_call(_Request, _From, H) ->
     {reply, {error, unknown_call}, H}.
 
@@ -142,56 +160,55 @@ handle_cast(_Msg, H) ->
     {noreply, H}.
 
 -spec handle_info(term(), #h{}) -> {noreply, #h{}}.
-handle_info({toroco_event, Ref, Event}, H = #h{tap = Ref}) ->
-    {noreply, event(Event, H)};
-handle_info({toroco_event, _, _}, H) ->
-    {noreply, H};
 handle_info({toroco_live_world, changed}, H) ->
     {noreply, H#h{world_dirty = true}};
 handle_info(tick, H) ->
     erlang:send_after(?TICK_MS, self(), tick),
     {noreply, tick(H)};
-handle_info({'DOWN', MRef, process, _, _}, H = #h{tap_monitor = MRef}) ->
-    {noreply, H#h{tap = none, tap_monitor = none, dirty = true}};
-handle_info({'DOWN', MRef, process, Pid, _}, H = #h{clients = Cs}) ->
+handle_info({'DOWN', MRef, process, Pid, _} = Down, H = #h{clients = Cs}) ->
     case Cs of
         #{Pid := #client{mref = MRef, skipped = S}} ->
             {noreply, H#h{clients = maps:remove(Pid, Cs), skipped = H#h.skipped + S}};
         #{} ->
-            {noreply, H}
+            handle_info_tap(Down, H)
     end;
-handle_info(_Info, H) ->
-    {noreply, H}.
+handle_info(Info, H) ->
+    handle_info_tap(Info, H).
+
+handle_info_tap(Info, H = #h{tap = Tap}) ->
+    case toroco_live_tap:handle(Info, Tap) of
+        {event, Event} -> {noreply, event(Event, H)};
+        {down, Tap1} -> {noreply, H#h{tap = Tap1, dirty = true}};
+        {retry, Tap1} -> {_, Tap2} = toroco_live_tap:on(Tap1), {noreply, H#h{tap = Tap2}};
+        _ -> {noreply, H}
+    end.
 
 -spec terminate(term(), #h{}) -> ok.
 terminate(_Reason, #h{tap = Tap}) ->
-    case Tap of
-        none -> ok;
-        Ref -> catch toroco:unsubscribe_events(Ref), ok
-    end.
+    _ = toroco_live_tap:off(Tap),
+    ok.
 
 %%====================================================================
 %% The tap
 %%====================================================================
 
-subscribe(H = #h{tap = none}) ->
-    try toroco:subscribe_events(#{buffer => ?TAP_BUFFER}) of
-        {ok, Ref} -> H#h{tap = Ref, tap_monitor = monitor(process, toroco_tap)};
-        {error, _} -> H
-    catch error:undef -> H;
-          exit:_ -> H
-    end;
-subscribe(H) ->
-    H.
-
-event({emit, _T, Src, _Kind, _V}, H = #h{emits = E}) ->
-    H#h{emits = bump(Src, E), dirty = true};
-event({deliver, _T, In, _V}, H = #h{delivers = D}) ->
-    H#h{delivers = bump(In, D), dirty = true};
 event({dropped, N}, H = #h{tap_dropped = D}) ->
     H#h{tap_dropped = D + N, dirty = true};
-event(_Router_or_lifecycle, H) ->
-    H#h{dirty = true}.
+event(Event = {lifecycle, _, _, _}, H = #h{lifecycle = L}) ->
+    H#h{lifecycle = [Event | L], dirty = true};
+event(Event = {Kind, _T, Key, _}, H = #h{latest = M}) ->
+    count(Event, H#h{latest = M#{{Kind, Key} => Event}, dirty = true});
+event(Event = {emit, _T, Src, _, _}, H = #h{latest = M}) ->
+    count(Event, H#h{latest = M#{{emit, Src} => Event}, dirty = true});
+event(_Event, H) ->
+    H.
+
+count({emit, _T, Src, _Kind, _V}, H = #h{emits = E}) ->
+    H#h{emits = bump(Src, E)};
+count({deliver, _T, In, _V}, H = #h{delivers = D}) ->
+    H#h{delivers = bump(In, D)};
+count(_Router_or_lifecycle, H) ->
+    H.
 
 bump(Key, Map) ->
     maps:update_with(Key, fun(N) -> N + 1 end, 1, Map).
@@ -201,14 +218,17 @@ bump(Key, Map) ->
 %%====================================================================
 
 tick(H0) ->
-    H = rates(subscribe(H0)),
+    H = rates(H0),
     case map_size(H#h.clients) of
         0 ->
-            H;
+            %% No page: nothing kept; the next one starts from a reading.
+            H#h{reading = none, latest = #{}, lifecycle = []};
         _ ->
             {Vs, Vw} = H#h.versions,
-            H1 = case H#h.dirty orelse H#h.tap =:= none of
-                     true -> H#h{state = state_frame(H), dirty = false, versions = {Vs + 1, Vw}};
+            H1 = case H#h.dirty orelse not toroco_live_tap:subscribed(H#h.tap) of
+                     true ->
+                         Hr = patched(read(H)),
+                         Hr#h{state = state_frame(Hr), dirty = false, versions = {Vs + 1, Vw}};
                      false -> H
                  end,
             Now = erlang:monotonic_time(millisecond),
@@ -240,22 +260,49 @@ rates(H = #h{last_rate = Last, emits = E, delivers = D, window = {E0, D0}}) ->
             H
     end.
 
-state_frame(#h{rates = Rates, clients = Cs, skipped = S, tap_dropped = Dropped, tap = Tap}) ->
-    try toroco_live_state:page(Rates) of
+%% The events since the last page brought into the reading.
+patched(H = #h{reading = none}) ->
+    H#h{latest = #{}, lifecycle = []};
+patched(H = #h{reading = R, latest = M, lifecycle = L}) ->
+    Patch = fun toroco_live_state:patch/2,
+    R1 = lists:foldl(Patch, lists:foldl(Patch, R, lists:reverse(L)), maps:values(M)),
+    H#h{reading = R1, latest = #{}, lifecycle = []}.
+
+%% The runtime read again if the reading is a second old (or there is none,
+%% or no tap keeps it up to date); the events kept so far are in it.
+read(H = #h{reading = R, read_at = At, tap = Tap}) ->
+    Now = erlang:monotonic_time(millisecond),
+    case R =:= none orelse Now - At >= ?READ_MS orelse not toroco_live_tap:subscribed(Tap) of
+        true ->
+            try toroco_live_state:readings() of
+                R1 -> H#h{reading = R1, read_at = Now, latest = #{}, lifecycle = []}
+            catch
+                exit:Why -> H#h{reading = none, read_error = Why}
+            end;
+        false ->
+            H
+    end.
+
+state_frame(#h{reading = none, read_error = Why}) ->
+    not_running(Why);
+state_frame(#h{rates = Rates, clients = Cs, skipped = S, tap_dropped = Dropped, tap = Tap,
+               reading = R}) ->
+    try toroco_live_state:page(Rates, R) of
         Page ->
             Skipped = S + lists:sum([C#client.skipped || C <- maps:values(Cs)]),
             toroco_live_json:encode(Page#{<<"dashboard">> =>
                                               #{<<"clients">> => map_size(Cs),
                                                 <<"skipped">> => Skipped,
-                                                <<"tap">> => Tap =/= none,
+                                                <<"tap">> => toroco_live_tap:subscribed(Tap),
                                                 <<"tap_dropped">> => Dropped}})
     catch
-        exit:Why ->
-            %% The runtime is not running (or restarting): say so.
-            toroco_live_json:encode(#{<<"type">> => <<"state">>, <<"nodes">> => [],
-                                      <<"layers">> => [],
-                                      <<"error">> => toroco_live_json:term_text(Why)})
+        exit:Why -> not_running(Why)
     end.
+
+%% The runtime is not running (or restarting): say so.
+not_running(Why) ->
+    toroco_live_json:encode(#{<<"type">> => <<"state">>, <<"nodes">> => [], <<"layers">> => [],
+                              <<"error">> => toroco_live_json:term_text(Why)}).
 
 world_frame() ->
     case toroco_live_world:latest() of

@@ -4,15 +4,19 @@
 %% may want back carries both `value' and `term'.
 %%
 %% {@link api/0} is the body of `GET /api/state' (inspect/0 and inspect/1
-%% as they are); {@link page/1} is the state frame the page draws, shaped
+%% as they are); {@link page/2} is the state frame the page draws, shaped
 %% for drawing (lists in priority order, sources as `[Emitter, Output]').
 %% {@link readings/0} is the raw reading both are made from, also used by
-%% `toroco_live_metrics'.
+%% `toroco_live_metrics'; {@link patch/2} brings a reading up to date with
+%% one event of the observer tap (winners, holds, latches, last values,
+%% output latches, status and restarts), so that the dashboard reads the
+%% runtime itself only for what events do not carry (the wiring's shape,
+%% mailboxes, states, device counters).
 -module(toroco_live_state).
 
--export([api/0, page/1, readings/0]).
+-export([api/0, page/1, page/2, readings/0, patch/2]).
 
--export_type([node_reading/0, rates/0]).
+-export_type([node_reading/0, rates/0, reading/0]).
 
 -type node_reading() :: #{name := atom(), info := map(), restarts := non_neg_integer(),
                           mailbox := non_neg_integer() | null, state := term()}.
@@ -20,6 +24,10 @@
 %% per input (`{Receiver, Input}', what was delivered).
 -type rates() :: #{emits := #{{atom(), atom()} => number()},
                    delivers := #{{atom(), atom()} => number()}}.
+
+%% A reading of the whole robot: inspect/0, and a node reading per name in
+%% its order.
+-type reading() :: {map(), [node_reading()]}.
 
 %% Longest term text shown for a state.
 -define(STATE_TEXT, 300).
@@ -60,10 +68,14 @@ reading(Name) ->
                    #{} -> down
                end}.
 
-%% @doc The page's state frame.
+%% @doc The page's state frame, read now.
 -spec page(rates()) -> jiffy:json_value().
 page(Rates) ->
-    {Overview, Readings} = readings(),
+    page(Rates, readings()).
+
+%% @doc The page's state frame from a reading.
+-spec page(rates(), reading()) -> jiffy:json_value().
+page(Rates, {Overview, Readings}) ->
     #{<<"type">> => <<"state">>,
       <<"node">> => toroco_live_json:value(node()),
       <<"t">> => erlang:system_time(millisecond),
@@ -132,6 +144,46 @@ output_json(N, O, Out, #{emits := Emits}) ->
 
 src(none) -> null;
 src({E, O}) -> [toroco_live_json:value(E), toroco_live_json:value(O)].
+
+%% @doc A reading brought up to date with one event of the observer tap
+%% (SPEC §10). Events about names the reading does not have change nothing:
+%% the next reading brings them.
+-spec patch(term(), reading()) -> reading().
+patch({router, _T, {R, I}, View}, Reading) ->
+    input(R, I, fun(In) -> maps:merge(In, maps:with([winner, holds, latches], View)) end, Reading);
+patch({deliver, _T, {R, I}, V}, Reading) ->
+    input(R, I, fun(In) -> In#{last => {value, V}} end, Reading);
+patch({emit, _T, {E, O}, Kind, V}, Reading) ->
+    Latch = case Kind of set -> {value, V}; _ -> none end,
+    node(E, fun(N = #{info := Info = #{outputs := #{O := Out} = Outs}}) ->
+                    N#{info := Info#{outputs := Outs#{O := Out#{latch => Latch}}}};
+               (N) -> N
+            end, Reading);
+patch({lifecycle, _T, Name, What}, Reading) ->
+    node(Name, fun(N = #{info := Info, restarts := R}) ->
+                       case What of
+                           suspended -> N#{info := Info#{status => suspended}};
+                           resumed -> N#{info := Info#{status => running}};
+                           started -> N#{info := Info#{status => running}};
+                           restarted -> N#{info := Info#{status => running}, restarts := R + 1};
+                           stopped -> N#{info := Info#{status => down}};
+                           _ -> N
+                       end
+               end, Reading);
+patch(_Event, Reading) ->
+    Reading.
+
+input(R, I, Fun, Reading) ->
+    node(R, fun(N = #{info := Info = #{inputs := #{I := In} = Ins}}) ->
+                    N#{info := Info#{inputs := Ins#{I := Fun(In)}}};
+               (N) -> N
+            end, Reading).
+
+node(Name, Fun, {Overview, Readings}) ->
+    {Overview, [case N of
+                    #{name := Name} -> Fun(N);
+                    _ -> N
+                end || N <- Readings]}.
 
 %% A device's counters name paths and addresses as strings (the motors'
 %% `sysfs_root'): the page shows them as text, not as lists of codes.

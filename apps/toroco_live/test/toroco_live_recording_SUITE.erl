@@ -174,10 +174,10 @@ flight_recorder_across_segments(Config) ->
         N = 3000,
         [ok = toroco:inject({s, dist}, {I, near}) || I <- lists:seq(1, N)],
         ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= N end, 10000),
-        #{segments := Segments} = W = toroco_live_flight:window(),
+        %% Each value is emitted and delivered: more than five segments
+        %% once the last events, batched by their producers, are in.
+        W = window_until(fun(#{segments := Segments}) -> Segments > 5 end, 5000),
         ct:log("window ~p", [W]),
-        %% Each value is emitted and delivered: more than five segments.
-        true = Segments > 5,
         Path = path(Config, "segments.mcap"),
         {ok, #{messages := M}} = toroco_live:dump(Path),
         All = [{I, near} || I <- lists:seq(1, N)],
@@ -220,6 +220,18 @@ flight_recorder_window_by_time(Config) ->
         New = terms(Path, <<"/toroco/out/s/dist">>),
         #{<<"ok">> := true, <<"messages">> := M} = read(Path)
     end).
+
+%% The flight recorder's window once Pred holds of it (or fails).
+window_until(Pred, Timeout) when Timeout =< 0 ->
+    W = toroco_live_flight:window(),
+    true = Pred(W),
+    W;
+window_until(Pred, Timeout) ->
+    W = toroco_live_flight:window(),
+    case Pred(W) of
+        true -> W;
+        false -> timer:sleep(20), window_until(Pred, Timeout - 20)
+    end.
 
 %% Runs Fun with a fresh flight recorder under app env Key = Value.
 with_flight_env(Key, Value, Fun) ->

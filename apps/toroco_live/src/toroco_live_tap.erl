@@ -1,0 +1,103 @@
+%% @doc One subscription to the observer tap (SPEC §10), kept in the state
+%% of the process that reads it: the dashboard's hub, the flight recorder
+%% (and the recordings it writes), the Foxglove bridge, and any other
+%% client of `toroco_live' that watches the robot.
+%%
+%% The client process keeps a {@link tap()} in its state and passes every
+%% message it does not know itself to {@link handle/2}. The subscription
+%% follows the runtime: when the tap server goes (the runtime stops or
+%% restarts), the subscription goes with it and the client is told
+%% `{down, Tap}'; `retry_ms' later (and `retry_ms' after a subscription
+%% that failed) it is told `{retry, Tap}' and subscribes again with
+%% {@link on/1} if it still wants events.
+%% <pre>
+%% T0 = toroco_live_tap:new(#{buffer => 1000}),
+%% {_, T} = toroco_live_tap:on(T0),
+%% ...
+%% handle_info(Msg, S = #s{tap = T}) ->
+%%     case toroco_live_tap:handle(Msg, T) of
+%%         {event, Event} -> ...;
+%%         {down, T1} -> ...;
+%%         {retry, T1} -> {_, T2} = toroco_live_tap:on(T1), ...;
+%%         ignore -> ...;
+%%         unknown -> ...
+%%     end.
+%% </pre>
+-module(toroco_live_tap).
+
+-export([new/1, on/1, off/1, handle/2, subscribed/1, ref/1]).
+-export_type([tap/0, opts/0]).
+
+%% The options of `toroco:subscribe_events/1', and how soon to try again
+%% (default 1000 ms).
+-type opts() :: #{kinds => [atom()], names => all | [atom()], buffer => pos_integer(),
+                  retry_ms => pos_integer()}.
+
+-record(tap, {opts :: map(),
+              retry_ms :: pos_integer(),
+              ref = none :: reference() | none,
+              %% the tap server: when it goes, so does the subscription
+              mon = none :: reference() | none,
+              %% a retry message is on its way
+              retrying = false :: boolean()}).
+-opaque tap() :: #tap{}.
+
+-define(RETRY, '$toroco_live_tap_retry').
+
+%% @doc A client's tap, not subscribed yet.
+-spec new(opts()) -> tap().
+new(Opts) ->
+    #tap{opts = maps:without([retry_ms], Opts), retry_ms = maps:get(retry_ms, Opts, 1000)}.
+
+%% @doc Subscribes, unless it is already. If the runtime refuses or is not
+%% there, `{retry, Tap}' comes later.
+-spec on(tap()) -> {ok, tap()} | {error, term(), tap()}.
+on(T = #tap{ref = none, opts = Opts}) ->
+    try toroco:subscribe_events(Opts) of
+        {ok, Ref} -> {ok, T#tap{ref = Ref, mon = monitor(process, toroco_tap)}};
+        {error, Why} -> {error, Why, retry(T)}
+    catch exit:Why -> {error, Why, retry(T)}
+    end;
+on(T) ->
+    {ok, T}.
+
+%% @doc Unsubscribes; events of the subscription still in the mailbox are
+%% `ignore'd by {@link handle/2}.
+-spec off(tap()) -> tap().
+off(T = #tap{ref = none}) ->
+    T;
+off(T = #tap{ref = Ref, mon = Mon}) ->
+    _ = demonitor(Mon, [flush]),
+    catch toroco:unsubscribe_events(Ref),
+    T#tap{ref = none, mon = none}.
+
+%% @doc What a message means to the client's tap: one of its events, its
+%% subscription gone, time to subscribe again, an event of an earlier
+%% subscription (`ignore'), or not the tap's (`unknown').
+-spec handle(term(), tap()) ->
+          {event, term()} | {down, tap()} | {retry, tap()} | ignore | unknown.
+handle({toroco_event, Ref, Event}, #tap{ref = Ref}) ->
+    {event, Event};
+handle({toroco_event, _, _}, _T) ->
+    ignore;
+handle({'DOWN', Mon, process, _, _}, T = #tap{mon = Mon}) when Mon =/= none ->
+    {down, retry(T#tap{ref = none, mon = none})};
+handle(?RETRY, T) ->
+    {retry, T#tap{retrying = false}};
+handle(_Msg, _T) ->
+    unknown.
+
+%% @doc Whether it is subscribed now.
+-spec subscribed(tap()) -> boolean().
+subscribed(#tap{ref = Ref}) -> Ref =/= none.
+
+%% @doc The subscription's reference (to take the events still coming
+%% with a `receive' of the client's own), or `none'.
+-spec ref(tap()) -> reference() | none.
+ref(#tap{ref = Ref}) -> Ref.
+
+retry(T = #tap{retrying = true}) ->
+    T;
+retry(T = #tap{retry_ms = Ms}) ->
+    _ = erlang:send_after(Ms, self(), ?RETRY),
+    T#tap{retrying = true}.
