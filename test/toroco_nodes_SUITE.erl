@@ -347,7 +347,7 @@ remote_events_bounded_and_counted(Config) ->
                      end]),
     receive {subscribed, Sub} -> ok after 5000 -> ct:fail(no_subscription) end,
     [ok = t(B, inject, [{s, out}, I, #{}]) || I <- lists:seq(1, N)],
-    wait(fun() -> queue_len(A, Sub) > 0 end, 3000),
+    wait_until(fun() -> queue_len(A, Sub) > 0 end, 3000),
     true = queue_len(A, Sub) =< Buffer + 1,
     Sub ! read,
     receive {counted, Sub, {Received, Dropped, Seq}} ->

@@ -68,7 +68,8 @@
               dropped = #{} :: #{pid() => pos_integer()},
               %% taken while clients are connected; when the runtime
               %% restarts, the hub subscribes again
-              tap = toroco_live_tap:new(#{buffer => ?TAP_BUFFER, retry_ms => ?REFRESH_MS})
+              tap = toroco_live_tap:new(#{buffer => ?TAP_BUFFER, retry_ms => ?REFRESH_MS,
+                                           world => true, who => <<"Foxglove bridge">>})
                   :: toroco_live_tap:tap()}).
 
 %%====================================================================
@@ -207,36 +208,11 @@ terminate(_, #hub{listener = L, tap = Tap}) ->
 %%====================================================================
 
 tap_on(H = #hub{tap = Tap}) ->
-    case toroco_live_tap:subscribed(Tap) of
-        true -> H;
-        false ->
-            case toroco_live_tap:on(Tap) of
-                {ok, Tap1} ->
-                    world_subscribe(subscribe),
-                    H#hub{tap = Tap1};
-                {error, Why, Tap1} ->
-                    logger:warning("Foxglove bridge: no events from the runtime yet: ~0p", [Why],
-                                   #{domain => [toroco, live]}),
-                    H#hub{tap = Tap1}
-            end
-    end.
+    H#hub{tap = toroco_live_tap:ensure_on(Tap)}.
 
 tap_off(H = #hub{tap = Tap, conns = Conns}) when map_size(Conns) =:= 0 ->
-    case toroco_live_tap:subscribed(Tap) of
-        true ->
-            world_subscribe(unsubscribe),
-            H#hub{tap = toroco_live_tap:off(Tap), subs = #{}};
-        false ->
-            H
-    end;
+    H#hub{tap = toroco_live_tap:off(Tap), subs = #{}};
 tap_off(H) -> H.
-
-%% The simulated world's snapshots (`toroco_live_world'), when a world runs.
-world_subscribe(How) ->
-    case whereis(toroco_live_world) of
-        undefined -> ok;
-        _ -> catch toroco_live_world:How()
-    end.
 
 event(Event = {lifecycle, _, _, _}, H) ->
     send_event(Event, refresh(H));

@@ -60,8 +60,9 @@
               topics = {[], -1} :: {[toroco_live_ros:topic()], integer()},
               %% topics clients advertised: type and advertisers
               relayed = #{} :: #{binary() => {binary(), [pid()]}},
-              tap = none :: none | reference(),
-              tap_monitor = none :: none | reference(),
+              tap = toroco_live_tap:new(#{kinds => [emit, lifecycle], buffer => ?TAP_BUFFER,
+                                           retry_ms => ?RETAP_MS, world => true,
+                                           who => <<"rosbridge">>}) :: toroco_live_tap:tap(),
               counters = #{} :: #{atom() => non_neg_integer()}}).
 
 %%====================================================================
@@ -212,10 +213,6 @@ handle_cast(_, H) ->
     {noreply, H}.
 
 -spec handle_info(term(), #hub{}) -> {noreply, #hub{}} | {stop, term(), #hub{}}.
-handle_info({toroco_event, Ref, Event}, H = #hub{tap = Ref}) ->
-    {noreply, event(Event, H)};
-handle_info({toroco_event, _, _}, H) ->
-    {noreply, H};
 handle_info({toroco_live_world, changed}, H = #hub{subs = Subs}) ->
     %% Reading re-arms the notification: read even with nobody on /odom.
     Snapshot = toroco_live_world:latest(),
@@ -223,11 +220,6 @@ handle_info({toroco_live_world, changed}, H = #hub{subs = Subs}) ->
         true -> {noreply, lists:foldl(fun deliver/2, H, toroco_live_ros:of_world(Snapshot))};
         false -> {noreply, H}
     end;
-handle_info({'DOWN', M, process, _, _}, H = #hub{tap_monitor = M}) ->
-    erlang:send_after(?RETAP_MS, self(), retap),
-    {noreply, H#hub{tap = none, tap_monitor = none}};
-handle_info(retap, H = #hub{tap = none, conns = Conns}) when map_size(Conns) > 0 ->
-    {noreply, tap_on(H)};
 handle_info({'DOWN', _, process, Conn, _}, H = #hub{conns = Conns, subs = Subs}) ->
     H1 = unsubscribe_all(Conn, maps:keys(Subs),
                          unadvertise_all(Conn, maps:keys(H#hub.relayed),
@@ -236,12 +228,18 @@ handle_info({'DOWN', _, process, Conn, _}, H = #hub{conns = Conns, subs = Subs})
     {noreply, tap_off(H1)};
 handle_info({'EXIT', L, Why}, H = #hub{listener = L}) ->
     {stop, {listener, Why}, H};
-handle_info(_, H) ->
-    {noreply, H}.
+handle_info(Info, H = #hub{tap = Tap, conns = Conns}) ->
+    case toroco_live_tap:handle(Info, Tap) of
+        {event, Event} -> {noreply, event(Event, H)};
+        {down, Tap1} -> {noreply, H#hub{tap = Tap1}};
+        {retry, Tap1} when map_size(Conns) > 0 -> {noreply, tap_on(H#hub{tap = Tap1})};
+        {retry, Tap1} -> {noreply, H#hub{tap = Tap1}};
+        _ -> {noreply, H}
+    end.
 
 -spec terminate(term(), #hub{}) -> ok.
 terminate(_, #hub{listener = L, tap = Tap}) ->
-    Tap =:= none orelse toroco:unsubscribe_events(Tap),
+    _ = toroco_live_tap:off(Tap),
     toroco_live_listener:stop(L).
 
 %%====================================================================
@@ -265,36 +263,12 @@ fresh_topics(H = #hub{topics = {_, At}}) ->
             H#hub{topics = {Topics, Now}}
     end.
 
-tap_on(H = #hub{tap = none}) ->
-    try toroco:subscribe_events(#{kinds => [emit, lifecycle], buffer => ?TAP_BUFFER}) of
-        {ok, Ref} ->
-            world(subscribe),
-            H#hub{tap = Ref, tap_monitor = monitor(process, toroco_tap)};
-        {error, Why} ->
-            no_tap(Why, H)
-    catch exit:Why ->
-            no_tap(Why, H)
-    end;
-tap_on(H) -> H.
+tap_on(H = #hub{tap = Tap}) ->
+    H#hub{tap = toroco_live_tap:ensure_on(Tap)}.
 
-no_tap(Why, H) ->
-    logger:warning("rosbridge: no events from the runtime yet: ~0p", [Why],
-                   #{domain => [toroco, live, ros]}),
-    erlang:send_after(?RETAP_MS, self(), retap),
-    H.
-
-tap_off(H = #hub{tap = Ref, conns = Conns}) when Ref =/= none, map_size(Conns) =:= 0 ->
-    toroco:unsubscribe_events(Ref),
-    world(unsubscribe),
-    demonitor(H#hub.tap_monitor, [flush]),
-    H#hub{tap = none, tap_monitor = none, subs = #{}};
+tap_off(H = #hub{tap = Tap, conns = Conns}) when map_size(Conns) =:= 0 ->
+    H#hub{tap = toroco_live_tap:off(Tap), subs = #{}};
 tap_off(H) -> H.
-
-world(How) ->
-    case whereis(toroco_live_world) of
-        undefined -> ok;
-        _ -> catch toroco_live_world:How()
-    end.
 
 event({lifecycle, _, _, _}, H = #hub{topics = {Topics, _}}) ->
     %% The wiring may have changed: read the topics again when next asked.

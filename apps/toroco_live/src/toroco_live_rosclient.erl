@@ -83,8 +83,7 @@
                key = <<>> :: binary(),
                head = <<>> :: binary(),
                decoder = none :: toroco_live_ws_frame:decoder() | none,
-               tap = none :: reference() | none,
-               tap_monitor = none :: reference() | none,
+               tap :: toroco_live_tap:tap(),
                %% topic => type, as advertised or subscribed on this connection
                advertised = #{} :: #{binary() => binary()},
                subscribed = #{} :: #{binary() => binary()},
@@ -193,8 +192,12 @@ init({Url, Opts}) ->
     case options(Url, Opts) of
         {ok, {U, Host, Port, Resource}, Options} ->
             logger:notice("rosbridge client: connecting to ~ts", [U], ?LOG),
+            Tap = toroco_live_tap:new(#{kinds => [emit, lifecycle],
+                                        buffer => maps:get(max_queue, Options),
+                                        retry_ms => ?REFRESH_MS, world => true,
+                                        who => <<"rosbridge client">>}),
             {ok, connecting, #data{url = U, host = Host, port = Port, resource = Resource,
-                                   opts = Options}};
+                                   opts = Options, tap = Tap}};
         {error, Why} ->
             {stop, Why}
     end.
@@ -251,15 +254,18 @@ connected(info, {tcp_closed, S}, D = #data{socket = S}) ->
     fail(closed, D);
 connected(info, {tcp_error, S, Why}, D = #data{socket = S}) ->
     fail({tcp_error, Why}, D);
-connected(info, {toroco_event, Tap, Event}, D = #data{tap = Tap}) ->
-    send_event(Event, D);
 connected(info, {toroco_live_world, changed}, D) ->
     Snapshot = try toroco_live_world:latest() catch exit:_ -> none end,
     publish_all(toroco_live_ros:of_world(Snapshot, erlang:system_time(nanosecond)), D);
-connected(info, {'DOWN', M, process, _, _}, D = #data{tap_monitor = M}) ->
-    {keep_state, D#data{tap = none, tap_monitor = none}};
 connected({timeout, refresh}, refresh, D) ->
     with_socket(refresh(tap_on(D)), [{{timeout, refresh}, ?REFRESH_MS, refresh}]);
+connected(info, Msg, D = #data{tap = Tap}) ->
+    case toroco_live_tap:handle(Msg, Tap) of
+        {event, Event} -> send_event(Event, D);
+        {down, Tap1} -> {keep_state, D#data{tap = Tap1}};
+        {retry, Tap1} -> {keep_state, tap_on(D#data{tap = Tap1})};
+        _ -> common(info, Msg, connected, D)
+    end;
 connected(EventType, Event, D) ->
     common(EventType, Event, connected, D).
 
@@ -395,21 +401,11 @@ fail(Why, D = #data{attempts = A, url = Url, socket = S, connector = C}) ->
 %% Connected
 %%====================================================================
 
-tap_on(D = #data{tap = none, opts = #{max_queue := Max}}) ->
-    _ = (catch toroco_live_world:subscribe()),
-    try toroco:subscribe_events(#{kinds => [emit, lifecycle], buffer => Max}) of
-        {ok, Ref} -> D#data{tap = Ref, tap_monitor = monitor(process, toroco_tap)};
-        {error, _} -> D
-    catch exit:_ -> D
-    end;
-tap_on(D) ->
-    D.
+tap_on(D = #data{tap = Tap}) ->
+    D#data{tap = toroco_live_tap:ensure_on(Tap)}.
 
-tap_off(D = #data{tap = Tap, tap_monitor = M}) ->
-    _ = (catch toroco_live_world:unsubscribe()),
-    Tap =:= none orelse (catch toroco:unsubscribe_events(Tap)),
-    M =:= none orelse demonitor(M, [flush]),
-    D#data{tap = none, tap_monitor = none}.
+tap_off(D = #data{tap = Tap}) ->
+    D#data{tap = toroco_live_tap:off(Tap)}.
 
 %% Advertise what appeared, unadvertise what went, subscribe to the inbound.
 refresh(D = #data{advertised = Adv, subscribed = Sub, refused_topics = Refused}) ->

@@ -25,16 +25,21 @@
 %% </pre>
 -module(toroco_live_tap).
 
--export([new/1, on/1, off/1, handle/2, subscribed/1, ref/1]).
+-export([new/1, on/1, ensure_on/1, off/1, handle/2, subscribed/1, ref/1]).
 -export_type([tap/0, opts/0]).
 
-%% The options of `toroco:subscribe_events/1', and how soon to try again
-%% (default 1000 ms).
+%% The options of `toroco:subscribe_events/1', how soon to try again
+%% (default 1000 ms), and whether the simulated world's snapshots
+%% (`toroco_live_world', while a world runs) come with the events
+%% (default `false'), for `who' (named in the log when the runtime
+%% refuses, default `<<"toroco_live">>').
 -type opts() :: #{kinds => [atom()], names => all | [atom()], buffer => pos_integer(),
-                  retry_ms => pos_integer()}.
+                  retry_ms => pos_integer(), world => boolean(), who => binary()}.
 
 -record(tap, {opts :: map(),
               retry_ms :: pos_integer(),
+              world :: boolean(),
+              who :: binary(),
               ref = none :: reference() | none,
               %% the tap server: when it goes, so does the subscription
               mon = none :: reference() | none,
@@ -47,19 +52,34 @@
 %% @doc A client's tap, not subscribed yet.
 -spec new(opts()) -> tap().
 new(Opts) ->
-    #tap{opts = maps:without([retry_ms], Opts), retry_ms = maps:get(retry_ms, Opts, 1000)}.
+    #tap{opts = maps:without([retry_ms, world, who], Opts), retry_ms = maps:get(retry_ms, Opts, 1000),
+         world = maps:get(world, Opts, false), who = maps:get(who, Opts, <<"toroco_live">>)}.
 
 %% @doc Subscribes, unless it is already. If the runtime refuses or is not
 %% there, `{retry, Tap}' comes later.
 -spec on(tap()) -> {ok, tap()} | {error, term(), tap()}.
 on(T = #tap{ref = none, opts = Opts}) ->
     try toroco:subscribe_events(Opts) of
-        {ok, Ref} -> {ok, T#tap{ref = Ref, mon = monitor(process, toroco_tap)}};
+        {ok, Ref} ->
+            world(subscribe, T),
+            {ok, T#tap{ref = Ref, mon = monitor(process, toroco_tap)}};
         {error, Why} -> {error, Why, retry(T)}
     catch exit:Why -> {error, Why, retry(T)}
     end;
 on(T) ->
     {ok, T}.
+
+%% @doc {@link on/1} for a client that goes on without events until the
+%% retry: a refusal is logged, naming the client.
+-spec ensure_on(tap()) -> tap().
+ensure_on(T0 = #tap{who = Who}) ->
+    case on(T0) of
+        {ok, T} -> T;
+        {error, Why, T} ->
+            logger:warning("~ts: no events from the runtime yet: ~0p", [Who, Why],
+                           #{domain => [toroco, live]}),
+            T
+    end.
 
 %% @doc Unsubscribes; events of the subscription still in the mailbox are
 %% `ignore'd by {@link handle/2}.
@@ -69,6 +89,7 @@ off(T = #tap{ref = none}) ->
 off(T = #tap{ref = Ref, mon = Mon}) ->
     _ = demonitor(Mon, [flush]),
     catch toroco:unsubscribe_events(Ref),
+    world(unsubscribe, T),
     T#tap{ref = none, mon = none}.
 
 %% @doc What a message means to the client's tap: one of its events, its
@@ -95,6 +116,14 @@ subscribed(#tap{ref = Ref}) -> Ref =/= none.
 %% with a `receive' of the client's own), or `none'.
 -spec ref(tap()) -> reference() | none.
 ref(#tap{ref = Ref}) -> Ref.
+
+world(_How, #tap{world = false}) ->
+    ok;
+world(How, #tap{}) ->
+    case whereis(toroco_live_world) of
+        undefined -> ok;
+        _ -> catch toroco_live_world:How()
+    end.
 
 retry(T = #tap{retrying = true}) ->
     T;
