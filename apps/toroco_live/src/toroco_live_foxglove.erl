@@ -129,17 +129,13 @@ start_link(Opts) ->
 -spec init(map()) -> {ok, #hub{}} | {stop, term()}.
 init(Opts) ->
     process_flag(trap_exit, true),
-    Ip = maps:get(ip, Opts, {127, 0, 0, 1}),
     Publish = maps:get(client_publish, Opts,
                        application:get_env(toroco_live, client_publish, false)) =:= true,
     Session = integer_to_binary(erlang:system_time(millisecond)),
     Loop = fun(Req) -> toroco_live_foxglove_conn:serve(Req, ?SUBPROTOCOL,
                                                         #{client_publish => Publish,
                                                           session => Session}) end,
-    Bounds = maps:with([request_timeout, idle_timeout, max_connections, max_per_peer, min_age],
-                       Opts),
-    case toroco_live_listener:start_link(?LISTENER, Bounds#{ip => Ip, port => maps:get(foxglove, Opts),
-                                                            loop => Loop}) of
+    case toroco_live_listener:start_link(?LISTENER, Opts, maps:get(foxglove, Opts), Loop) of
         {ok, Listener} ->
             Port = toroco_live_listener:port(Listener),
             %% The wiring is read again every ?REFRESH_MS while clients

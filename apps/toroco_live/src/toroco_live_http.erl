@@ -27,11 +27,8 @@
 %% @doc Starts the bounded listener on the configured address and port,
 %% with the bounds of `Config' (`toroco_live_listener''s options).
 -spec start_link(map()) -> {ok, pid()} | {error, term()}.
-start_link(#{ip := Ip, http := Port} = Config) ->
-    Bounds = maps:with([request_timeout, idle_timeout, max_connections, max_per_peer, min_age],
-                       Config),
-    toroco_live_listener:start_link(?NAME, Bounds#{ip => Ip, port => Port,
-                                                   loop => fun ?MODULE:loop/1}).
+start_link(#{http := Port} = Config) ->
+    toroco_live_listener:start_link(?NAME, Config, Port, fun ?MODULE:loop/1).
 
 %% @doc The port the listener got (the one asked for, or the free one for 0).
 -spec port() -> inet:port_number().

@@ -47,7 +47,7 @@
 -module(toroco_live_listener).
 -behaviour(gen_statem).
 
--export([start_link/2, stop/1, port/1, stats/1, reasons/0]).
+-export([start_link/2, start_link/4, stop/1, port/1, stats/1, reasons/0]).
 -export([connection/4]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3]).
 -export_type([opts/0, stats/0]).
@@ -77,6 +77,17 @@ start_link(undefined, Opts) ->
     gen_statem:start_link(?MODULE, Opts, []);
 start_link(Name, Opts) ->
     gen_statem:start_link({local, Name}, ?MODULE, Opts, []).
+
+%% @doc A `toroco_live' port's listener: `Port' and `Loop' with the address
+%% and the bounds of the dashboard's configuration (`toroco_live:start/1''s
+%% `ip', `request_timeout', `idle_timeout', `max_connections',
+%% `max_per_peer', `min_age'), the same for every port.
+-spec start_link(atom(), map(), inet:port_number(), fun((term()) -> term())) ->
+          {ok, pid()} | {error, term()}.
+start_link(Name, Config, Port, Loop) ->
+    Bounds = maps:with([request_timeout, idle_timeout, max_connections, max_per_peer, min_age],
+                       Config),
+    start_link(Name, Bounds#{ip => maps:get(ip, Config, {127, 0, 0, 1}), port => Port, loop => Loop}).
 
 %% @doc Stops the listener and every connection it still has.
 -spec stop(pid() | atom()) -> ok.

@@ -157,13 +157,9 @@ start_link(Opts) ->
 -spec init(map()) -> {ok, #hub{}} | {stop, term()}.
 init(Opts) ->
     process_flag(trap_exit, true),
-    Ip = maps:get(ip, Opts, {127, 0, 0, 1}),
     ConnOpts = maps:with([max_message], Opts),
     Loop = fun(Req) -> toroco_live_rosbridge_conn:serve(Req, ConnOpts) end,
-    Bounds = maps:with([request_timeout, idle_timeout, max_connections, max_per_peer, min_age],
-                       Opts),
-    case toroco_live_listener:start_link(?LISTENER, Bounds#{ip => Ip, port => maps:get(rosbridge, Opts),
-                                                            loop => Loop}) of
+    case toroco_live_listener:start_link(?LISTENER, Opts, maps:get(rosbridge, Opts), Loop) of
         {ok, Listener} ->
             {ok, #hub{listener = Listener, port = toroco_live_listener:port(Listener)}};
         {error, Why} ->
