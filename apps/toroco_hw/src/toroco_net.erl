@@ -30,7 +30,7 @@
 %% Anything else (pids, funs, non-UTF-8 binaries) is not encodable.
 -module(toroco_net).
 
--export([option/3, options/2, allowed/2, udp_open/4, udp_rearm/1, udp_check/4,
+-export([option/3, options/2, names/2, allowed/2, udp_open/4, udp_rearm/1, udp_check/4,
          decode_event/2, encode_event/2]).
 -export_type([allow/0]).
 
@@ -104,6 +104,19 @@ all(F, L) ->
                 end, {ok, []}, L).
 
 %% @doc Whether a peer address may talk to the device.
+%% @doc A link's `inputs' or `outputs' option: a list of names (atoms),
+%% default `[]'.
+-spec names(inputs | outputs, map()) -> {ok, [atom()]} | {error, {bad_option, {atom(), term()}}}.
+names(Key, Opts) ->
+    case maps:get(Key, Opts, []) of
+        L when is_list(L) ->
+            case lists:all(fun is_atom/1, L) of
+                true -> {ok, L};
+                false -> {error, {bad_option, {Key, L}}}
+            end;
+        Other -> {error, {bad_option, {Key, Other}}}
+    end.
+
 -spec allowed(inet:ip_address(), allow()) -> boolean().
 allowed(_Ip, any) -> true;
 allowed(Ip, List) -> lists:member(Ip, List).

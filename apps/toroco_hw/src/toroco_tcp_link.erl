@@ -66,22 +66,13 @@ init(Name, Opts) ->
              {idle_timeout, {pos_integer, 30000}}, {max_per_peer, {pos_integer, 4}},
              {min_age, {non_neg_integer, 2000}}],
     case {[K || K <- maps:keys(Opts), not lists:member(K, Allowed)],
-          ports(inputs, Opts), ports(outputs, Opts), toroco_net:options(Specs, Opts)} of
+          toroco_net:names(inputs, Opts), toroco_net:names(outputs, Opts),
+          toroco_net:options(Specs, Opts)} of
         {[K | _], _, _, _} -> {error, {unknown_option, K}};
         {[], {error, _} = E, _, _} -> E;
         {[], _, {error, _} = E, _} -> E;
         {[], _, _, {error, _} = E} -> E;
         {[], {ok, _}, {ok, Outs}, {ok, S}} -> listen(Name, S#{outputs => Outs})
-    end.
-
-ports(Key, Opts) ->
-    case maps:get(Key, Opts, []) of
-        L when is_list(L) ->
-            case lists:all(fun is_atom/1, L) of
-                true -> {ok, L};
-                false -> {error, {bad_option, {Key, L}}}
-            end;
-        Other -> {error, {bad_option, {Key, Other}}}
     end.
 
 listen(Name, S = #{port := Port, ip := Ip, send_timeout := T, max_clients := Max,

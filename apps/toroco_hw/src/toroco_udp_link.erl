@@ -41,7 +41,8 @@ init(Name, Opts) ->
              {peers, {peers, []}}, {max_datagram, {pos_integer, 8192}},
              {recbuf, {pos_integer, 1048576}}],
     case {[K || K <- maps:keys(Opts), not lists:member(K, Allowed)],
-          ports(inputs, Opts), ports(outputs, Opts), toroco_net:options(Specs, Opts)} of
+          toroco_net:names(inputs, Opts), toroco_net:names(outputs, Opts),
+          toroco_net:options(Specs, Opts)} of
         {[K | _], _, _, _} -> {error, {unknown_option, K}};
         {[], {error, _} = E, _, _} -> E;
         {[], _, {error, _} = E, _} -> E;
@@ -59,16 +60,6 @@ init(Name, Opts) ->
                                    #{domain => [toroco, hw]}),
                     {error, Reason}
             end
-    end.
-
-ports(Key, Opts) ->
-    case maps:get(Key, Opts, []) of
-        L when is_list(L) ->
-            case lists:all(fun is_atom/1, L) of
-                true -> {ok, L};
-                false -> {error, {bad_option, {Key, L}}}
-            end;
-        Other -> {error, {bad_option, {Key, Other}}}
     end.
 
 -spec handle_input(atom(), term(), linked, map()) -> toroco_behavior:result().

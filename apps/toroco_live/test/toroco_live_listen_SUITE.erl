@@ -59,6 +59,8 @@ silent_websocket_closed(_Config) ->
             end,
     toroco_test_lib:wait_until(fun() -> Pongs() >= 3 end, 20 * Ping, three_pongs),
     ?assert(is_process_alive(Answerer)),
+    unlink(Answerer),
+    exit(Answerer, kill),
     ok.
 
 %% The opcodes of the frames a passive socket gets until it is closed
@@ -92,7 +94,7 @@ answer_pings(S, Buf, N) ->
                     after 0 -> ok
                     end,
                     answer_pings(S, Buf, N);
-                {error, Why} -> exit({closed, Why})
+                {error, _} -> ok                 % the dashboard stopped
             end
     end.
 

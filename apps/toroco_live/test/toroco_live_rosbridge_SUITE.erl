@@ -405,7 +405,9 @@ simulated_range_and_odometry() ->
     [{doc, "While the teleop robot's world runs, a subscription gets sensor_msgs/msg/Range "
       "from its range sensors and nav_msgs/msg/Odometry of its pose, every field there"}].
 simulated_range_and_odometry(Config) ->
-    run_world(Config, 6),
+    %% Long enough for a loaded machine to start roslib, subscribe and drive
+    %% before the world ends.
+    run_world(Config, 20),
     C = connect(Config, token_url),
     await_topic(C, <<"/odom">>),
     toroco_live_js:send(C, #{cmd => subscribe, topic => <<"/odom">>, type => <<"nav_msgs/msg/Odometry">>}),
@@ -434,7 +436,7 @@ drive_the_teleop_robot() ->
       "its world: forward moves it along +x, turning changes its heading, and it stops "
       "within 500 ms of the last command"}].
 drive_the_teleop_robot(Config) ->
-    run_world(Config, 12),
+    run_world(Config, 25),
     C = connect(Config, token_url),
     await_topic(C, <<"/odom">>),
     toroco_live_js:send(C, #{cmd => subscribe, topic => <<"/odom">>, type => <<"nav_msgs/msg/Odometry">>}),
@@ -535,7 +537,7 @@ wait_for(Fun, TimeoutMs) ->
 %% The run is over (its devices gone) before the next case.
 sim_done() ->
     receive {sim_done, R} -> {ok, _} = R, ok
-    after 30000 -> ct:fail(sim_not_done)
+    after 40000 -> ct:fail(sim_not_done)
     end.
 
 root() ->
