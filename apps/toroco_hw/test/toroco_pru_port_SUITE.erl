@@ -330,6 +330,7 @@ servo_command_while_connecting(Config) ->
     kill(Old),
     ok = wait_until(fun() -> awaiting_hello(S, Old) end, ?WAIT),
     #{os_pid := Sleeper} = toroco_pru_port:info(S),
+    ok = wait_until(fun() -> withholding(Config, Sleeper) end, ?WAIT),
     Self = self(),
     _ = spawn_link(fun() -> Self ! {neutral, toroco_pru_port:call(S, neutral, 60000)} end),
     Calls = [begin
@@ -423,6 +424,13 @@ hello_backoff(Config) ->
                    restarts := 7, backoff_ms := 400, failures := 6}, Info),
     %% six hello timeouts and the delays between them were waited
     ?assert(Elapsed >= 6 * 200 + 50 + 100 + 200 + 400 + 400),
+    %% the program now waiting has seen the flag: it is killed at its hello
+    %% timeout and the next one starts
+    ok = wait_until(fun() -> case toroco_pru_port:info(S) of
+                                 #{os_pid := P} when is_integer(P) -> withholding(Config, P);
+                                 _ -> false
+                             end
+                    end, ?WAIT),
     ok = file:delete(flag(Config)),
     receive
         {toroco_pru_port, {port_restarted, Why}} -> ?assertEqual({exit_status, 137}, Why)
@@ -577,10 +585,18 @@ raw_recv(P) ->
 withhold_exe(Config) ->
     Exe = filename:join(?config(root, Config), "withhold.sh"),
     ok = file:write_file(Exe, ["#!/bin/sh\n",
-                               "if [ -e '", flag(Config), "' ]; then exec sleep 30; fi\n",
+                               "if [ -e '", flag(Config), "' ]; then\n",
+                               "  : > '", flag(Config), ".withholding.'$$\n",
+                               "  exec sleep 30\n",
+                               "fi\n",
                                "exec '", ?config(exe, Config), "' \"$@\"\n"]),
     ok = file:change_mode(Exe, 8#755),
     Exe.
+
+%% Whether the program with OS pid `OsPid' is withholding its hello (has
+%% seen the flag): until then deleting the flag would let it start.
+withholding(Config, OsPid) ->
+    filelib:is_regular(flag(Config) ++ ".withholding." ++ integer_to_list(OsPid)).
 
 flag(Config) ->
     filename:join(?config(root, Config), "no_hello").
