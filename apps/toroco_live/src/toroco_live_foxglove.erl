@@ -244,18 +244,8 @@ deliver({Key, T, Json}, H = #hub{ids = Ids, subs = Subs}) ->
 %% A connection behind by more than ?CONN_QUEUE messages misses this one;
 %% it hears how many it missed once it has caught up.
 send_to(C, Msg, H = #hub{dropped = D}) ->
-    case erlang:process_info(C, message_queue_len) of
-        {message_queue_len, N} when N > ?CONN_QUEUE ->
-            H#hub{dropped = maps:update_with(C, fun(K) -> K + 1 end, 1, D)};
-        {message_queue_len, _} ->
-            _ = case D of
-                    #{C := Missed} -> C ! {fox, dropped, Missed};
-                    #{} -> ok
-                end,
-            C ! Msg,
-            H#hub{dropped = maps:remove(C, D)};
-        undefined -> H
-    end.
+    {_, D1} = toroco_live_ws_conn:offer(C, Msg, fun(N) -> {fox, dropped, N} end, ?CONN_QUEUE, D),
+    H#hub{dropped = D1}.
 
 refresh(H) ->
     refresh(H, false).

@@ -308,17 +308,10 @@ unadvertise_all(Conn, Topics, H = #hub{relayed = R}) ->
 %% A connection behind by more than ?CONN_QUEUE messages misses this one;
 %% it hears how many it missed once it has caught up.
 send_to(C, Msg, H = #hub{dropped = D}) ->
-    case erlang:process_info(C, message_queue_len) of
-        {message_queue_len, N} when N > ?CONN_QUEUE ->
-            bump(dropped, H#hub{dropped = maps:update_with(C, fun(K) -> K + 1 end, 1, D)});
-        {message_queue_len, _} ->
-            _ = case D of
-                    #{C := Missed} -> C ! {rosbridge, dropped, Missed};
-                    #{} -> ok
-                end,
-            C ! Msg,
-            bump(messages, H#hub{dropped = maps:remove(C, D)});
-        undefined -> H
+    case toroco_live_ws_conn:offer(C, Msg, fun(N) -> {rosbridge, dropped, N} end, ?CONN_QUEUE, D) of
+        {dropped, D1} -> bump(dropped, H#hub{dropped = D1});
+        {sent, D1} -> bump(messages, H#hub{dropped = D1});
+        {gone, _} -> H
     end.
 
 unsubscribe_all(Conn, Topics, H = #hub{subs = Subs}) ->

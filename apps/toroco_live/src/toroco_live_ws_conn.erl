@@ -24,7 +24,7 @@
 -module(toroco_live_ws_conn).
 -behaviour(gen_server).
 
--export([serve/3, send/2]).
+-export([serve/3, send/2, offer/5]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2, terminate/2]).
 
 -export_type([result/1, socket/0]).
@@ -96,6 +96,28 @@ send(Socket, Frame) ->
     case mochiweb_socket:send(Socket, Frame) of
         ok -> ok;
         {error, _} -> exit(normal)
+    end.
+
+%% @doc A hub's bounded send to one of its connections: `Msg' goes to
+%% `Conn' unless `Conn''s mailbox holds more than `Max' messages, in which
+%% case it is counted in `Dropped' (a count per connection); the next message
+%% that goes is preceded by `DroppedMsg(Count)', so the client hears how many
+%% it missed. `gone' when `Conn' is not alive.
+-spec offer(pid(), term(), fun((pos_integer()) -> term()), pos_integer(),
+            #{pid() => pos_integer()}) -> {sent | dropped | gone, #{pid() => pos_integer()}}.
+offer(Conn, Msg, DroppedMsg, Max, Dropped) ->
+    case erlang:process_info(Conn, message_queue_len) of
+        {message_queue_len, N} when N > Max ->
+            {dropped, maps:update_with(Conn, fun(K) -> K + 1 end, 1, Dropped)};
+        {message_queue_len, _} ->
+            _ = case Dropped of
+                    #{Conn := Missed} -> Conn ! DroppedMsg(Missed);
+                    #{} -> ok
+                end,
+            Conn ! Msg,
+            {sent, maps:remove(Conn, Dropped)};
+        undefined ->
+            {gone, Dropped}
     end.
 
 %%====================================================================
