@@ -110,45 +110,30 @@ vector3(X, Y, Z) -> #{x => float(X), y => float(Y), z => float(Z)}.
 %% Types
 %%====================================================================
 
-%% @doc The ROS 2 types this module makes and reads, each with its fields
-%% (in order) as `{Name, FieldType}': a primitive, `{array, Primitive, N}'
-%% or another of these types. {@link fields/1} gives one.
+%% @doc The ROS 2 types this module makes and reads (those of
+%% `toroco_live_ros_msgs', the one table of them), each with its fields (in
+%% order) as `{Name, FieldType}': a primitive, `{array, Primitive, N}' or
+%% another of these types. {@link fields/1} gives one.
 -spec types() -> [binary()].
 types() ->
-    [?TWIST, ?ODOMETRY, ?RANGE, ?STRING, <<"std_msgs/msg/Header">>,
-     <<"builtin_interfaces/msg/Time">>, <<"geometry_msgs/msg/Vector3">>,
-     <<"geometry_msgs/msg/Point">>, <<"geometry_msgs/msg/Quaternion">>,
-     <<"geometry_msgs/msg/Pose">>, <<"geometry_msgs/msg/PoseWithCovariance">>,
-     <<"geometry_msgs/msg/TwistWithCovariance">>].
+    toroco_live_ros_msgs:types().
 
 -type field_type() :: float64 | float32 | uint8 | int32 | uint32 | string
                     | {array, float64, pos_integer()} | binary().
 
-%% @doc The fields of a ROS 2 type, in the order of its definition.
+%% @doc The fields of a ROS 2 type, in the order of its definition (its
+%% constants, which only its definition carries, left out).
 -spec fields(binary()) -> [{atom(), field_type()}].
-fields(<<"geometry_msgs/msg/Twist">>) ->
-    [{linear, <<"geometry_msgs/msg/Vector3">>}, {angular, <<"geometry_msgs/msg/Vector3">>}];
-fields(<<"geometry_msgs/msg/Vector3">>) -> [{x, float64}, {y, float64}, {z, float64}];
-fields(<<"geometry_msgs/msg/Point">>) -> [{x, float64}, {y, float64}, {z, float64}];
-fields(<<"geometry_msgs/msg/Quaternion">>) ->
-    [{x, float64}, {y, float64}, {z, float64}, {w, float64}];
-fields(<<"geometry_msgs/msg/Pose">>) ->
-    [{position, <<"geometry_msgs/msg/Point">>}, {orientation, <<"geometry_msgs/msg/Quaternion">>}];
-fields(<<"geometry_msgs/msg/PoseWithCovariance">>) ->
-    [{pose, <<"geometry_msgs/msg/Pose">>}, {covariance, {array, float64, 36}}];
-fields(<<"geometry_msgs/msg/TwistWithCovariance">>) ->
-    [{twist, ?TWIST}, {covariance, {array, float64, 36}}];
-fields(<<"builtin_interfaces/msg/Time">>) -> [{sec, int32}, {nanosec, uint32}];
-fields(<<"std_msgs/msg/Header">>) ->
-    [{stamp, <<"builtin_interfaces/msg/Time">>}, {frame_id, string}];
-fields(<<"std_msgs/msg/String">>) -> [{data, string}];
-fields(<<"nav_msgs/msg/Odometry">>) ->
-    [{header, <<"std_msgs/msg/Header">>}, {child_frame_id, string},
-     {pose, <<"geometry_msgs/msg/PoseWithCovariance">>},
-     {twist, <<"geometry_msgs/msg/TwistWithCovariance">>}];
-fields(<<"sensor_msgs/msg/Range">>) ->
-    [{header, <<"std_msgs/msg/Header">>}, {radiation_type, uint8}, {field_of_view, float32},
-     {min_range, float32}, {max_range, float32}, {range, float32}, {variance, float32}].
+fields(Type) ->
+    {ok, Fields} = toroco_live_ros_msgs:fields(Type),
+    [{Name, field_type(FT)} || Field <- Fields, {Name, FT} <- [name_type(Field)]].
+
+name_type({const, _, _, _}) -> none;
+name_type({Name, FT}) -> {Name, FT};
+name_type({Name, FT, _Default}) -> {Name, FT}.
+
+field_type({msg, Type}) -> Type;
+field_type(FT) -> FT.
 
 %% @doc The ROS 2 message definition of a type with its dependencies, as
 %% ROS 2 tools concatenate them (rosbag2, rosapi's `typedefs_full_text'):

@@ -28,7 +28,7 @@
 %% {@link string_data/1} reads a `std_msgs/msg/String' back (replay).
 -module(toroco_live_ros_msgs).
 
--export([types/0, definition/1, cdr/2, string_data/1]).
+-export([types/0, fields/1, definition/1, cdr/2, string_data/1]).
 
 -export_type([type_name/0, msg/0]).
 
@@ -47,6 +47,8 @@
 %% The types
 %%====================================================================
 
+%% @doc The fields of a type in the order of its definition, with the
+%% defaults and constants its definition writes.
 -spec fields(type_name()) -> {ok, [field()]} | error.
 fields(<<"builtin_interfaces/msg/Time">>) ->
     {ok, [{sec, int32}, {nanosec, uint32}]};
