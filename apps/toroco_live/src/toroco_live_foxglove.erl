@@ -63,14 +63,11 @@
               wiring = #{keys => [], receivers => #{}} :: toroco_live_channels:wiring(),
               world = [] :: [toroco_live_channels:key()],
               scene = none :: toroco_live_channels:scene_sent(),
-              conns = #{} :: #{pid() => reference()},
-              subs = #{} :: #{pos_integer() => [pid()]},
-              dropped = #{} :: #{pid() => pos_integer()},
-              %% taken while clients are connected; when the runtime
-              %% restarts, the hub subscribes again
-              tap = toroco_live_tap:new(#{buffer => ?TAP_BUFFER, retry_ms => ?REFRESH_MS,
-                                           world => true, who => <<"Foxglove bridge">>})
-                  :: toroco_live_tap:tap()}).
+              %% subscribed to channel ids; the tap taken while clients
+              %% are connected, and again when the runtime restarts
+              clients = toroco_live_clients:new(#{buffer => ?TAP_BUFFER, retry_ms => ?REFRESH_MS,
+                                                  world => true, who => <<"Foxglove bridge">>})
+                  :: toroco_live_clients:clients()}).
 
 %%====================================================================
 %% API
@@ -149,19 +146,19 @@ init(Opts) ->
 -spec handle_call(term(), gen_server:from(), #hub{}) -> {reply, term(), #hub{}}.
 handle_call(port, _From, H) ->
     {reply, H#hub.port, H};
-handle_call({join, Conn}, _From, H0) ->
-    H = tap_on(H0),
-    H1 = (refresh(H, true))#hub{conns = (H#hub.conns)#{Conn => monitor(process, Conn)}},
+handle_call({join, Conn}, _From, H) ->
+    %% read before it joins: the reply carries every channel
+    H0 = refresh(H, true),
+    H1 = H0#hub{clients = toroco_live_clients:join(Conn, H0#hub.clients)},
     {reply, {ok, channels(H1, all_keys(H1)), toroco_live_channels:graph(H1#hub.wiring)}, H1};
 handle_call(_, _From, H) ->
     {reply, {error, unknown_call}, H}.
 
 -spec handle_cast(term(), #hub{}) -> {noreply, #hub{}}.
-handle_cast({subscribe, Conn, Ids}, H = #hub{subs = Subs}) ->
-    {noreply, H#hub{subs = lists:foldl(fun(Id, S) -> maps:update_with(Id, fun(L) -> lists:usort([Conn | L]) end, [Conn], S) end,
-                                       Subs, Ids)}};
-handle_cast({unsubscribe, Conn, Ids}, H) ->
-    {noreply, unsubscribe_all(Conn, Ids, H)};
+handle_cast({subscribe, Conn, Ids}, H = #hub{clients = Cl}) ->
+    {noreply, H#hub{clients = toroco_live_clients:subscribe(Conn, Ids, Cl)}};
+handle_cast({unsubscribe, Conn, Ids}, H = #hub{clients = Cl}) ->
+    {noreply, H#hub{clients = toroco_live_clients:unsubscribe(Conn, Ids, Cl)}};
 handle_cast(_, H) ->
     {noreply, H}.
 
@@ -177,43 +174,36 @@ handle_info({toroco_live_world, changed}, H) ->
 handle_info(refresh, H) ->
     erlang:send_after(?REFRESH_MS, self(), refresh),
     {noreply, refresh(H)};
-handle_info({'DOWN', _, process, Conn, _}, H = #hub{conns = Conns, subs = Subs})
-  when is_map_key(Conn, Conns) ->
-    H1 = unsubscribe_all(Conn, maps:keys(Subs),
-                         H#hub{conns = maps:remove(Conn, Conns),
-                               dropped = maps:remove(Conn, H#hub.dropped)}),
-    {noreply, tap_off(H1)};
 handle_info({'EXIT', L, Why}, H = #hub{listener = L}) ->
     {stop, {listener, Why}, H};
-handle_info(Info, H = #hub{tap = Tap, conns = Conns}) ->
-    case toroco_live_tap:handle(Info, Tap) of
-        {event, Event} -> {noreply, event(Event, H)};
-        {down, Tap1} -> {noreply, H#hub{tap = Tap1}};
-        {retry, Tap1} when map_size(Conns) > 0 -> {noreply, refresh(tap_on(H#hub{tap = Tap1}))};
-        {retry, Tap1} -> {noreply, H#hub{tap = Tap1}};
-        _ -> {noreply, H}
+handle_info(Info, H = #hub{clients = Cl}) ->
+    case client_down(Info, Cl) of
+        {ok, Cl1} -> {noreply, H#hub{clients = Cl1}};
+        not_client ->
+            case toroco_live_clients:handle(Info, Cl) of
+                {event, Event} -> {noreply, event(Event, H)};
+                {retapped, Cl1} -> {noreply, refresh(H#hub{clients = Cl1})};
+                {ok, Cl1} -> {noreply, H#hub{clients = Cl1}};
+                ignore -> {noreply, H}
+            end
     end.
 
 -spec terminate(term(), #hub{}) -> ok.
-terminate(_, #hub{listener = L, tap = Tap}) ->
-    _ = toroco_live_tap:off(Tap),
+terminate(_, #hub{listener = L, clients = Cl}) ->
+    ok = toroco_live_clients:stop(Cl),
     toroco_live_listener:stop(L).
 
 %%====================================================================
 %% Inside
 %%====================================================================
 
-tap_on(H = #hub{tap = Tap}) ->
-    H#hub{tap = toroco_live_tap:ensure_on(Tap)}.
-
-tap_off(H = #hub{tap = Tap, conns = Conns}) when map_size(Conns) =:= 0 ->
-    H#hub{tap = toroco_live_tap:off(Tap), subs = #{}};
-tap_off(H) -> H.
+client_down({'DOWN', _, process, Conn, _}, Cl) -> toroco_live_clients:down(Conn, Cl);
+client_down(_, _) -> not_client.
 
 event(Event = {lifecycle, _, _, _}, H) ->
     send_event(Event, refresh(H));
-event({dropped, N}, H = #hub{conns = Conns}) ->
-    _ = [C ! {fox, dropped, N} || C <- maps:keys(Conns)],
+event({dropped, N}, H) ->
+    ok = toroco_live_clients:broadcast({fox, dropped, N}, H#hub.clients),
     H;
 event(Event, H) ->
     send_event(Event, H).
@@ -227,33 +217,37 @@ send_event(Event, H) ->
                      true -> H;
                      false -> refresh(H)
                  end,
-            case maps:get(maps:get(Key, H1#hub.ids, none), H1#hub.subs, []) of
-                [] -> H1;
-                _ -> deliver(toroco_live_channels:of_event(Event), H1)
+            case toroco_live_clients:subscribed(maps:get(Key, H1#hub.ids, none), H1#hub.clients) of
+                false -> H1;
+                true -> deliver(toroco_live_channels:of_event(Event), H1)
             end
     end.
 
-deliver({Key, T, Json}, H = #hub{ids = Ids, subs = Subs}) ->
+deliver({Key, T, Json}, H = #hub{ids = Ids, clients = Cl}) ->
     case Ids of
         #{Key := Id} ->
             lists:foldl(fun(C, Acc) -> send_to(C, {fox, message, Id, T, Json}, Acc) end,
-                        H, maps:get(Id, Subs, []));
+                        H, toroco_live_clients:subscribers(Id, Cl));
         #{} -> H
     end.
 
 %% A connection behind by more than ?CONN_QUEUE messages misses this one;
 %% it hears how many it missed once it has caught up.
-send_to(C, Msg, H = #hub{dropped = D}) ->
-    {_, D1} = toroco_live_ws_conn:offer(C, Msg, fun(N) -> {fox, dropped, N} end, ?CONN_QUEUE, D),
-    H#hub{dropped = D1}.
+send_to(C, Msg, H = #hub{clients = Cl}) ->
+    {_, Cl1} = toroco_live_clients:offer(C, Msg, fun(N) -> {fox, dropped, N} end, ?CONN_QUEUE, Cl),
+    H#hub{clients = Cl1}.
 
 refresh(H) ->
     refresh(H, false).
 
 %% Nobody to tell: the wiring is read when the next client joins.
-refresh(H = #hub{conns = Conns}, false) when map_size(Conns) =:= 0 ->
-    H;
-refresh(H = #hub{wiring = Old, conns = Conns}, _) ->
+refresh(H = #hub{wiring = Old, clients = Cl}, Joining) ->
+    case toroco_live_clients:pids(Cl) of
+        [] when not Joining -> H;
+        Conns -> refresh(H, Old, Conns)
+    end.
+
+refresh(H, Old, Conns) ->
     New = try toroco_live_channels:from_wiring()
           catch _:_ -> Old
           end,
@@ -263,13 +257,13 @@ refresh(H = #hub{wiring = Old, conns = Conns}, _) ->
     Added = NewKeys -- OldKeys,
     H1 = advertise(H#hub{wiring = New}, Added),
     GoneIds = [maps:get(K, H1#hub.ids) || K <- Gone],
-    _ = [C ! {fox, unadvertise, GoneIds} || GoneIds =/= [], C <- maps:keys(Conns)],
+    _ = [C ! {fox, unadvertise, GoneIds} || GoneIds =/= [], C <- Conns],
     New =:= Old orelse
-        [C ! {fox, graph, toroco_live_channels:graph(New)} || C <- maps:keys(Conns)],
-    H1#hub{subs = maps:without(GoneIds, H1#hub.subs)}.
+        [C ! {fox, graph, toroco_live_channels:graph(New)} || C <- Conns],
+    H1#hub{clients = toroco_live_clients:forget(GoneIds, H1#hub.clients)}.
 
 advertise(H, []) -> H;
-advertise(H0 = #hub{conns = Conns}, Keys) ->
+advertise(H0, Keys) ->
     H = lists:foldl(fun(K, Acc = #hub{ids = Ids, next_id = N}) ->
                             case Ids of
                                 #{K := _} -> Acc;
@@ -277,7 +271,7 @@ advertise(H0 = #hub{conns = Conns}, Keys) ->
                             end
                     end, H0, Keys),
     Channels = channels(H, Keys),
-    _ = [C ! {fox, advertise, Channels} || C <- maps:keys(Conns)],
+    ok = toroco_live_clients:broadcast({fox, advertise, Channels}, H#hub.clients),
     H.
 
 all_keys(#hub{wiring = #{keys := Keys}, world = World}) -> Keys ++ World.
@@ -288,12 +282,3 @@ channels(#hub{ids = Ids}, Keys) ->
          #{id => maps:get(K, Ids), key => K, topic => toroco_live_channels:topic(K),
            schema_name => Name, schema => Schema}
      end || K <- Keys, maps:is_key(K, Ids)].
-
-unsubscribe_all(Conn, Ids, H = #hub{subs = Subs}) ->
-    Subs1 = lists:foldl(fun(Id, S) ->
-                                case maps:get(Id, S, []) -- [Conn] of
-                                    [] -> maps:remove(Id, S);
-                                    L -> S#{Id => L}
-                                end
-                        end, Subs, Ids),
-    H#hub{subs = Subs1}.

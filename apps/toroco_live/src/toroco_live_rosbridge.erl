@@ -54,15 +54,14 @@
 
 -record(hub, {listener :: pid(),
               port :: inet:port_number(),
-              conns = #{} :: #{pid() => reference()},
-              subs = #{} :: #{binary() => [pid()]},
-              dropped = #{} :: #{pid() => pos_integer()},
               topics = {[], -1} :: {[toroco_live_ros:topic()], integer()},
               %% topics clients advertised: type and advertisers
               relayed = #{} :: #{binary() => {binary(), [pid()]}},
-              tap = toroco_live_tap:new(#{kinds => [emit, lifecycle], buffer => ?TAP_BUFFER,
-                                           retry_ms => ?RETAP_MS, world => true,
-                                           who => <<"rosbridge">>}) :: toroco_live_tap:tap(),
+              %% subscribed to topic names; the tap taken while clients
+              %% are connected
+              clients = toroco_live_clients:new(#{kinds => [emit, lifecycle], buffer => ?TAP_BUFFER,
+                                                  retry_ms => ?RETAP_MS, world => true,
+                                                  who => <<"rosbridge">>}) :: toroco_live_clients:clients(),
               counters = #{} :: #{atom() => non_neg_integer()}}).
 
 %%====================================================================
@@ -169,11 +168,10 @@ init(Opts) ->
 -spec handle_call(term(), gen_server:from(), #hub{}) -> {reply, term(), #hub{}}.
 handle_call(port, _From, H) ->
     {reply, H#hub.port, H};
-handle_call(stats, _From, H = #hub{conns = Conns, counters = Cs}) ->
-    {reply, Cs#{clients => map_size(Conns)}, H};
-handle_call({join, Conn}, _From, H0) ->
-    H = tap_on(H0#hub{conns = (H0#hub.conns)#{Conn => monitor(process, Conn)}}),
-    {reply, ok, bump(connections, H)};
+handle_call(stats, _From, H = #hub{clients = Cl, counters = Cs}) ->
+    {reply, Cs#{clients => toroco_live_clients:size(Cl)}, H};
+handle_call({join, Conn}, _From, H) ->
+    {reply, ok, bump(connections, H#hub{clients = toroco_live_clients:join(Conn, H#hub.clients)})};
 handle_call(topics, _From, H0) ->
     H = fresh_topics(H0),
     {Topics, _} = H#hub.topics,
@@ -181,24 +179,31 @@ handle_call(topics, _From, H0) ->
     Relayed = [#{topic => T, type => Ty, dir => out}
                || {T, {Ty, _}} <- lists:sort(maps:to_list(H#hub.relayed)), not lists:member(T, Robot)],
     {reply, Topics ++ Relayed, H};
-handle_call({advertise, Conn, Topic, Type}, _From, H0 = #hub{relayed = R}) when is_map_key(Conn, H0#hub.conns) ->
-    H = fresh_topics(H0),
-    {Topics, _} = H#hub.topics,
-    case {lists:any(fun(#{topic := T}) -> T =:= Topic end, Topics), R} of
-        {true, _} -> {reply, {error, robot_topic}, H};
-        {false, #{Topic := {Type, Conns}}} ->
-            {reply, ok, H#hub{relayed = R#{Topic := {Type, lists:usort([Conn | Conns])}}}};
-        {false, #{Topic := {Other, _}}} -> {reply, {error, {type, Other}}, H};
-        {false, #{}} -> {reply, ok, H#hub{relayed = R#{Topic => {Type, [Conn]}}}}
+handle_call({advertise, Conn, Topic, Type}, _From, H0) ->
+    case toroco_live_clients:member(Conn, H0#hub.clients) of
+        true ->
+            H = #hub{relayed = R, topics = {Topics, _}} = fresh_topics(H0),
+            case {lists:any(fun(#{topic := T}) -> T =:= Topic end, Topics), R} of
+                {true, _} -> {reply, {error, robot_topic}, H};
+                {false, #{Topic := {Type, Conns}}} ->
+                    {reply, ok, H#hub{relayed = R#{Topic := {Type, lists:usort([Conn | Conns])}}}};
+                {false, #{Topic := {Other, _}}} -> {reply, {error, {type, Other}}, H};
+                {false, #{}} -> {reply, ok, H#hub{relayed = R#{Topic => {Type, [Conn]}}}}
+            end;
+        false ->
+            {reply, {error, unknown_call}, H0}
     end;
 handle_call(_, _From, H) ->
     {reply, {error, unknown_call}, H}.
 
 -spec handle_cast(term(), #hub{}) -> {noreply, #hub{}}.
-handle_cast({subscribe, Conn, Topic}, H = #hub{subs = Subs, conns = Conns}) when is_map_key(Conn, Conns) ->
-    {noreply, H#hub{subs = maps:update_with(Topic, fun(L) -> lists:usort([Conn | L]) end, [Conn], Subs)}};
-handle_cast({unsubscribe, Conn, Topic}, H) ->
-    {noreply, unsubscribe_all(Conn, [Topic], H)};
+handle_cast({subscribe, Conn, Topic}, H = #hub{clients = Cl}) ->
+    case toroco_live_clients:member(Conn, Cl) of
+        true -> {noreply, H#hub{clients = toroco_live_clients:subscribe(Conn, [Topic], Cl)}};
+        false -> {noreply, H}
+    end;
+handle_cast({unsubscribe, Conn, Topic}, H = #hub{clients = Cl}) ->
+    {noreply, H#hub{clients = toroco_live_clients:unsubscribe(Conn, [Topic], Cl)}};
 handle_cast({count, Counter}, H) when is_atom(Counter) ->
     {noreply, bump(Counter, H)};
 handle_cast({unadvertise, Conn, Topic}, H) ->
@@ -209,33 +214,30 @@ handle_cast(_, H) ->
     {noreply, H}.
 
 -spec handle_info(term(), #hub{}) -> {noreply, #hub{}} | {stop, term(), #hub{}}.
-handle_info({toroco_live_world, changed}, H = #hub{subs = Subs}) ->
+handle_info({toroco_live_world, changed}, H) ->
     %% Reading re-arms the notification: read even with nobody on /odom.
     Snapshot = toroco_live_world:latest(),
-    case maps:is_key(<<"/odom">>, Subs) of
+    case toroco_live_clients:subscribed(<<"/odom">>, H#hub.clients) of
         true -> {noreply, lists:foldl(fun deliver/2, H, toroco_live_ros:of_world(Snapshot))};
         false -> {noreply, H}
     end;
-handle_info({'DOWN', _, process, Conn, _}, H = #hub{conns = Conns, subs = Subs}) ->
-    H1 = unsubscribe_all(Conn, maps:keys(Subs),
-                         unadvertise_all(Conn, maps:keys(H#hub.relayed),
-                                         H#hub{conns = maps:remove(Conn, Conns),
-                                               dropped = maps:remove(Conn, H#hub.dropped)})),
-    {noreply, tap_off(H1)};
 handle_info({'EXIT', L, Why}, H = #hub{listener = L}) ->
     {stop, {listener, Why}, H};
-handle_info(Info, H = #hub{tap = Tap, conns = Conns}) ->
-    case toroco_live_tap:handle(Info, Tap) of
-        {event, Event} -> {noreply, event(Event, H)};
-        {down, Tap1} -> {noreply, H#hub{tap = Tap1}};
-        {retry, Tap1} when map_size(Conns) > 0 -> {noreply, tap_on(H#hub{tap = Tap1})};
-        {retry, Tap1} -> {noreply, H#hub{tap = Tap1}};
-        _ -> {noreply, H}
+handle_info(Info, H = #hub{clients = Cl}) ->
+    case client_down(Info, Cl) of
+        {ok, Conn, Cl1} ->
+            {noreply, unadvertise_all(Conn, maps:keys(H#hub.relayed), H#hub{clients = Cl1})};
+        not_client ->
+            case toroco_live_clients:handle(Info, Cl) of
+                {event, Event} -> {noreply, event(Event, H)};
+                {_, Cl1} -> {noreply, H#hub{clients = Cl1}};
+                ignore -> {noreply, H}
+            end
     end.
 
 -spec terminate(term(), #hub{}) -> ok.
-terminate(_, #hub{listener = L, tap = Tap}) ->
-    _ = toroco_live_tap:off(Tap),
+terminate(_, #hub{listener = L, clients = Cl}) ->
+    ok = toroco_live_clients:stop(Cl),
     toroco_live_listener:stop(L).
 
 %%====================================================================
@@ -259,38 +261,41 @@ fresh_topics(H = #hub{topics = {_, At}}) ->
             H#hub{topics = {Topics, Now}}
     end.
 
-tap_on(H = #hub{tap = Tap}) ->
-    H#hub{tap = toroco_live_tap:ensure_on(Tap)}.
-
-tap_off(H = #hub{tap = Tap, conns = Conns}) when map_size(Conns) =:= 0 ->
-    H#hub{tap = toroco_live_tap:off(Tap), subs = #{}};
-tap_off(H) -> H.
+client_down({'DOWN', _, process, Conn, _}, Cl) ->
+    case toroco_live_clients:down(Conn, Cl) of
+        {ok, Cl1} -> {ok, Conn, Cl1};
+        not_client -> not_client
+    end;
+client_down(_, _) ->
+    not_client.
 
 event({lifecycle, _, _, _}, H = #hub{topics = {Topics, _}}) ->
     %% The wiring may have changed: read the topics again when next asked.
     H#hub{topics = {Topics, -1}};
-event({dropped, N}, H = #hub{conns = Conns}) ->
-    _ = [C ! {rosbridge, dropped, N} || C <- maps:keys(Conns)],
+event({dropped, N}, H) ->
+    ok = toroco_live_clients:broadcast({rosbridge, dropped, N}, H#hub.clients),
     bump(tap_dropped, N, H);
-event(Event, H = #hub{subs = Subs}) ->
+event(Event, H) ->
     case toroco_live_ros:event_topic(Event) of
         none -> H;
-        Topic when is_map_key(Topic, Subs) ->
-            lists:foldl(fun deliver/2, H, toroco_live_ros:of_event(Event));
-        _ -> H
+        Topic ->
+            case toroco_live_clients:subscribed(Topic, H#hub.clients) of
+                true -> lists:foldl(fun deliver/2, H, toroco_live_ros:of_event(Event));
+                false -> H
+            end
     end.
 
-deliver({Topic, Type, Msg}, H = #hub{subs = Subs}) ->
-    case maps:get(Topic, Subs, []) of
-        [] -> H;
-        _ -> deliver_msg(Topic, Type, Msg, H)
+deliver({Topic, Type, Msg}, H) ->
+    case toroco_live_clients:subscribed(Topic, H#hub.clients) of
+        false -> H;
+        true -> deliver_msg(Topic, Type, Msg, H)
     end.
 
 %% Encoded once for every subscriber of the topic.
-deliver_msg(Topic, Type, Msg, H = #hub{subs = Subs}) ->
+deliver_msg(Topic, Type, Msg, H) ->
     Json = iolist_to_binary(jiffy:encode(Msg)),
     lists:foldl(fun(C, Acc) -> send_to(C, {rosbridge, message, Topic, Type, Json, Msg}, Acc) end,
-                H, maps:get(Topic, Subs, [])).
+                H, toroco_live_clients:subscribers(Topic, H#hub.clients)).
 
 unadvertise_all(Conn, Topics, H = #hub{relayed = R}) ->
     R1 = lists:foldl(fun(T, Acc) ->
@@ -307,18 +312,9 @@ unadvertise_all(Conn, Topics, H = #hub{relayed = R}) ->
 
 %% A connection behind by more than ?CONN_QUEUE messages misses this one;
 %% it hears how many it missed once it has caught up.
-send_to(C, Msg, H = #hub{dropped = D}) ->
-    case toroco_live_ws_conn:offer(C, Msg, fun(N) -> {rosbridge, dropped, N} end, ?CONN_QUEUE, D) of
-        {dropped, D1} -> bump(dropped, H#hub{dropped = D1});
-        {sent, D1} -> bump(messages, H#hub{dropped = D1});
+send_to(C, Msg, H) ->
+    case toroco_live_clients:offer(C, Msg, fun(N) -> {rosbridge, dropped, N} end, ?CONN_QUEUE, H#hub.clients) of
+        {dropped, Cl} -> bump(dropped, H#hub{clients = Cl});
+        {sent, Cl} -> bump(messages, H#hub{clients = Cl});
         {gone, _} -> H
     end.
-
-unsubscribe_all(Conn, Topics, H = #hub{subs = Subs}) ->
-    Subs1 = lists:foldl(fun(T, S) ->
-                                case maps:get(T, S, []) -- [Conn] of
-                                    [] -> maps:remove(T, S);
-                                    L -> S#{T => L}
-                                end
-                        end, Subs, Topics),
-    H#hub{subs = Subs1}.
