@@ -14,11 +14,10 @@
 //   {"cmd":"raw_subscribe_all"}       subscribes to every advertised channel
 //   events raw_open, raw_text, raw_binary {bytes}, raw_close {code}
 "use strict";
-const readline = require("readline");
 const WebSocket = require("ws");
 const { FoxgloveClient } = require("@foxglove/ws-protocol");
+const { out, commands, rawSocket } = require("./driver");
 
-const out = (ev) => process.stdout.write(JSON.stringify(ev) + "\n");
 let client = null;
 const channels = new Map();           // topic -> channel
 const subs = new Map();               // subId -> topic
@@ -52,62 +51,51 @@ function connect(url) {
 }
 
 function rawConnect(url, read) {
-  raw = new WebSocket(url, ["foxglove.websocket.v1"]);
-  raw.on("open", () => { out({ ev: "raw_open" }); if (!read) raw._socket.pause(); });
-  raw.on("message", (data, isBinary) => {
+  raw = rawSocket(WebSocket, url, ["foxglove.websocket.v1"], read, (data, isBinary) => {
     if (isBinary) { out({ ev: "raw_binary", bytes: data.length }); return; }
     const msg = JSON.parse(data.toString());
     if (msg.op === "advertise") rawChannels.push(...msg.channels);
     out({ ev: "raw_text", msg: msg.op === "advertise" ? { op: "advertise", count: msg.channels.length } : msg });
   });
-  raw.on("close", (code) => out({ ev: "raw_close", code }));
-  raw.on("error", (e) => out({ ev: "raw_error", error: String(e && e.message || e) }));
 }
 
-const rl = readline.createInterface({ input: process.stdin });
-rl.on("line", (line) => {
-  let c;
-  try { c = JSON.parse(line); } catch { out({ ev: "bad_command", line }); return; }
-  try {
-    switch (c.cmd) {
-      case "connect": connect(c.url); break;
-      case "subscribe": {
-        const ch = channels.get(c.topic);
-        if (!ch) { out({ ev: "no_channel", topic: c.topic }); break; }
-        const id = client.subscribe(ch.id);
-        subs.set(id, c.topic);
-        out({ ev: "subscribed", topic: c.topic, subId: id, channelId: ch.id });
-        break;
-      }
-      case "unsubscribe":
-        for (const [id, t] of subs) if (t === c.topic) { client.unsubscribe(id); subs.delete(id); }
-        out({ ev: "unsubscribed", topic: c.topic });
-        break;
-      case "subscribeGraph": client.subscribeConnectionGraph(); break;
-      case "advertise": {
-        const id = client.advertise({ topic: c.topic, encoding: "json", schemaName: "toroco.Publish" });
-        published.set(c.topic, id);
-        out({ ev: "advertised", topic: c.topic, id });
-        break;
-      }
-      case "publish":
-        client.sendMessage(published.get(c.topic), new TextEncoder().encode(JSON.stringify(c.message)));
-        out({ ev: "published", topic: c.topic });
-        break;
-      case "close": client.close(); break;
-      case "raw_connect": rawConnect(c.url, c.read !== false); break;
-      case "raw_text": raw.send(c.text); break;
-      case "raw_hex": raw.send(Buffer.from(c.hex, "hex"), { binary: true }); break;
-      case "raw_subscribe_all":
-        raw.send(JSON.stringify({ op: "subscribe",
-          subscriptions: rawChannels.map((ch, i) => ({ id: i, channelId: ch.id })) }));
-        out({ ev: "raw_subscribed", count: rawChannels.length });
-        break;
-      case "exit": process.exit(0);
-      default: out({ ev: "bad_command", line });
+commands((c) => {
+  switch (c.cmd) {
+    case "connect": connect(c.url); break;
+    case "subscribe": {
+      const ch = channels.get(c.topic);
+      if (!ch) { out({ ev: "no_channel", topic: c.topic }); break; }
+      const id = client.subscribe(ch.id);
+      subs.set(id, c.topic);
+      out({ ev: "subscribed", topic: c.topic, subId: id, channelId: ch.id });
+      break;
     }
-  } catch (e) {
-    out({ ev: "command_failed", cmd: c.cmd, error: String(e && e.message || e) });
+    case "unsubscribe":
+      for (const [id, t] of subs) if (t === c.topic) { client.unsubscribe(id); subs.delete(id); }
+      out({ ev: "unsubscribed", topic: c.topic });
+      break;
+    case "subscribeGraph": client.subscribeConnectionGraph(); break;
+    case "advertise": {
+      const id = client.advertise({ topic: c.topic, encoding: "json", schemaName: "toroco.Publish" });
+      published.set(c.topic, id);
+      out({ ev: "advertised", topic: c.topic, id });
+      break;
+    }
+    case "publish":
+      client.sendMessage(published.get(c.topic), new TextEncoder().encode(JSON.stringify(c.message)));
+      out({ ev: "published", topic: c.topic });
+      break;
+    case "close": client.close(); break;
+    case "raw_connect": rawConnect(c.url, c.read !== false); break;
+    case "raw_text": raw.send(c.text); break;
+    case "raw_hex": raw.send(Buffer.from(c.hex, "hex"), { binary: true }); break;
+    case "raw_subscribe_all":
+      raw.send(JSON.stringify({ op: "subscribe",
+        subscriptions: rawChannels.map((ch, i) => ({ id: i, channelId: ch.id })) }));
+      out({ ev: "raw_subscribed", count: rawChannels.length });
+      break;
+    case "exit": process.exit(0);
+    default: return false;
   }
+  return true;
 });
-rl.on("close", () => process.exit(0));

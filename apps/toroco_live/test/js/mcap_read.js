@@ -4,52 +4,34 @@
 //  "first":{topic: [first 50 messages]},"last":{topic: [last 50]}}
 // or {"ok":false,"error":"..."}. Message CRCs are checked as chunks are read.
 "use strict";
-const fs = require("fs/promises");
-const { McapIndexedReader } = require("@mcap/core");
+const { withMcap } = require("./mcap_file");
 
-async function main(path) {
-  const handle = await fs.open(path, "r");
-  const readable = {
-    size: async () => BigInt((await handle.stat()).size),
-    read: async (offset, length) => {
-      const buf = Buffer.alloc(Number(length));
-      await handle.read(buf, 0, Number(length), Number(offset));
-      return new Uint8Array(buf.buffer, buf.byteOffset, buf.byteLength);
-    },
-  };
-  try {
-    const reader = await McapIndexedReader.Initialize({ readable });
-    const channels = [...reader.channelsById.values()].map((c) => ({
-      id: c.id, topic: c.topic, encoding: c.messageEncoding,
-      schema: reader.schemasById.get(c.schemaId)?.name,
-    }));
-    const schemas = [...reader.schemasById.values()].map((s) => ({
-      id: s.id, name: s.name, encoding: s.encoding,
-      valid: (() => { try { JSON.parse(new TextDecoder().decode(s.data)); return true; } catch { return false; } })(),
-    }));
-    const perTopic = {};
-    let messages = 0, lastTime = 0n, ordered = true;
-    const first = {}, last = {};
-    for await (const m of reader.readMessages()) {
-      const topic = reader.channelsById.get(m.channelId).topic;
-      perTopic[topic] = (perTopic[topic] ?? 0) + 1;
-      if (m.logTime < lastTime) ordered = false;
-      lastTime = m.logTime;
-      const body = JSON.parse(new TextDecoder().decode(m.data));
-      (first[topic] ??= []).length < 50 && first[topic].push(body);
-      (last[topic] ??= []).push(body);
-      last[topic].length > 50 && last[topic].shift();
-      messages++;
-    }
-    console.log(JSON.stringify({
-      ok: true, header: reader.header, channels, schemas, ordered,
-      statistics: Number(reader.statistics?.messageCount ?? -1),
-      chunks: reader.chunkIndexes.length, messages, perTopic, first, last,
-    }));
-  } catch (e) {
-    console.log(JSON.stringify({ ok: false, error: String(e && e.message || e) }));
-  } finally {
-    await handle.close();
+withMcap(process.argv[2], async (reader) => {
+  const channels = [...reader.channelsById.values()].map((c) => ({
+    id: c.id, topic: c.topic, encoding: c.messageEncoding,
+    schema: reader.schemasById.get(c.schemaId)?.name,
+  }));
+  const schemas = [...reader.schemasById.values()].map((s) => ({
+    id: s.id, name: s.name, encoding: s.encoding,
+    valid: (() => { try { JSON.parse(new TextDecoder().decode(s.data)); return true; } catch { return false; } })(),
+  }));
+  const perTopic = {};
+  let messages = 0, lastTime = 0n, ordered = true;
+  const first = {}, last = {};
+  for await (const m of reader.readMessages()) {
+    const topic = reader.channelsById.get(m.channelId).topic;
+    perTopic[topic] = (perTopic[topic] ?? 0) + 1;
+    if (m.logTime < lastTime) ordered = false;
+    lastTime = m.logTime;
+    const body = JSON.parse(new TextDecoder().decode(m.data));
+    (first[topic] ??= []).length < 50 && first[topic].push(body);
+    (last[topic] ??= []).push(body);
+    last[topic].length > 50 && last[topic].shift();
+    messages++;
   }
-}
-main(process.argv[2]);
+  return {
+    header: reader.header, channels, schemas, ordered,
+    statistics: Number(reader.statistics?.messageCount ?? -1),
+    chunks: reader.chunkIndexes.length, messages, perTopic, first, last,
+  };
+});

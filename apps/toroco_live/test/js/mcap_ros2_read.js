@@ -6,51 +6,35 @@
 //  "statistics":N,"messages":N,"perTopic":{topic:N},
 //  "decoded":{topic:[{"t":logTimeNs,"msg":{...}}]}} or {"ok":false,"error"}.
 "use strict";
-const fs = require("fs/promises");
-const { McapIndexedReader } = require("@mcap/core");
 const { parse } = require("@foxglove/rosmsg");
 const { MessageReader } = require("@foxglove/rosmsg2-serialization");
+const { withMcap } = require("./mcap_file");
 
-async function main(path) {
-  const handle = await fs.open(path, "r");
-  const readable = {
-    size: async () => BigInt((await handle.stat()).size),
-    read: async (offset, length) => {
-      const buf = Buffer.alloc(Number(length));
-      await handle.read(buf, 0, Number(length), Number(offset));
-      return new Uint8Array(buf.buffer, buf.byteOffset, buf.byteLength);
-    },
-  };
-  try {
-    const reader = await McapIndexedReader.Initialize({ readable });
-    const readers = new Map();
-    for (const s of reader.schemasById.values()) {
-      if (s.encoding !== "ros2msg") throw new Error(`schema ${s.name}: encoding ${s.encoding}`);
-      readers.set(s.id, new MessageReader(parse(new TextDecoder().decode(s.data), { ros2: true })));
-    }
-    const channels = [...reader.channelsById.values()].map((c) => ({
-      topic: c.topic, encoding: c.messageEncoding,
-      schema: reader.schemasById.get(c.schemaId)?.name,
-      schemaEncoding: reader.schemasById.get(c.schemaId)?.encoding,
-    }));
-    const perTopic = {}, decoded = {};
-    let messages = 0;
-    for await (const m of reader.readMessages()) {
-      const c = reader.channelsById.get(m.channelId);
-      if (c.messageEncoding !== "cdr") throw new Error(`${c.topic}: encoding ${c.messageEncoding}`);
-      const msg = readers.get(c.schemaId).readMessage(m.data);
-      perTopic[c.topic] = (perTopic[c.topic] ?? 0) + 1;
-      (decoded[c.topic] ??= []).push({ t: m.logTime.toString(), msg });
-      messages++;
-    }
-    console.log(JSON.stringify({
-      ok: true, profile: reader.header.profile, channels,
-      statistics: Number(reader.statistics?.messageCount ?? -1), messages, perTopic, decoded,
-    }, (k, v) => typeof v === "bigint" ? Number(v) : ArrayBuffer.isView(v) ? Array.from(v) : v));
-  } catch (e) {
-    console.log(JSON.stringify({ ok: false, error: String((e && e.message) || e) }));
-  } finally {
-    await handle.close();
+const plain = (k, v) => typeof v === "bigint" ? Number(v) : ArrayBuffer.isView(v) ? Array.from(v) : v;
+
+withMcap(process.argv[2], async (reader) => {
+  const readers = new Map();
+  for (const s of reader.schemasById.values()) {
+    if (s.encoding !== "ros2msg") throw new Error(`schema ${s.name}: encoding ${s.encoding}`);
+    readers.set(s.id, new MessageReader(parse(new TextDecoder().decode(s.data), { ros2: true })));
   }
-}
-main(process.argv[2]);
+  const channels = [...reader.channelsById.values()].map((c) => ({
+    topic: c.topic, encoding: c.messageEncoding,
+    schema: reader.schemasById.get(c.schemaId)?.name,
+    schemaEncoding: reader.schemasById.get(c.schemaId)?.encoding,
+  }));
+  const perTopic = {}, decoded = {};
+  let messages = 0;
+  for await (const m of reader.readMessages()) {
+    const c = reader.channelsById.get(m.channelId);
+    if (c.messageEncoding !== "cdr") throw new Error(`${c.topic}: encoding ${c.messageEncoding}`);
+    const msg = readers.get(c.schemaId).readMessage(m.data);
+    perTopic[c.topic] = (perTopic[c.topic] ?? 0) + 1;
+    (decoded[c.topic] ??= []).push({ t: m.logTime.toString(), msg });
+    messages++;
+  }
+  return {
+    profile: reader.header.profile, channels,
+    statistics: Number(reader.statistics?.messageCount ?? -1), messages, perTopic, decoded,
+  };
+}, plain);
