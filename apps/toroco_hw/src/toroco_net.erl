@@ -30,8 +30,8 @@
 %% Anything else (pids, funs, non-UTF-8 binaries) is not encodable.
 -module(toroco_net).
 
--export([option/3, options/2, names/2, allowed/2, udp_open/4, udp_rearm/1, udp_check/4,
-         decode_event/2, encode_event/2]).
+-export([option/3, options/2, link_options/2, names/2, link_interface/1, allowed/2, udp_open/4, udp_rearm/1,
+         udp_check/4, udp_datagram/4, decode_event/2, encode_event/2]).
 -export_type([allow/0]).
 
 -type allow() :: any | [inet:ip_address()].
@@ -50,6 +50,21 @@ option(Key, {Kind, Default}, Opts) ->
     case check(Kind, V) of
         {ok, V1} -> {ok, V1};
         error -> {error, {bad_option, {Key, V}}}
+    end.
+
+%% @doc A link's options: `inputs' and `outputs' (lists of names) and the
+%% `Specs' as in {@link options/2}; any other key is refused. The checked
+%% values by key, with `outputs'.
+-spec link_options([{atom(), {kind(), term()}}], map()) -> {ok, map()} | {error, term()}.
+link_options(Specs, Opts) ->
+    Allowed = [inputs, outputs | [K || {K, _} <- Specs]],
+    case {[K || K <- maps:keys(Opts), not lists:member(K, Allowed)],
+          names(inputs, Opts), names(outputs, Opts), options(Specs, Opts)} of
+        {[K | _], _, _, _} -> {error, {unknown_option, K}};
+        {[], {error, _} = E, _, _} -> E;
+        {[], _, {error, _} = E, _} -> E;
+        {[], _, _, {error, _} = E} -> E;
+        {[], {ok, _}, {ok, Outs}, {ok, S}} -> {ok, S#{outputs => Outs}}
     end.
 
 %% @doc Checks each `{Key, {Kind, Default}}' in turn; the checked values by key.
@@ -117,6 +132,16 @@ names(Key, Opts) ->
         Other -> {error, {bad_option, {Key, Other}}}
     end.
 
+%% @doc A link's interface: its `inputs' and `outputs' options, the names
+%% in them (an option that is not a list of names is refused by `init/2',
+%% through {@link names/2}).
+-spec link_interface(map()) -> #{inputs := [atom()], outputs := [atom()]}.
+link_interface(Opts) ->
+    #{inputs => atoms(maps:get(inputs, Opts, [])), outputs => atoms(maps:get(outputs, Opts, []))}.
+
+atoms(L) when is_list(L) -> lists:usort([A || A <- L, is_atom(A)]);
+atoms(_) -> [].
+
 -spec allowed(inet:ip_address(), allow()) -> boolean().
 allowed(_Ip, any) -> true;
 allowed(Ip, List) -> lists:member(Ip, List).
@@ -155,6 +180,28 @@ udp_check(Ip, Data, Allow, Max) ->
         false -> {error, not_allowed};
         true when byte_size(Data) > Max -> {error, oversized};
         true -> ok
+    end.
+
+%% @doc A datagram a UDP device received from `Ip', in the device's
+%% `handle_event': checked ({@link udp_check/4}) against the data's `allow'
+%% and `max_datagram', then read by `Read' into the action to take. What
+%% is taken counts in the data's `accepted', what is refused in its `bad'
+%% (`toroco_bad_input').
+-spec udp_datagram(inet:ip_address(), binary(), map(),
+                   fun((binary()) -> {ok, toroco_behavior:action()} | {error, atom()})) ->
+          {keep_state, map()} | {keep_state, map(), [toroco_behavior:action()]}.
+udp_datagram(Ip, Data, D = #{allow := Allow, max_datagram := Max}, Read) ->
+    Result = case udp_check(Ip, Data, Allow, Max) of
+                 ok -> Read(Data);
+                 Err -> Err
+             end,
+    case Result of
+        {ok, Action} ->
+            #{accepted := N} = D,
+            {keep_state, D#{accepted := N + 1}, [Action]};
+        {error, Reason} ->
+            #{bad := B} = D,
+            {keep_state, D#{bad := toroco_bad_input:count(Reason, Data, B)}}
     end.
 
 %%====================================================================

@@ -51,28 +51,18 @@
 
 -spec interface(map()) -> #{inputs := [atom()], outputs := [atom()]}.
 interface(Opts) ->
-    #{inputs => atoms(maps:get(inputs, Opts, [])), outputs => atoms(maps:get(outputs, Opts, []))}.
-
-atoms(L) when is_list(L) -> lists:usort([A || A <- L, is_atom(A)]);
-atoms(_) -> [].
+    toroco_net:link_interface(Opts).
 
 -spec init(atom(), map()) -> {ok, listening, map()} | {error, term()}.
 init(Name, Opts) ->
-    Allowed = [inputs, outputs, port, ip, allow, max_clients, max_line, send_timeout,
-               line_timeout, idle_timeout, max_per_peer, min_age],
     Specs = [{port, {port, 0}}, {ip, {ip, {127, 0, 0, 1}}}, {allow, {allow, any}},
              {max_clients, {pos_integer, 8}}, {max_line, {pos_integer, 65536}},
              {send_timeout, {pos_integer, 1000}}, {line_timeout, {pos_integer, 5000}},
              {idle_timeout, {pos_integer, 30000}}, {max_per_peer, {pos_integer, 4}},
              {min_age, {non_neg_integer, 2000}}],
-    case {[K || K <- maps:keys(Opts), not lists:member(K, Allowed)],
-          toroco_net:names(inputs, Opts), toroco_net:names(outputs, Opts),
-          toroco_net:options(Specs, Opts)} of
-        {[K | _], _, _, _} -> {error, {unknown_option, K}};
-        {[], {error, _} = E, _, _} -> E;
-        {[], _, {error, _} = E, _} -> E;
-        {[], _, _, {error, _} = E} -> E;
-        {[], {ok, _}, {ok, Outs}, {ok, S}} -> listen(Name, S#{outputs => Outs})
+    case toroco_net:link_options(Specs, Opts) of
+        {ok, S} -> listen(Name, S);
+        {error, _} = E -> E
     end.
 
 listen(Name, S = #{port := Port, ip := Ip, send_timeout := T, max_clients := Max,

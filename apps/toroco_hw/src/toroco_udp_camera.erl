@@ -77,20 +77,13 @@ handle_input(_Input, _Value, _State, _D) ->
           toroco_behavior:result().
 handle_event(info, {?MODULE, datagram, Data}, State, D = #{socket := S}) ->
     handle_event(info, {udp, S, {127, 0, 0, 1}, 0, Data}, State, D);
-handle_event(info, {udp, S, Ip, _Port, Data}, _State,
-             D = #{socket := S, allow := Allow, max_datagram := Max}) ->
-    Result = case toroco_net:udp_check(Ip, Data, Allow, Max) of
-                 ok -> sighting(Data);
-                 Err -> Err
-             end,
-    case Result of
-        {ok, Out, V} ->
-            #{accepted := N} = D,
-            {keep_state, D#{accepted := N + 1}, [{send, #{Out => V}}]};
-        {error, Reason} ->
-            #{bad := B} = D,
-            {keep_state, D#{bad := toroco_bad_input:count(Reason, Data, B)}}
-    end;
+handle_event(info, {udp, S, Ip, _Port, Data}, _State, D = #{socket := S}) ->
+    toroco_net:udp_datagram(Ip, Data, D, fun(Bin) ->
+                                                 case sighting(Bin) of
+                                                     {ok, Out, V} -> {ok, {send, #{Out => V}}};
+                                                     Err -> Err
+                                                 end
+                                         end);
 handle_event(info, {udp_passive, S}, _State, #{socket := S}) ->
     toroco_net:udp_rearm(S),
     keep_state_and_data.

@@ -29,37 +29,28 @@
 
 -spec interface(map()) -> #{inputs := [atom()], outputs := [atom()]}.
 interface(Opts) ->
-    #{inputs => atoms(maps:get(inputs, Opts, [])), outputs => atoms(maps:get(outputs, Opts, []))}.
-
-atoms(L) when is_list(L) -> lists:usort([A || A <- L, is_atom(A)]);
-atoms(_) -> [].
+    toroco_net:link_interface(Opts).
 
 -spec init(atom(), map()) -> {ok, linked, map()} | {error, term()}.
 init(Name, Opts) ->
-    Allowed = [inputs, outputs, peers, port, ip, allow, max_datagram, recbuf],
     Specs = [{port, {port, 0}}, {ip, {ip, {127, 0, 0, 1}}}, {allow, {allow, any}},
              {peers, {peers, []}}, {max_datagram, {pos_integer, 8192}},
              {recbuf, {pos_integer, 1048576}}],
-    case {[K || K <- maps:keys(Opts), not lists:member(K, Allowed)],
-          toroco_net:names(inputs, Opts), toroco_net:names(outputs, Opts),
-          toroco_net:options(Specs, Opts)} of
-        {[K | _], _, _, _} -> {error, {unknown_option, K}};
-        {[], {error, _} = E, _, _} -> E;
-        {[], _, {error, _} = E, _} -> E;
-        {[], _, _, {error, _} = E} -> E;
-        {[], {ok, _}, {ok, Outs}, {ok, S = #{port := Port, ip := Ip, max_datagram := Max,
-                                            recbuf := RecBuf}}} ->
-            case toroco_net:udp_open(Ip, Port, Max, RecBuf) of
-                {ok, Sock, Actual} ->
-                    {ok, linked, S#{name => Name, socket => Sock, port := Actual,
-                                    outputs => Outs, accepted => 0, sent => 0,
-                                    unencodable => 0, send_errors => 0,
-                                    bad => toroco_bad_input:new(Name)}};
-                {error, Reason} ->
-                    logger:warning("~p (toroco_udp_link) not started: ~0p", [Name, Reason],
-                                   #{domain => [toroco, hw]}),
-                    {error, Reason}
-            end
+    case toroco_net:link_options(Specs, Opts) of
+        {ok, S} -> open(Name, S);
+        {error, _} = E -> E
+    end.
+
+open(Name, S = #{port := Port, ip := Ip, max_datagram := Max, recbuf := RecBuf}) ->
+    case toroco_net:udp_open(Ip, Port, Max, RecBuf) of
+        {ok, Sock, Actual} ->
+            {ok, linked, S#{name => Name, socket => Sock, port := Actual, accepted => 0,
+                            sent => 0, unencodable => 0, send_errors => 0,
+                            bad => toroco_bad_input:new(Name)}};
+        {error, Reason} ->
+            logger:warning("~p (toroco_udp_link) not started: ~0p", [Name, Reason],
+                           #{domain => [toroco, hw]}),
+            {error, Reason}
     end.
 
 -spec handle_input(atom(), term(), linked, map()) -> toroco_behavior:result().
@@ -84,20 +75,8 @@ handle_input(Input, V, _State, D = #{socket := S, peers := Peers, sent := N,
 
 -spec handle_event(gen_statem:event_type(), term(), linked, map()) ->
           toroco_behavior:result().
-handle_event(info, {udp, S, Ip, _Port, Data}, _State,
-             D = #{socket := S, allow := Allow, max_datagram := Max, outputs := Outs}) ->
-    Result = case toroco_net:udp_check(Ip, Data, Allow, Max) of
-                 ok -> toroco_net:decode_event(Data, Outs);
-                 Err -> Err
-             end,
-    case Result of
-        {ok, Action} ->
-            #{accepted := N} = D,
-            {keep_state, D#{accepted := N + 1}, [Action]};
-        {error, Reason} ->
-            #{bad := B} = D,
-            {keep_state, D#{bad := toroco_bad_input:count(Reason, Data, B)}}
-    end;
+handle_event(info, {udp, S, Ip, _Port, Data}, _State, D = #{socket := S, outputs := Outs}) ->
+    toroco_net:udp_datagram(Ip, Data, D, fun(Bin) -> toroco_net:decode_event(Bin, Outs) end);
 handle_event(info, {udp_passive, S}, _State, #{socket := S}) ->
     toroco_net:udp_rearm(S),
     keep_state_and_data.
