@@ -103,28 +103,25 @@ messages(D = #dec{buffer = Buf, max = Max, masked = Masked}, Acc) ->
 frame_of(<<_:1, Rsv:3, _/bits>>, _, _) when Rsv =/= 0 -> {error, reserved_bits};
 frame_of(<<_:8, 0:1, _/bits>>, _, true) -> {error, unmasked_frame};
 frame_of(<<_:8, 1:1, _/bits>>, _, false) -> {error, masked_frame};
-frame_of(<<Fin:1, 0:3, Op:4, 1:1, Len:7, Rest/binary>>, Max, true) ->
+frame_of(<<Fin:1, 0:3, Op:4, M:1, Len:7, Rest/binary>>, Max, _Masked) ->
     case length_of(Len, Rest) of
         more -> more;
         {N, _} when N > Max -> {error, too_big};
-        {N, R} ->
-            case R of
-                <<Mask:4/binary, Payload:N/binary, After/binary>> ->
-                    {ok, Fin, Op, unmask(Payload, Mask), After};
-                _ -> more
-            end
-    end;
-frame_of(<<Fin:1, 0:3, Op:4, 0:1, Len:7, Rest/binary>>, Max, false) ->
-    case length_of(Len, Rest) of
-        more -> more;
-        {N, _} when N > Max -> {error, too_big};
-        {N, R} ->
-            case R of
-                <<Payload:N/binary, After/binary>> -> {ok, Fin, Op, Payload, After};
-                _ -> more
-            end
+        {N, R} -> payload(M, N, R, Fin, Op)
     end;
 frame_of(_, _, _) -> more.
+
+%% The payload (unmasked) and what follows it, or more to read.
+payload(1, N, R, Fin, Op) ->
+    case R of
+        <<Mask:4/binary, Payload:N/binary, After/binary>> -> {ok, Fin, Op, unmask(Payload, Mask), After};
+        _ -> more
+    end;
+payload(0, N, R, Fin, Op) ->
+    case R of
+        <<Payload:N/binary, After/binary>> -> {ok, Fin, Op, Payload, After};
+        _ -> more
+    end.
 
 length_of(126, <<N:16, R/binary>>) -> {N, R};
 length_of(127, <<0:1, N:63, R/binary>>) -> {N, R};
