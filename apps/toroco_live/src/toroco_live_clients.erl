@@ -10,7 +10,7 @@
 -module(toroco_live_clients).
 
 -export([new/1, join/2, down/2, stop/1]).
--export([member/2, pids/1, size/1]).
+-export([member/2, pids/1, size/1, subscriptions/1]).
 -export([subscribe/3, unsubscribe/3, forget/2, subscribers/2, subscribed/2]).
 -export([offer/5, broadcast/2, handle/2]).
 
@@ -64,6 +64,11 @@ pids(#clients{conns = Conns}) -> maps:keys(Conns).
 
 -spec size(clients()) -> non_neg_integer().
 size(#clients{conns = Conns}) -> map_size(Conns).
+
+%% @doc How many subscriptions there are, counting each client's to each key.
+-spec subscriptions(clients()) -> non_neg_integer().
+subscriptions(#clients{subs = Subs}) ->
+    maps:fold(fun(_, Conns, N) -> N + length(Conns) end, 0, Subs).
 
 %% @doc `Conn' subscribes to `Keys' (a subscription twice is one).
 -spec subscribe(pid(), [term()], clients()) -> clients().

@@ -36,7 +36,7 @@
 -module(toroco_live_foxglove).
 -behaviour(gen_server).
 
--export([child_spec/1, port/0]).
+-export([child_spec/1, port/0, stats/0]).
 -export([start_link/1, join/0, subscribe/2, unsubscribe/2, receive_fox/1]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2, terminate/2]).
 
@@ -87,6 +87,14 @@ child_spec(Config) ->
 port() ->
     try gen_server:call(?MODULE, port)
     catch exit:{noproc, _} -> off
+    end.
+
+%% @doc `clients' connected and their `subscriptions' to channels, now
+%% (`/metrics'); empty when the bridge does not run.
+-spec stats() -> #{clients => non_neg_integer(), subscriptions => non_neg_integer()}.
+stats() ->
+    try gen_server:call(?MODULE, stats, 10000)
+    catch exit:_ -> #{}
     end.
 
 %%====================================================================
@@ -146,6 +154,9 @@ init(Opts) ->
 -spec handle_call(term(), gen_server:from(), #hub{}) -> {reply, term(), #hub{}}.
 handle_call(port, _From, H) ->
     {reply, H#hub.port, H};
+handle_call(stats, _From, H = #hub{clients = Cl}) ->
+    {reply, #{clients => toroco_live_clients:size(Cl),
+              subscriptions => toroco_live_clients:subscriptions(Cl)}, H};
 handle_call({join, Conn}, _From, H) ->
     %% read before it joins: the reply carries every channel
     H0 = refresh(H, true),

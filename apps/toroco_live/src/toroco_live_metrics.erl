@@ -14,6 +14,9 @@
 %% <tr><td>`toroco_live_skipped_total'</td><td>counter</td><td>states a slow client did not get (coalesced)</td></tr>
 %% <tr><td>`toroco_live_tap_dropped_total'</td><td>counter</td><td>tap events the dashboard fell behind on</td></tr>
 %% <tr><td>`toroco_live_rosbridge_clients'</td><td>gauge</td><td>rosbridge clients connected</td></tr>
+%% <tr><td>`toroco_live_foxglove_clients'</td><td>gauge</td><td>Foxglove clients connected</td></tr>
+%% <tr><td>`toroco_live_foxglove_subscriptions'</td><td>gauge</td><td>subscriptions of Foxglove clients to channels</td></tr>
+%% <tr><td>`toroco_live_rosbridge_subscriptions'</td><td>gauge</td><td>subscriptions of rosbridge clients to topics</td></tr>
 %% <tr><td>`toroco_live_rosbridge_total'</td><td>counter</td><td>`counter': the rosbridge server's totals (`toroco_live_rosbridge:stats/0': `connections', `messages', `dropped', `tap_dropped', `published', `publish_dropped', `refused_unauthorized', `faults', `disconnected', `fragments_expired')</td></tr>
 %% <tr><td>`toroco_live_connections'</td><td>gauge</td><td>`listener' (`dashboard', `foxglove', `rosbridge'): TCP connections holding a slot (`toroco_live_listener')</td></tr>
 %% <tr><td>`toroco_live_connections_accepted_total'</td><td>counter</td><td>`listener': connections given a slot</td></tr>
@@ -60,7 +63,18 @@ text() ->
             [{[], maps:get(skipped, Stats, 0)}]),
      family(toroco_live_tap_dropped_total, counter, "Tap events the dashboard fell behind on.",
             [{[], maps:get(tap_dropped, Stats, 0)}])
-     | rosbridge() ++ listeners() ++ rosclients()].
+     | foxglove() ++ rosbridge() ++ listeners() ++ rosclients()].
+
+%% The Foxglove bridge's clients, when it runs.
+foxglove() ->
+    case toroco_live_foxglove:stats() of
+        Stats when map_size(Stats) =:= 0 -> [];
+        #{clients := Clients, subscriptions := Subs} ->
+            [family(toroco_live_foxglove_clients, gauge, "Foxglove clients connected.",
+                    [{[], Clients}]),
+             family(toroco_live_foxglove_subscriptions, gauge,
+                    "Subscriptions of Foxglove clients to channels.", [{[], Subs}])]
+    end.
 
 %% The rosbridge server's counters, when it runs.
 rosbridge() ->
@@ -72,6 +86,8 @@ rosbridge() ->
                       refused_unauthorized, faults, disconnected, fragments_expired],
             [family(toroco_live_rosbridge_clients, gauge, "rosbridge clients connected.",
                     [{[], maps:get(clients, Stats, 0)}]),
+             family(toroco_live_rosbridge_subscriptions, gauge, "Subscriptions of rosbridge clients to topics.",
+                    [{[], maps:get(subscriptions, Stats, 0)}]),
              family(toroco_live_rosbridge_total, counter, "The rosbridge server's totals.",
                     [{[{counter, K}], maps:get(K, Stats, 0)} || K <- Totals])]
     end.

@@ -82,7 +82,8 @@ port() ->
     catch exit:_ -> off
     end.
 
-%% @doc The counters (`/metrics'): `clients' now, and totals: `connections',
+%% @doc The counters (`/metrics'): `clients' and `subscriptions' (of
+%% clients to topics) now, and totals: `connections',
 %% `messages' sent to clients, `dropped' (not sent to a client behind),
 %% `tap_dropped' (events the hub itself fell behind on, SPEC §10),
 %% `published' (handed to the `ros' device), `refused_unauthorized',
@@ -169,7 +170,8 @@ init(Opts) ->
 handle_call(port, _From, H) ->
     {reply, H#hub.port, H};
 handle_call(stats, _From, H = #hub{clients = Cl, counters = Cs}) ->
-    {reply, Cs#{clients => toroco_live_clients:size(Cl)}, H};
+    {reply, Cs#{clients => toroco_live_clients:size(Cl),
+                subscriptions => toroco_live_clients:subscriptions(Cl)}, H};
 handle_call({join, Conn}, _From, H) ->
     {reply, ok, bump(connections, H#hub{clients = toroco_live_clients:join(Conn, H#hub.clients)})};
 handle_call(topics, _From, H0) ->

@@ -175,9 +175,17 @@ client_that_never_reads() ->
 client_that_never_reads(Config) ->
     Slow = connect_raw(Config, false),
     {ok, _, _} = toroco_live_js:await(Slow, ev(<<"raw_open">>), 10000),
-    timer:sleep(300),      % the advertise arrives before the client stops reading
+    %% The channels came before it stopped reading: it subscribes to them all.
+    {ok, _, _} = toroco_live_js:await(Slow, fun(#{<<"ev">> := <<"raw_text">>,
+                                                  <<"msg">> := #{<<"op">> := <<"advertise">>}}) -> true;
+                                               (_) -> false
+                                            end, 10000),
+    Before = subscriptions(),
     toroco_live_js:send(Slow, #{cmd => raw_subscribe_all}),
-    {ok, _, _} = toroco_live_js:await(Slow, ev(<<"raw_subscribed">>), 10000),
+    {ok, #{<<"count">> := Count}, _} = toroco_live_js:await(Slow, ev(<<"raw_subscribed">>), 10000),
+    true = Count > 0,
+    ok = toroco_test_lib:wait_until(fun() -> subscriptions() >= Before + Count end, 10000,
+                                    {subscribed, Count}),
     Big = binary:copy(<<"x">>, 2000),
     N = 5000,
     T0 = erlang:monotonic_time(millisecond),
@@ -295,11 +303,16 @@ await_topics(C, Topics, Acc) ->
             await_topics(C, Topics, maps:merge(Acc, maps:from_list([{T, Ch} || Ch = #{<<"topic">> := T} <- Chs])))
     end.
 
+%% Subscribed, and the subscription in the bridge before the case makes events.
 subscribe(C, Topic) ->
+    Before = subscriptions(),
     toroco_live_js:send(C, #{cmd => subscribe, topic => Topic}),
     {ok, _, _} = toroco_live_js:await(C, ev(<<"subscribed">>), 10000),
-    %% The subscription reaches the server before the test makes events.
-    timer:sleep(100).
+    ok = toroco_test_lib:wait_until(fun() -> subscriptions() > Before end, 10000,
+                                    {subscribed, Topic}).
+
+subscriptions() ->
+    maps:get(subscriptions, toroco_live_foxglove:stats(), 0).
 
 %% The next N messages on any of Topics, in the order they came.
 messages(C, Topics, N) ->

@@ -38,10 +38,7 @@ init_per_testcase(_Case, Config) ->
 end_per_testcase(_Case, _Config) ->
     _ = toroco_live:stop_recording(),
     _ = toroco_clock:realtime(),
-    #{behaviors := Bs, devices := Ds} = toroco:inspect(),
-    [toroco:remove_behavior(B) || B <- Bs],
-    [toroco:remove_device(D) || D <- Ds],
-    ok.
+    toroco_test_lib:clear().
 
 %%====================================================================
 %% Cases
@@ -222,16 +219,12 @@ flight_recorder_window_by_time(Config) ->
     end).
 
 %% The flight recorder's window once Pred holds of it (or fails).
-window_until(Pred, Timeout) when Timeout =< 0 ->
+window_until(Pred, Timeout) ->
+    ok = toroco_test_lib:wait_until(fun() -> Pred(toroco_live_flight:window()) end, Timeout,
+                                    flight_window),
     W = toroco_live_flight:window(),
     true = Pred(W),
-    W;
-window_until(Pred, Timeout) ->
-    W = toroco_live_flight:window(),
-    case Pred(W) of
-        true -> W;
-        false -> timer:sleep(20), window_until(Pred, Timeout - 20)
-    end.
+    W.
 
 %% Runs Fun with a fresh flight recorder under app env Key = Value.
 with_flight_env(Key, Value, Fun) ->
@@ -292,15 +285,8 @@ flight_recorder_after_restart(Config) ->
                                     <<"term">> => <<"after_restart">>},
                                   maps:get(<<"/toroco/out/s/dist">>, Last, []))
              end,
-    true = until(Dumped, 10000),
+    ok = toroco_test_lib:poll(Dumped, 10000, 200),
     ok.
-
-until(Pred, Ms) when Ms =< 0 -> Pred();
-until(Pred, Ms) ->
-    case Pred() of
-        true -> true;
-        false -> timer:sleep(200), until(Pred, Ms - 200)
-    end.
 
 %% logger handler: sends the flight recorder's line to the test.
 log(#{msg := {Fmt, Args}, meta := #{domain := [toroco, live]}}, #{config := Pid}) ->
@@ -371,9 +357,7 @@ ros2_recording_replays(Config) ->
 %% The wiring of a recorded run, with fake sensors and motors standing for
 %% the devices, replays the recording's sensors to the same motors.
 replays_on_fakes(Path, WiringFile) ->
-    #{behaviors := Bs, devices := Ds} = toroco:inspect(),
-    _ = [toroco:remove_behavior(B) || B <- Bs],
-    _ = [toroco:remove_device(D) || D <- Ds],
+    ok = toroco_test_lib:clear(),
     ok = toroco:add_device(ir, toroco_fake_sensor, #{outputs => [left, right]}),
     ok = toroco:add_device(camera, toroco_fake_sensor, #{outputs => [update_red, update_trq]}),
     ok = toroco:add_device(push, toroco_fake_sensor, #{outputs => [button]}),
@@ -532,5 +516,4 @@ path(Config, Name) -> filename:join(?config(priv_dir, Config), Name).
 read(Path) -> toroco_live_js:run("mcap_read.js", [Path]).
 
 root() ->
-    Src = proplists:get_value(source, ?MODULE:module_info(compile)),
-    filename:dirname(filename:dirname(filename:dirname(filename:dirname(Src)))).
+    toroco_test_lib:root().

@@ -11,7 +11,8 @@
 all() ->
     [topics_and_types, services_round_trip, publish_needs_the_token, subscribe_throttled, cbor_raw,
      fragments_out, bad_input, flood_disconnected, client_that_never_reads, not_a_websocket,
-     start_options, lockstep_stimulus, simulated_range_and_odometry, drive_the_teleop_robot].
+     start_options, lockstep_stimulus, simulated_range_and_odometry, drive_the_teleop_robot,
+     runtime_restart].
 
 suite() -> [{timetrap, {seconds, 90}}].
 
@@ -232,7 +233,7 @@ fragments_out(Config) ->
     toroco_live_js:send(C, #{cmd => raw_json, json => #{op => subscribe, id => <<"f1">>,
                                                         topic => <<"/toroco/out/s/dist">>,
                                                         fragment_size => 40}}),
-    timer:sleep(200),   % the subscription reaches the hub before the value
+    await_subscriptions(1),
     ok = toroco:inject({s, dist}, <<"a value long enough to need several fragments: ééé"/utf8>>),
     Frags = raw_ops(C, <<"fragment">>, 1),
     [#{<<"total">> := Total}] = Frags,
@@ -281,7 +282,7 @@ bad_input(Config) ->
     [toroco_live_js:send(C, #{cmd => raw_json, json => #{op => fragment, id => <<"m2">>, data => P,
                                                         num => N, total => 2}})
      || {N, P} <- [{1, P2}, {0, P1}]],
-    timer:sleep(200),
+    await_subscriptions(1),
     ok = toroco:inject({s, dist}, 1),
     [#{<<"topic">> := <<"/toroco/out/s/dist">>}] = raw_ops(C, <<"publish">>, 1),
     ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= 1 end, 5000),
@@ -325,7 +326,7 @@ client_that_never_reads() ->
 client_that_never_reads(Config) ->
     Slow = connect_raw(Config, url, false),
     toroco_live_js:send(Slow, #{cmd => raw_json, json => #{op => subscribe, topic => <<"/toroco/out/s/dist">>}}),
-    timer:sleep(300),
+    await_subscriptions(1),
     Big = binary:copy(<<"x">>, 8000),
     N = 5000,
     T0 = erlang:monotonic_time(millisecond),
@@ -337,13 +338,15 @@ client_that_never_reads(Config) ->
     Missed = fun() -> S = toroco_live_rosbridge:stats(),
                       maps:get(dropped, S, 0) + maps:get(tap_dropped, S, 0)
              end,
-    Dropped = wait_for(Missed, 10000),
+    ok = toroco_test_lib:wait_until(fun() -> Missed() > 0 end, 10000, nothing_missed),
+    Dropped = Missed(),
     ct:log("~b values of 8 kB through the robot in ~b ms with a client that never reads; "
            "~b messages not sent to it", [N, Ms, Dropped]),
     true = Dropped > 0,
     C = connect(Config, url),
     toroco_live_js:send(C, #{cmd => subscribe, topic => <<"/toroco/out/s/dist">>}),
     await_subscribed(C, 1),
+    await_subscriptions(2),
     ok = toroco:inject({s, dist}, last),
     {ok, #{<<"msg">> := #{<<"data">> := D}}, _} = await_message(C, <<"/toroco/out/s/dist">>),
     #{<<"term">> := <<"last">>} = jiffy:decode(D, [return_maps]),
@@ -457,6 +460,33 @@ drive_the_teleop_robot(Config) ->
     true = StopMs - LastMs =< 500,
     sim_done().
 
+runtime_restart() ->
+    [{doc, "A subscribed client keeps getting the robot's messages after the runtime restarts "
+      "under the server (the server takes the tap again)"}].
+runtime_restart(Config) ->
+    C = connect(Config, url),
+    toroco_live_js:send(C, #{cmd => subscribe, topic => <<"/range/front">>,
+                             type => <<"sensor_msgs/msg/Range">>}),
+    await_subscribed(C, 1),
+    ok = toroco:inject({range, front}, 0.5),
+    {ok, _, _} = await_message(C, <<"/range/front">>),
+    ok = application:stop(toroco_hw),
+    ok = application:stop(toroco),
+    {ok, _} = application:ensure_all_started(toroco_hw),
+    fake_robot(),
+    %% Until the server has the tap again, a value reaches nobody.
+    Again = fun() ->
+                    ok = toroco:inject({range, front}, 0.25),
+                    case toroco_live_js:await(C, fun(#{<<"ev">> := <<"message">>,
+                                                       <<"msg">> := #{<<"range">> := R}}) -> R == 0.25;
+                                                    (_) -> false
+                                                 end, 300) of
+                        {ok, _, _} -> true;
+                        {error, _} -> false
+                    end
+            end,
+    ok = toroco_test_lib:wait_until(Again, 15000, no_message_after_restart).
+
 %%====================================================================
 %% Shared by the cases
 %%====================================================================
@@ -479,12 +509,17 @@ ev(Name) -> fun(#{<<"ev">> := E}) -> E =:= Name end.
 
 await(C, Name) -> toroco_live_js:await(C, ev(Name), 10000).
 
-await_subscribed(_C, 0) -> ok;
+%% N subscriptions made by the client, and at least N in the server, so
+%% that the case's events find them there.
 await_subscribed(C, N) ->
-    {ok, _, _} = await(C, <<"subscribed">>),
-    await_subscribed(C, N - 1),
-    %% The subscriptions reach the server before the test makes events.
-    timer:sleep(200).
+    [{ok, _, _} = await(C, <<"subscribed">>) || _ <- lists:seq(1, N)],
+    await_subscriptions(N).
+
+%% The server holds at least N subscriptions (of any client to any topic).
+await_subscriptions(N) ->
+    toroco_test_lib:wait_until(
+      fun() -> maps:get(subscriptions, toroco_live_rosbridge:stats(), 0) >= N end,
+      10000, {subscriptions, N}).
 
 await_message(C, Topic) ->
     toroco_live_js:await(C, fun(#{<<"ev">> := <<"message">>, <<"topic">> := T}) -> T =:= Topic;
@@ -502,15 +537,14 @@ raw_ops(C, Op, N) ->
 
 %% Until getTopics lists Topic (the world's first snapshot came).
 await_topic(C, Topic) ->
-    await_topic(C, Topic, 50).
-
-await_topic(_C, Topic, 0) -> ct:fail({never_listed, Topic});
-await_topic(C, Topic, N) ->
-    toroco_live_js:send(C, #{cmd => getTopics}),
-    {ok, #{<<"topics">> := Ts}, _} = await(C, <<"topics">>),
-    case lists:member(Topic, Ts) of
-        true -> ok;
-        false -> timer:sleep(200), await_topic(C, Topic, N - 1)
+    Listed = fun() ->
+                     toroco_live_js:send(C, #{cmd => getTopics}),
+                     {ok, #{<<"topics">> := Ts}, _} = await(C, <<"topics">>),
+                     lists:member(Topic, Ts)
+             end,
+    case toroco_test_lib:poll(Listed, 10000, 200) of
+        ok -> ok;
+        timeout -> ct:fail({never_listed, Topic})
     end.
 
 %% The teleop robot in its world, for DurationS simulated seconds, in real time.
@@ -526,14 +560,6 @@ run_world(Config, DurationS) ->
     register(rosbridge_suite_sim, Pid),
     ok.
 
-%% Polls Fun until it gives a positive number (or TimeoutMs pass: 0).
-wait_for(Fun, TimeoutMs) ->
-    case Fun() of
-        N when N > 0 -> N;
-        _ when TimeoutMs =< 0 -> 0;
-        _ -> timer:sleep(100), wait_for(Fun, TimeoutMs - 100)
-    end.
-
 %% The run is over (its devices gone) before the next case.
 sim_done() ->
     receive {sim_done, R} -> {ok, _} = R, ok
@@ -541,8 +567,7 @@ sim_done() ->
     end.
 
 root() ->
-    Src = proplists:get_value(source, ?MODULE:module_info(compile)),
-    filename:dirname(filename:dirname(filename:dirname(filename:dirname(Src)))).
+    toroco_test_lib:root().
 
 %% Publishes Msg on /cmd_vel at 10 Hz for Ms; the wall-clock ms of the last.
 drive(C, Msg, Ms) ->

@@ -33,10 +33,7 @@ init_per_testcase(_Case, Config) ->
 
 end_per_testcase(_Case, _Config) ->
     [ok = toroco_live:rosbridge_disconnect(P) || P <- toroco_live_rosclient_sup:clients()],
-    #{behaviors := Bs, devices := Ds} = toroco:inspect(),
-    [toroco:remove_behavior(B) || B <- Bs],
-    [toroco:remove_device(D) || D <- Ds],
-    ok.
+    toroco_test_lib:clear().
 
 %%====================================================================
 %% Cases
@@ -419,16 +416,6 @@ recv_close(S, {D, Ms}) ->
 send_op(S, Op) ->
     ok = gen_tcp:send(S, toroco_live_ws_frame:frame(text, jiffy:encode(Op))).
 
+%% Pred may fail to match while the client is not listed yet.
 until(Pred, Ms) ->
-    Deadline = erlang:monotonic_time(millisecond) + Ms,
-    until_(Pred, Deadline).
-
-until_(Pred, Deadline) ->
-    case catch Pred() of
-        true -> ok;
-        _ ->
-            case erlang:monotonic_time(millisecond) > Deadline of
-                true -> {error, timeout};
-                false -> timer:sleep(20), until_(Pred, Deadline)
-            end
-    end.
+    toroco_test_lib:wait_until(fun() -> (catch Pred()) =:= true end, Ms, client_state).

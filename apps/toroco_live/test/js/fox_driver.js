@@ -9,7 +9,8 @@
 //   {"cmd":"publish","topic":T,"message":{...}}
 //   {"cmd":"close"}
 // A raw WebSocket, for what a misbehaving client does:
-//   {"cmd":"raw_connect","url":U,"read":false}  (read:false stops reading)
+//   {"cmd":"raw_connect","url":U,"read":false}  (read:false stops reading once it has
+//                                                subscribed: it reads the channels first)
 //   {"cmd":"raw_text","text":S} | {"cmd":"raw_hex","hex":H}
 //   {"cmd":"raw_subscribe_all"}       subscribes to every advertised channel
 //   events raw_open, raw_text, raw_binary {bytes}, raw_close {code}
@@ -50,8 +51,10 @@ function connect(url) {
   });
 }
 
+let rawReads = true;
 function rawConnect(url, read) {
-  raw = rawSocket(WebSocket, url, ["foxglove.websocket.v1"], read, (data, isBinary) => {
+  rawReads = read;
+  raw = rawSocket(WebSocket, url, ["foxglove.websocket.v1"], true, (data, isBinary) => {
     if (isBinary) { out({ ev: "raw_binary", bytes: data.length }); return; }
     const msg = JSON.parse(data.toString());
     if (msg.op === "advertise") rawChannels.push(...msg.channels);
@@ -92,6 +95,7 @@ commands((c) => {
     case "raw_subscribe_all":
       raw.send(JSON.stringify({ op: "subscribe",
         subscriptions: rawChannels.map((ch, i) => ({ id: i, channelId: ch.id })) }));
+      if (!rawReads) raw._socket.pause();
       out({ ev: "raw_subscribed", count: rawChannels.length });
       break;
     case "exit": process.exit(0);
