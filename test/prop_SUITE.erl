@@ -24,9 +24,7 @@ init_per_suite(Config) ->
     Config.
 
 end_per_suite(_Config) ->
-    _ = application:stop(toroco_hw),
-    _ = application:stop(toroco),
-    ok.
+    toroco_test_lib:stop().
 
 init_per_testcase(_Case, Config) ->
     _ = ets:new(prop_router_counts, [named_table, public]),
@@ -40,9 +38,7 @@ end_per_testcase(_Case, _Config) ->
     _ = logger:remove_primary_filter(prop_killed),
     ets:delete(prop_router_counts),
     ets:delete(prop_output),
-    _ = application:stop(toroco_hw),
-    _ = application:stop(toroco),
-    ok.
+    toroco_test_lib:stop().
 
 quiet_kills(#{msg := {report, #{label := {supervisor, child_terminated}, report := R}}}, _) ->
     case proplists:get_value(reason, R) of

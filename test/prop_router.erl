@@ -614,9 +614,7 @@ start_network(Cfg = #{srcs := Srcs, wiring := W, idle := Idle, inhib_on := On}) 
     end.
 
 stop_network() ->
-    _ = application:stop(toroco_hw),
-    _ = application:stop(toroco),
-    ok.
+    toroco_test_lib:stop().
 
 %%--------------------------------------------------------------------
 %% Commands: each acts, waits for what it set in motion, and observes

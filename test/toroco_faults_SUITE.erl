@@ -63,8 +63,7 @@ init_common(Config) ->
 
 end_per_testcase(_, _Config) ->
     logger:set_primary_config(level, warning),
-    _ = application:stop(toroco_hw),
-    _ = application:stop(toroco),
+    ok = toroco_test_lib:stop(),
     _ = application:stop(toroco_lua),
     [application:unset_env(toroco, K)
      || K <- [layer_restart_intensity, device_restart_intensity, router_restart_intensity]],

@@ -16,8 +16,7 @@ all() ->
      remote_behavior_shows_running_with_restarts, remote_events_bounded_and_counted].
 
 init_per_suite(Config) ->
-    _ = application:stop(toroco_hw),
-    _ = application:stop(toroco),
+    ok = toroco_test_lib:stop(),
     _ = os:cmd("epmd -daemon"),
     Started = case node() of
                   nonode@nohost ->

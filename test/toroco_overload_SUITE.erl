@@ -18,13 +18,11 @@ suite() -> [{timetrap, {minutes, 2}}].
 all() -> [all_keeps_everything_and_grows, latest_stays_bounded].
 
 init_per_testcase(_, Config) ->
-    {ok, _} = application:ensure_all_started(toroco_hw),
+    ok = toroco_test_lib:start(),
     Config.
 
 end_per_testcase(_, _Config) ->
-    _ = application:stop(toroco_hw),
-    _ = application:stop(toroco),
-    ok.
+    toroco_test_lib:stop().
 
 -define(EVENTS, 2000).
 -define(WORK_MS, 2).          % the receiver's wait per input

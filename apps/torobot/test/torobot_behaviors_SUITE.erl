@@ -25,7 +25,7 @@ groups() ->
        red_follower_steers, red_follower_wins_and_hands_back, red_follower_command]}].
 
 init_per_testcase(_Case, Config) ->
-    {ok, _} = application:ensure_all_started(toroco_hw),
+    ok = toroco_test_lib:start(),
     ok = toroco:add_device(ir, toroco_fake_sensor, #{outputs => [left, right]}),
     ok = toroco:add_device(camera, toroco_fake_sensor, #{outputs => [update_red, update_trq]}),
     ok = toroco:add_device(push, toroco_fake_sensor, #{outputs => [button]}),
@@ -34,9 +34,7 @@ init_per_testcase(_Case, Config) ->
     Config.
 
 end_per_testcase(_Case, _Config) ->
-    _ = application:stop(toroco_hw),
-    _ = application:stop(toroco),
-    ok.
+    toroco_test_lib:stop().
 
 %%====================================================================
 %% Cases
@@ -293,5 +291,4 @@ settle() ->
     ok.
 
 root() ->
-    Source = proplists:get_value(source, ?MODULE:module_info(compile)),
-    filename:dirname(filename:dirname(filename:dirname(filename:dirname(Source)))).
+    toroco_test_lib:root().

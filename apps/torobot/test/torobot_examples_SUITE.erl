@@ -54,9 +54,7 @@ end_per_testcase(_TC, _Config) ->
     _ = (catch torobot_examples:stop()),
     _ = (catch toroco_clock:realtime()),
     _ = application:stop(torobot),
-    _ = application:stop(toroco_hw),
-    _ = application:stop(toroco),
-    ok.
+    toroco_test_lib:stop().
 
 %%--------------------------------------------------------------------
 %% Helpers

@@ -358,5 +358,4 @@ write_terms(FileName, Terms, Config) ->
 
 %% The project's root: this file is apps/torobot/test/ in it.
 root() ->
-    Source = proplists:get_value(source, ?MODULE:module_info(compile)),
-    filename:dirname(filename:dirname(filename:dirname(filename:dirname(Source)))).
+    toroco_test_lib:root().

@@ -1,7 +1,13 @@
 %% Helpers shared by the runtime's suites.
 -module(toroco_test_lib).
--export([start/0, stop/0, values/1, await_values/2, await_values/3, settle/1,
+-export([root/0, start/0, stop/0, clear/0, values/1, values/2, await_values/2, await_values/3,
+         await_input/4, settle/1,
          sensor/2, actuator/2, wait_until/2, wait_until/3, poll/2, poll/3]).
+
+%% The project's top folder (this file is apps/toroco/test/toroco_test_lib.erl).
+root() ->
+    Source = proplists:get_value(source, ?MODULE:module_info(compile)),
+    filename:dirname(filename:dirname(filename:dirname(filename:dirname(Source)))).
 
 start() ->
     {ok, _} = application:ensure_all_started(toroco_hw),
@@ -10,6 +16,13 @@ start() ->
 stop() ->
     _ = application:stop(toroco_hw),
     _ = application:stop(toroco),
+    ok.
+
+%% Every behavior and device removed, the runtime left running.
+clear() ->
+    #{behaviors := Bs, devices := Ds} = toroco:inspect(),
+    _ = [toroco:remove_behavior(B) || B <- Bs],
+    _ = [toroco:remove_device(D) || D <- Ds],
     ok.
 
 sensor(Name, Outs) -> ok = toroco:add_device(Name, toroco_fake_sensor, #{outputs => Outs}).
@@ -25,6 +38,17 @@ await_values(A, Expected, Timeout) ->
                                     Timeout) of
         ok -> ok;
         {error, timeout} -> ct:fail({expected, Expected, got, values(A)})
+    end.
+
+%% The values `Input' of `A' received, in order.
+values(A, Input) -> [V || {I, V, _} <- toroco_fake_actuator:history(A), I =:= Input].
+
+%% Waits until the values delivered on `Input' are exactly `Expected'.
+await_input(A, Input, Expected, Timeout) ->
+    Pred = fun(H) -> [V || {I, V, _} <- H, I =:= Input] =:= Expected end,
+    case toroco_fake_actuator:await(A, Pred, Timeout) of
+        ok -> ok;
+        {error, timeout} -> ct:fail({expected, Input, Expected, got, values(A, Input)})
     end.
 
 %% Returns once everything already sent towards `A' has been handled: the

@@ -4,6 +4,7 @@
 %% the function adapters, and refused options.
 -module(toroco_devices_SUITE).
 -import(toroco_test_lib, [wait_until/2]).
+-import(toroco_hw_test_lib, [fake_pwm/3, pwm/3]).
 
 -include_lib("common_test/include/ct.hrl").
 -include_lib("stdlib/include/assert.hrl").
@@ -44,17 +45,13 @@ groups() ->
      {engine_defaults, [], [unknown_requests]}].
 
 init_per_suite(Config) ->
-    Exe = filename:join(code:priv_dir(toroco_hw), "pru_port"),
-    case filelib:is_regular(Exe) of
-        true -> Config;
-        false -> {fail, {not_built, Exe, "run make -C c_src/pru_port"}}
-    end.
+    toroco_hw_test_lib:require_pru_port(Config).
 
 end_per_suite(_Config) ->
     ok.
 
 init_per_testcase(Case, Config) ->
-    {ok, _} = application:ensure_all_started(toroco_hw),
+    ok = toroco_test_lib:start(),
     Root = filename:join(?config(priv_dir, Config), atom_to_list(Case)),
     fake_pwm(Root, 0, 0),
     fake_pwm(Root, 0, 1),
@@ -62,9 +59,7 @@ init_per_testcase(Case, Config) ->
 
 end_per_testcase(_Case, _Config) ->
     _ = [toroco_pru_port:stop(P) || P <- [whereis(shared_pru)], is_pid(P)],
-    _ = application:stop(toroco_hw),
-    _ = application:stop(toroco),
-    ok.
+    toroco_test_lib:stop().
 
 %%% ---------------------------------------------------------------------
 %%% PRU sensors
@@ -651,39 +646,10 @@ refusal(Other) ->
 dev(Name) ->
     maps:get(device, toroco:inspect(Name)).
 
-%% Waits until the values delivered on `Input' are exactly `Expected'.
 await_input(A, Input, Expected) ->
-    Pred = fun(H) -> [V || {I, V, _} <- H, I =:= Input] =:= Expected end,
-    case toroco_fake_actuator:await(A, Pred, ?WAIT) of
-        ok -> ok;
-        {error, timeout} ->
-            ct:fail({expected, Input, Expected,
-                     got, [V || {I, V, _} <- toroco_fake_actuator:history(A), I =:= Input]})
-    end.
+    toroco_test_lib:await_input(A, Input, Expected, ?WAIT).
 
 send_udp(Port, Datagrams) ->
     {ok, S} = gen_udp:open(0, [binary, {ip, {127, 0, 0, 1}}]),
     [ok = gen_udp:send(S, {127, 0, 0, 1}, Port, D) || D <- Datagrams],
     gen_udp:close(S).
-
-fake_pwm(Root, Chip, Ch) ->
-    ChipDir = filename:join(Root, "class/pwm/pwmchip" ++ integer_to_list(Chip)),
-    Dir = filename:join(ChipDir, "pwm" ++ integer_to_list(Ch)),
-    ok = filelib:ensure_dir(filename:join(Dir, "x")),
-    ok = file:write_file(filename:join(ChipDir, "export"), ""),
-    [ok = file:write_file(filename:join(Dir, F), "0\n") || F <- ["period", "duty_cycle", "enable"]],
-    ok.
-
-%% An attribute of the fake sysfs tree. The program rewrites a file in
-%% place (truncate, then write), as sysfs is written; a read between the two
-%% sees it empty, which a real sysfs file never is: read again then.
-pwm(Root, Ch, Attr) ->
-    pwm(Root, Ch, Attr, 100).
-
-pwm(Root, Ch, Attr, Tries) ->
-    Path = filename:join([Root, "class/pwm/pwmchip0", "pwm" ++ integer_to_list(Ch), Attr]),
-    {ok, Bin} = file:read_file(Path),
-    case string:trim(binary_to_list(Bin)) of
-        "" when Tries > 1 -> pwm(Root, Ch, Attr, Tries - 1);
-        Value -> Value
-    end.

@@ -28,13 +28,11 @@ all() ->
     [camera_hostile, udp_link_hostile].
 
 init_per_testcase(_Case, Config) ->
-    {ok, _} = application:ensure_all_started(toroco_hw),
+    ok = toroco_test_lib:start(),
     Config.
 
 end_per_testcase(_Case, _Config) ->
-    _ = application:stop(toroco_hw),
-    _ = application:stop(toroco),
-    ok.
+    toroco_test_lib:stop().
 
 %%% ---------------------------------------------------------------------
 %%% Cases
@@ -271,25 +269,19 @@ dev(Name) ->
 %% if it does not within 10 s (the kernel dropped some, or the device is
 %% stuck).
 await_counted(Dev, N) ->
-    Deadline = erlang:monotonic_time(millisecond) + 10000,
-    await_counted(Dev, N, Deadline).
-
-await_counted(Dev, N, Deadline) ->
-    #{accepted := A, rejected := R} = Info = dev(Dev),
-    case A + R >= N of
-        true -> ok;
-        false ->
-            case erlang:monotonic_time(millisecond) > Deadline of
-                true -> ct:fail({not_counted, N, Info});
-                false -> timer:sleep(1), await_counted(Dev, N, Deadline)
-            end
+    Counted = fun() -> #{accepted := A, rejected := R} = dev(Dev), A + R >= N end,
+    case toroco_test_lib:poll(Counted, 10000) of
+        ok -> ok;
+        timeout -> ct:fail({not_counted, N, dev(Dev)})
     end.
 
+%% As toroco_test_lib:await_input/4, failing with the counts only (the
+%% lists are long).
 await_values(A, Input, Expected) ->
     Pred = fun(H) -> [V || {I, V, _} <- H, I =:= Input] =:= Expected end,
     case toroco_fake_actuator:await(A, Pred, 30000) of
         ok -> ok;
         {error, timeout} ->
-            Got = [V || {I, V, _} <- toroco_fake_actuator:history(A), I =:= Input],
-            ct:fail({expected, Input, length(Expected), got, length(Got)})
+            ct:fail({expected, Input, length(Expected), got,
+                     length(toroco_test_lib:values(A, Input))})
     end.

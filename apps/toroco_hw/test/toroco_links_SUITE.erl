@@ -28,13 +28,11 @@ groups() ->
                 tcp_per_peer_limit]}].
 
 init_per_testcase(_Case, Config) ->
-    {ok, _} = application:ensure_all_started(toroco_hw),
+    ok = toroco_test_lib:start(),
     Config.
 
 end_per_testcase(_Case, _Config) ->
-    _ = application:stop(toroco_hw),
-    _ = application:stop(toroco),
-    ok.
+    toroco_test_lib:stop().
 
 %%% ---------------------------------------------------------------------
 %%% Codec
@@ -415,18 +413,11 @@ await_connections(A, Input, PerConnection) ->
     case toroco_fake_actuator:await(A, Pred, ?WAIT) of
         ok -> ok;
         {error, timeout} ->
-            ct:fail({expected, Input, PerConnection,
-                     got, [V || {I, V, _} <- toroco_fake_actuator:history(A), I =:= Input]})
+            ct:fail({expected, Input, PerConnection, got, toroco_test_lib:values(A, Input)})
     end.
 
 await_input(A, Input, Expected) ->
-    Pred = fun(H) -> [V || {I, V, _} <- H, I =:= Input] =:= Expected end,
-    case toroco_fake_actuator:await(A, Pred, ?WAIT) of
-        ok -> ok;
-        {error, timeout} ->
-            ct:fail({expected, Input, Expected,
-                     got, [V || {I, V, _} <- toroco_fake_actuator:history(A), I =:= Input]})
-    end.
+    toroco_test_lib:await_input(A, Input, Expected, ?WAIT).
 
 wait_until(Fun) ->
     wait_until(Fun, ?WAIT).

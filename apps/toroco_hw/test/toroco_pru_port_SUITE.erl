@@ -2,6 +2,7 @@
 %% servos' PWM on a fake sysfs tree in the case's private directory.
 -module(toroco_pru_port_SUITE).
 -import(toroco_test_lib, [wait_until/2]).
+-import(toroco_hw_test_lib, [fake_pwm/3, pwm/3]).
 
 -include_lib("common_test/include/ct.hrl").
 -include_lib("stdlib/include/assert.hrl").
@@ -38,11 +39,7 @@ groups() ->
      {performance, [], [round_trip]}].
 
 init_per_suite(Config) ->
-    Exe = executable(),
-    case filelib:is_regular(Exe) of
-        true -> [{exe, Exe} | Config];
-        false -> {fail, {not_built, Exe, "run make -C c_src/pru_port"}}
-    end.
+    toroco_hw_test_lib:require_pru_port(Config).
 
 end_per_suite(_Config) ->
     ok.
@@ -489,14 +486,6 @@ round_trip(Config) ->
 %%% Helpers
 %%% ---------------------------------------------------------------------
 
-executable() ->
-    case code:priv_dir(toroco_hw) of
-        {error, _} ->
-            filename:join([filename:dirname(code:which(?MODULE)), "..", "priv", "pru_port"]);
-        Dir ->
-            filename:join(Dir, "pru_port")
-    end.
-
 %% A start expected to be refused: the refusal is an exit of the linked
 %% process, which must not take the test case with it.
 start_link(Config, Opts) ->
@@ -529,19 +518,6 @@ servos() ->
 
 wire_left() ->
     {left, 0, 0, 20000000, 1500000, 500000, false}.
-
-fake_pwm(Root, Chip, Ch) ->
-    ChipDir = filename:join(Root, "class/pwm/pwmchip" ++ integer_to_list(Chip)),
-    Dir = filename:join(ChipDir, "pwm" ++ integer_to_list(Ch)),
-    ok = filelib:ensure_dir(filename:join(Dir, "x")),
-    ok = file:write_file(filename:join(ChipDir, "export"), ""),
-    [ok = file:write_file(filename:join(Dir, F), "0\n") || F <- ["period", "duty_cycle", "enable"]],
-    ok.
-
-pwm(Root, Ch, Attr) ->
-    Path = filename:join([Root, "class/pwm/pwmchip0", "pwm" ++ integer_to_list(Ch), Attr]),
-    {ok, Bin} = file:read_file(Path),
-    string:trim(binary_to_list(Bin)).
 
 %% The ADC events in the mailbox now, oldest first.
 adc_events() ->

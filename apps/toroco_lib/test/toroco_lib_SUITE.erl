@@ -25,7 +25,7 @@ groups() ->
                       fear_and_love]}].
 
 init_per_testcase(_Case, Config) ->
-    {ok, _} = application:ensure_all_started(toroco_hw),
+    ok = toroco_test_lib:start(),
     ok = toroco:add_device(sensor, toroco_fake_sensor,
                            #{outputs => [a, b, c, bump, command, odometry]}),
     ok = toroco:add_device(motors, toroco_fake_actuator, #{inputs => [setvel]}),
@@ -36,9 +36,7 @@ init_per_testcase(_Case, Config) ->
     Config.
 
 end_per_testcase(_Case, _Config) ->
-    _ = application:stop(toroco_hw),
-    _ = application:stop(toroco),
-    ok.
+    toroco_test_lib:stop().
 
 %%====================================================================
 %% Parameters

@@ -169,5 +169,4 @@ room(Name, Config) ->
                    atom_to_list(Name) ++ ".world"]).
 
 root() ->
-    Source = proplists:get_value(source, ?MODULE:module_info(compile)),
-    filename:dirname(filename:dirname(filename:dirname(filename:dirname(Source)))).
+    toroco_test_lib:root().

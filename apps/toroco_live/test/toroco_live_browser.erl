@@ -7,8 +7,7 @@
 
 %% The repository's root, from where this module's source is.
 root() ->
-    Src = proplists:get_value(source, ?MODULE:module_info(compile)),
-    filename:dirname(filename:dirname(filename:dirname(filename:dirname(Src)))).
+    toroco_test_lib:root().
 
 web() -> filename:join([root(), "apps", "toroco_live", "web"]).
 

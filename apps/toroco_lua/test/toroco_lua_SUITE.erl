@@ -44,7 +44,7 @@ groups() ->
      {lockstep, [], [lockstep_timers_at_simulated_deadlines]}].
 
 init_per_testcase(_Case, Config) ->
-    {ok, _} = application:ensure_all_started(toroco_hw),
+    ok = toroco_test_lib:start(),
     {ok, _} = application:ensure_all_started(toroco_lua),
     ok = logger:add_handler(lua_suite, ?MODULE, #{config => #{pid => self()}, level => notice}),
     #{level := Level} = logger:get_primary_config(),
@@ -56,8 +56,7 @@ end_per_testcase(Case, Config) ->
     _ = logger:remove_handler(lua_suite),
     ok = logger:set_primary_config(level, ?config(primary_level, Config)),
     %% the behaviors first, so none sees its port go
-    _ = application:stop(toroco_hw),
-    _ = application:stop(toroco),
+    ok = toroco_test_lib:stop(),
     _ = application:stop(toroco_lua),
     ok.
 

@@ -36,8 +36,7 @@ init_per_testcase(_Case, Config) ->
 end_per_testcase(_Case, _Config) ->
     _ = (catch torobot_examples:stop()),
     _ = application:stop(torobot),
-    _ = application:stop(toroco_hw),
-    _ = application:stop(toroco),
+    ok = toroco_test_lib:stop(),
     _ = application:stop(toroco_lua),
     ok.
 
