@@ -118,7 +118,6 @@ all(F, L) ->
                         end
                 end, {ok, []}, L).
 
-%% @doc Whether a peer address may talk to the device.
 %% @doc A link's `inputs' or `outputs' option: a list of names (atoms),
 %% default `[]'.
 -spec names(inputs | outputs, map()) -> {ok, [atom()]} | {error, {bad_option, {atom(), term()}}}.
@@ -142,6 +141,7 @@ link_interface(Opts) ->
 atoms(L) when is_list(L) -> lists:usort([A || A <- L, is_atom(A)]);
 atoms(_) -> [].
 
+%% @doc Whether a peer address may talk to the device.
 -spec allowed(inet:ip_address(), allow()) -> boolean().
 allowed(_Ip, any) -> true;
 allowed(Ip, List) -> lists:member(Ip, List).
