@@ -8,7 +8,7 @@
 
 -spec start_link(non_neg_integer()) -> {ok, pid()} | {error, term()}.
 start_link(L) ->
-    toroco_sup:start_hibernating(self, ?MODULE, L).
+    supervisor:start_link(?MODULE, L).
 
 -spec init(non_neg_integer()) -> {ok, {supervisor:sup_flags(), []}}.
 init(_L) ->

@@ -18,7 +18,7 @@
 
 -spec start_link() -> {ok, pid()} | {error, term()}.
 start_link() ->
-    toroco_sup:start_hibernating({local, ?MODULE}, ?MODULE, []).
+    supervisor:start_link({local, ?MODULE}, ?MODULE, []).
 
 %% @doc Starts the consumer of `Key' run by `Mod' (`toroco_router' or
 %% `toroco_gate'); `{error, {already_started, Pid}}' if it runs.

@@ -23,26 +23,11 @@
 -module(toroco_sup).
 -behaviour(supervisor).
 
--export([start_link/0, start_hibernating/3, init/1]).
+-export([start_link/0, init/1]).
 
 -spec start_link() -> {ok, pid()} | {error, term()}.
 start_link() ->
     supervisor:start_link({local, ?MODULE}, ?MODULE, []).
-
-%% @doc Starts a supervisor (callback module `Mod', `Name' as for
-%% `supervisor:start_link/2,3') that hibernates after a second without
-%% messages. The supervisors of routers and of a layer's behaviors keep a
-%% record per child, thousands of them on a large robot: a supervisor's heap
-%% grows by steps and keeps up to half as much again as it holds, and
-%% hibernation gives the slack back (about 500 bytes per behavior with its
-%% router at ten thousand). `supervisor:start_link' takes no options; the
-%% supervisor's own gen_server is started here with the one option added,
-%% and the argument it has always been given.
--spec start_hibernating(self | {local, atom()}, module(), term()) -> {ok, pid()} | {error, term()}.
-start_hibernating(self, Mod, Args) ->
-    gen_server:start_link(supervisor, {self, Mod, Args}, [{hibernate_after, 1000}]);
-start_hibernating(Name, Mod, Args) ->
-    gen_server:start_link(Name, supervisor, {Name, Mod, Args}, [{hibernate_after, 1000}]).
 
 -spec init([]) -> {ok, {supervisor:sup_flags(), [supervisor:child_spec()]}}.
 init([]) ->
