@@ -249,6 +249,7 @@ init(Args = #{file := File}) ->
             D = #{name => Name, file => File, args => Args,
                   owner => erlang:monitor(process, Owner), id => none, port => none,
                   reattached => [], out => queue:new(), seq => 1, batch => [],
+                  watched => false, stuck_ms => toroco_lua_port:stuck_ms(),
                   window => window(maps:get(window, Args, env(window)))},
             case open(D) of
                 {ok, D1, Actions} -> {ok, running, D1, actions(Actions, D1)};
@@ -287,20 +288,27 @@ handle_event({timeout, {lua, _}}, {lua_timer, _OldId, _, _}, _S, _D) ->
     keep_state_and_data;                      % a timer of the state before a reload
 handle_event(info, {toroco_lua_port, reply, Ref, Bin}, _S, D = #{out := Out}) ->
     case queue:peek(Out) of
-        {value, Ref} -> activation(toroco_lua_port:answer(Ref, Bin), D#{out := queue:drop(Out)});
+        {value, {Ref, _}} -> activation(toroco_lua_port:answer(Ref, Bin), D#{out := queue:drop(Out)});
         _ -> keep_state_and_data              % of a state it no longer has
     end;
 handle_event(info, {?MODULE, flush, Id}, _S, D = #{id := Id}) ->
     flushed(D);
 handle_event(info, {?MODULE, flush, _OldId}, _S, _D) ->
     keep_state_and_data;
-handle_event(info, {timeout, _, {lua_stuck, Ref}}, _S, #{out := Out, port := Port}) ->
-    _ = case queue:peek(Out) of
-            {value, Ref} -> toroco_lua_port:stuck(Port);
-            {value, Newer} -> watchdog(Newer);
-            empty -> ok
-        end,
-    keep_state_and_data;
+handle_event(info, {timeout, _, lua_stuck}, _S, D = #{out := Out, port := Port}) ->
+    case queue:peek(Out) of
+        {value, {_, Due}} ->
+            case Due - erlang:monotonic_time(millisecond) of
+                Left when Left =< 0 ->
+                    ok = toroco_lua_port:stuck(Port),
+                    {keep_state, D#{watched := false}};
+                Left ->
+                    _ = erlang:start_timer(Left, self(), lua_stuck),
+                    keep_state_and_data
+            end;
+        empty ->
+            {keep_state, D#{watched := false}}
+    end;
 handle_event(info, {'DOWN', MRef, process, _, Why}, _S, #{owner := MRef}) ->
     {stop, {lua_port_down, Why}};
 handle_event(info, ?LUA_PORT_DOWN(Ids, Why), _S, D = #{id := Id}) ->
@@ -389,11 +397,11 @@ call(D, Req) ->
 %% While more messages wait in the mailbox, the requests are kept and
 %% written together when the `flush' this sends itself comes, after them:
 %% one write for a burst of inputs.
-pipeline(Req, D = #{id := Id, out := Out, seq := Seq, window := Window, batch := Batch}) ->
-    case toroco_lua_port:encode(conn(D), Seq, Req) of
+pipeline(Req, D0 = #{id := Id, out := Out, seq := Seq, window := Window, batch := Batch}) ->
+    case toroco_lua_port:encode(conn(D0), Seq, Req) of
         {ok, Ref, Frame} ->
-            _ = queue:is_empty(Out) andalso watchdog(Ref),
-            Out1 = queue:in(Ref, Out),
+            D = watchdog(D0),
+            Out1 = queue:in({Ref, erlang:monotonic_time(millisecond) + maps:get(stuck_ms, D)}, Out),
             D1 = D#{out := Out1, seq := Seq rem 65535 + 1, batch := [Frame | Batch]},
             case queue:len(Out1) >= Window of
                 true -> oldest(D1);
@@ -408,7 +416,7 @@ pipeline(Req, D = #{id := Id, out := Out, seq := Seq, window := Window, batch :=
                     end
             end;
         Error ->
-            activation(Error, D)
+            activation(Error, D0)
     end.
 
 %% The requests kept, written.
@@ -430,7 +438,7 @@ flushed(D) ->
 oldest(D) ->
     case flush(D) of
         {ok, D1 = #{out := Out}} ->
-            {{value, Oldest}, Out1} = queue:out(Out),
+            {{value, {Oldest, _}}, Out1} = queue:out(Out),
             activation(toroco_lua_port:await(conn(D1), Oldest), D1#{out := Out1});
         {Error, D1} ->
             activation(Error, D1)
@@ -446,7 +454,7 @@ drain(D) ->
 drain(D = #{out := Out}, Acc) ->
     case queue:out(Out) of
         {empty, _} -> {keep_state, D, lists:append(lists:reverse(Acc))};
-        {{value, Ref}, Out1} ->
+        {{value, {Ref, _}}, Out1} ->
             case activation(toroco_lua_port:await(conn(D), Ref), D#{out := Out1}) of
                 {keep_state, D1, Actions} -> drain(D1, [Actions | Acc]);
                 Stop -> Stop
@@ -457,9 +465,15 @@ then(Actions, {keep_state, D, More}) -> {keep_state, D, Actions ++ More};
 then(_Actions, Stop) -> Stop.
 
 %% A request unanswered for stuck_ms gets the program killed (the owner
-%% checks it is still the one running); checked for the oldest in flight.
-watchdog(Ref) ->
-    erlang:start_timer(toroco_lua_port:stuck_ms(), self(), {lua_stuck, Ref}).
+%% checks it is still the one running). Each request in flight carries the
+%% time it is due by; one timer at a time checks the oldest and is set again
+%% for the next one's due time, rather than one timer (and its message, two
+%% seconds later) for every activation.
+watchdog(D = #{watched := true}) ->
+    D;
+watchdog(D = #{stuck_ms := Ms}) ->
+    _ = erlang:start_timer(Ms, self(), lua_stuck),
+    D#{watched := true}.
 
 activation({ok, Actions}, D) ->
     {keep_state, D, actions(Actions, D)};
