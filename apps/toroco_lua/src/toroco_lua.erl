@@ -286,11 +286,10 @@ handle_event({timeout, {lua, Task}}, {lua_timer, Id, Task, Seq}, _S, D = #{id :=
     activate({timer, toroco_clock:now_ms(), Task, Seq}, D);
 handle_event({timeout, {lua, _}}, {lua_timer, _OldId, _, _}, _S, _D) ->
     keep_state_and_data;                      % a timer of the state before a reload
-handle_event(info, {toroco_lua_port, reply, Ref, Bin}, _S, D = #{out := Out}) ->
-    case queue:peek(Out) of
-        {value, {Ref, _}} -> activation(toroco_lua_port:answer(Ref, Bin), D#{out := queue:drop(Out)});
-        _ -> keep_state_and_data              % of a state it no longer has
-    end;
+handle_event(info, {toroco_lua_port, replies, Replies}, _S, D) ->
+    replies(Replies, D);
+handle_event(info, {toroco_lua_port, reply, _Ref, _Bin}, _S, _D) ->
+    keep_state_and_data;                      % a call's, after its caller gave up
 handle_event(info, {?MODULE, flush, Id}, _S, D = #{id := Id}) ->
     flushed(D);
 handle_event(info, {?MODULE, flush, _OldId}, _S, _D) ->
@@ -434,12 +433,45 @@ flushed(D) ->
         {Error, D1} -> activation(Error, D1)
     end.
 
-%% The window is full: the oldest answer, awaited.
+%% The answers to pipelined activations that came together, in order: the
+%% actions of all of them, one event. One that ends the behavior (or fails)
+%% after others is left for the next event, inserted before anything else
+%% (`next_event'), so that the emissions before it go out first.
+replies(Replies, D) ->
+    replies(Replies, D, []).
+
+replies([], D, Acc) ->
+    {keep_state, D, lists:append(lists:reverse(Acc))};
+replies([{Ref, Bin} | More] = Replies, D = #{out := Out}, Acc) ->
+    case queue:peek(Out) of
+        {value, {Ref, _}} ->
+            case toroco_lua_port:answer(Ref, Bin) of
+                {ok, _} = Ok ->
+                    {keep_state, D1, Actions} = activation(Ok, D#{out := queue:drop(Out)}),
+                    replies(More, D1, [Actions | Acc]);
+                _Other when Acc =/= [] ->
+                    Next = {next_event, info, {toroco_lua_port, replies, Replies}},
+                    {keep_state, D, lists:append(lists:reverse(Acc)) ++ [Next]};
+                Other ->
+                    case activation(Other, D#{out := queue:drop(Out)}) of
+                        {keep_state, D1, Actions} -> replies(More, D1, [Actions]);
+                        Stop -> Stop
+                    end
+            end;
+        _ ->
+            replies(More, D, Acc)             % of a state it no longer has
+    end.
+
+%% The window is full: the oldest answer, awaited, with those that came
+%% with it.
 oldest(D) ->
     case flush(D) of
         {ok, D1 = #{out := Out}} ->
-            {{value, {Oldest, _}}, Out1} = queue:out(Out),
-            activation(toroco_lua_port:await(conn(D1), Oldest), D1#{out := Out1});
+            {value, {Oldest, _}} = queue:peek(Out),
+            case toroco_lua_port:await_replies(conn(D1), Oldest) of
+                {replies, Replies} -> replies(Replies, D1);
+                Error -> activation(Error, D1)
+            end;
         {Error, D1} ->
             activation(Error, D1)
     end.
@@ -452,13 +484,30 @@ drain(D) ->
     end.
 
 drain(D = #{out := Out}, Acc) ->
-    case queue:out(Out) of
-        {empty, _} -> {keep_state, D, lists:append(lists:reverse(Acc))};
-        {{value, {Ref, _}}, Out1} ->
-            case activation(toroco_lua_port:await(conn(D), Ref), D#{out := Out1}) of
-                {keep_state, D1, Actions} -> drain(D1, [Actions | Acc]);
-                Stop -> Stop
+    case queue:peek(Out) of
+        empty -> {keep_state, D, lists:append(lists:reverse(Acc))};
+        {value, {Ref, _}} ->
+            case toroco_lua_port:await_replies(conn(D), Ref) of
+                {replies, Replies} -> drained(Replies, D, Acc);
+                Error ->
+                    case activation(Error, D#{out := queue:drop(Out)}) of
+                        {keep_state, D1, Actions} -> drain(D1, [Actions | Acc]);
+                        Stop -> Stop
+                    end
             end
+    end.
+
+%% The answers awaited while draining, each in turn.
+drained([], D, Acc) ->
+    drain(D, Acc);
+drained([{Ref, Bin} | More], D = #{out := Out}, Acc) ->
+    case queue:peek(Out) of
+        {value, {Ref, _}} ->
+            case activation(toroco_lua_port:answer(Ref, Bin), D#{out := queue:drop(Out)}) of
+                {keep_state, D1, Actions} -> drained(More, D1, [Actions | Acc]);
+                Stop -> Stop
+            end;
+        _ -> drained(More, D, Acc)
     end.
 
 then(Actions, {keep_state, D, More}) -> {keep_state, D, Actions ++ More};
