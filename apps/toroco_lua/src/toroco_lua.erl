@@ -8,7 +8,8 @@
 %% state, written to the program by this process; up to `window' are in
 %% flight (one at a time, inside `handle_input/4', in lockstep: see
 %% `activate/2'), and what the Lua code emitted comes back, in order, as the
-%% actions of the answer's message: `set_output{motors_setvel = {20, 20}}' becomes
+%% actions of the message that brings the answer:
+%% `set_output{motors_setvel = {20, 20}}' becomes
 %% `{set, #{motors_setvel => {20, 20}}}'. Time is the runtime's: the state
 %% reads `toroco_clock:now_ms()' and its timers (`wait_for_input' timeouts,
 %% `sched.sleep') are this process's gen_statem timeouts, so Lua behaviors
