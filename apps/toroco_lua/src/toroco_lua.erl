@@ -403,11 +403,16 @@ pipeline(Req, D0 = #{id := Id, out := Out, seq := Seq, window := Window, batch :
             D = watchdog(D0),
             Out1 = queue:in({Ref, erlang:monotonic_time(millisecond) + maps:get(stuck_ms, D)}, Out),
             D1 = D#{out := Out1, seq := Seq rem 65535 + 1, batch := [Frame | Batch]},
-            case queue:len(Out1) >= Window of
-                true -> oldest(D1);
-                false when Batch =/= [] ->
-                    {keep_state, D1, []};     % its flush is on its way
-                false ->
+            case {queue:len(Out1) >= Window, Batch =:= [] andalso queue:is_empty(Out)} of
+                {true, _} -> oldest(D1);
+                {false, false} ->
+                    %% its flush is on its way, or requests written are in
+                    %% flight: this one is written, with whatever else
+                    %% comes meanwhile, when their answers come (the
+                    %% program would take it after them anyway): one write
+                    %% instead of one per input
+                    {keep_state, D1, []};
+                {false, true} ->
                     case process_info(self(), message_queue_len) of
                         {message_queue_len, 0} -> flushed(D1);
                         _ ->
@@ -438,8 +443,16 @@ flushed(D) ->
 %% actions of all of them, one event. One that ends the behavior (or fails)
 %% after others is left for the next event, inserted before anything else
 %% (`next_event'), so that the emissions before it go out first.
-replies(Replies, D) ->
-    replies(Replies, D, []).
+replies(Replies, D0) ->
+    case replies(Replies, D0, []) of
+        {keep_state, D, Actions} ->
+            case flush(D) of
+                {ok, D1} -> {keep_state, D1, Actions};
+                {Error, D1} -> then(Actions, activation(Error, D1))
+            end;
+        Stop ->
+            Stop
+    end.
 
 replies([], D, Acc) ->
     {keep_state, D, lists:append(lists:reverse(Acc))};
