@@ -8,7 +8,8 @@
 %% state, written to the program by this process; up to `window' are in
 %% flight (one at a time, inside `handle_input/4', in lockstep: see
 %% `activate/2'), and what the Lua code emitted comes back, in order, as the
-%% actions of the answer's message: `set_output{motors_setvel = {20, 20}}' becomes
+%% actions of the message that brings the answer:
+%% `set_output{motors_setvel = {20, 20}}' becomes
 %% `{set, #{motors_setvel => {20, 20}}}'. Time is the runtime's: the state
 %% reads `toroco_clock:now_ms()' and its timers (`wait_for_input' timeouts,
 %% `sched.sleep') are this process's gen_statem timeouts, so Lua behaviors
@@ -249,6 +250,7 @@ init(Args = #{file := File}) ->
             D = #{name => Name, file => File, args => Args,
                   owner => erlang:monitor(process, Owner), id => none, port => none,
                   reattached => [], out => queue:new(), seq => 1, batch => [],
+                  watched => false, stuck_ms => toroco_lua_port:stuck_ms(),
                   window => window(maps:get(window, Args, env(window)))},
             case open(D) of
                 {ok, D1, Actions} -> {ok, running, D1, actions(Actions, D1)};
@@ -285,22 +287,28 @@ handle_event({timeout, {lua, Task}}, {lua_timer, Id, Task, Seq}, _S, D = #{id :=
     activate({timer, toroco_clock:now_ms(), Task, Seq}, D);
 handle_event({timeout, {lua, _}}, {lua_timer, _OldId, _, _}, _S, _D) ->
     keep_state_and_data;                      % a timer of the state before a reload
-handle_event(info, {toroco_lua_port, reply, Ref, Bin}, _S, D = #{out := Out}) ->
-    case queue:peek(Out) of
-        {value, Ref} -> activation(toroco_lua_port:answer(Ref, Bin), D#{out := queue:drop(Out)});
-        _ -> keep_state_and_data              % of a state it no longer has
-    end;
+handle_event(info, {toroco_lua_port, replies, Replies}, _S, D) ->
+    replies(Replies, D);
+handle_event(info, {toroco_lua_port, reply, _Ref, _Bin}, _S, _D) ->
+    keep_state_and_data;                      % a call's, after its caller gave up
 handle_event(info, {?MODULE, flush, Id}, _S, D = #{id := Id}) ->
     flushed(D);
 handle_event(info, {?MODULE, flush, _OldId}, _S, _D) ->
     keep_state_and_data;
-handle_event(info, {timeout, _, {lua_stuck, Ref}}, _S, #{out := Out, port := Port}) ->
-    _ = case queue:peek(Out) of
-            {value, Ref} -> toroco_lua_port:stuck(Port);
-            {value, Newer} -> watchdog(Newer);
-            empty -> ok
-        end,
-    keep_state_and_data;
+handle_event(info, {timeout, _, lua_stuck}, _S, D = #{out := Out, port := Port}) ->
+    case queue:peek(Out) of
+        {value, {_, Due}} ->
+            case Due - erlang:monotonic_time(millisecond) of
+                Left when Left =< 0 ->
+                    ok = toroco_lua_port:stuck(Port),
+                    {keep_state, D#{watched := false}};
+                Left ->
+                    _ = erlang:start_timer(Left, self(), lua_stuck),
+                    keep_state_and_data
+            end;
+        empty ->
+            {keep_state, D#{watched := false}}
+    end;
 handle_event(info, {'DOWN', MRef, process, _, Why}, _S, #{owner := MRef}) ->
     {stop, {lua_port_down, Why}};
 handle_event(info, ?LUA_PORT_DOWN(Ids, Why), _S, D = #{id := Id}) ->
@@ -389,17 +397,22 @@ call(D, Req) ->
 %% While more messages wait in the mailbox, the requests are kept and
 %% written together when the `flush' this sends itself comes, after them:
 %% one write for a burst of inputs.
-pipeline(Req, D = #{id := Id, out := Out, seq := Seq, window := Window, batch := Batch}) ->
-    case toroco_lua_port:encode(conn(D), Seq, Req) of
+pipeline(Req, D0 = #{id := Id, out := Out, seq := Seq, window := Window, batch := Batch}) ->
+    case toroco_lua_port:encode(conn(D0), Seq, Req) of
         {ok, Ref, Frame} ->
-            _ = queue:is_empty(Out) andalso watchdog(Ref),
-            Out1 = queue:in(Ref, Out),
+            D = watchdog(D0),
+            Out1 = queue:in({Ref, erlang:monotonic_time(millisecond) + maps:get(stuck_ms, D)}, Out),
             D1 = D#{out := Out1, seq := Seq rem 65535 + 1, batch := [Frame | Batch]},
-            case queue:len(Out1) >= Window of
-                true -> oldest(D1);
-                false when Batch =/= [] ->
-                    {keep_state, D1, []};     % its flush is on its way
-                false ->
+            case {queue:len(Out1) >= Window, Batch =:= [] andalso queue:is_empty(Out)} of
+                {true, _} -> oldest(D1);
+                {false, false} ->
+                    %% its flush is on its way, or requests written are in
+                    %% flight: this one is written, with whatever else
+                    %% comes meanwhile, when their answers come (the
+                    %% program would take it after them anyway): one write
+                    %% instead of one per input
+                    {keep_state, D1, []};
+                {false, true} ->
                     case process_info(self(), message_queue_len) of
                         {message_queue_len, 0} -> flushed(D1);
                         _ ->
@@ -408,7 +421,7 @@ pipeline(Req, D = #{id := Id, out := Out, seq := Seq, window := Window, batch :=
                     end
             end;
         Error ->
-            activation(Error, D)
+            activation(Error, D0)
     end.
 
 %% The requests kept, written.
@@ -426,12 +439,53 @@ flushed(D) ->
         {Error, D1} -> activation(Error, D1)
     end.
 
-%% The window is full: the oldest answer, awaited.
+%% The answers to pipelined activations that came together, in order: the
+%% actions of all of them, one event. One that ends the behavior (or fails)
+%% after others is left for the next event, inserted before anything else
+%% (`next_event'), so that the emissions before it go out first.
+replies(Replies, D0) ->
+    case replies(Replies, D0, []) of
+        {keep_state, D, Actions} ->
+            case flush(D) of
+                {ok, D1} -> {keep_state, D1, Actions};
+                {Error, D1} -> then(Actions, activation(Error, D1))
+            end;
+        Stop ->
+            Stop
+    end.
+
+replies([], D, Acc) ->
+    {keep_state, D, lists:append(lists:reverse(Acc))};
+replies([{Ref, Bin} | More] = Replies, D = #{out := Out}, Acc) ->
+    case queue:peek(Out) of
+        {value, {Ref, _}} ->
+            case toroco_lua_port:answer(Ref, Bin) of
+                {ok, _} = Ok ->
+                    {keep_state, D1, Actions} = activation(Ok, D#{out := queue:drop(Out)}),
+                    replies(More, D1, [Actions | Acc]);
+                _Other when Acc =/= [] ->
+                    Next = {next_event, info, {toroco_lua_port, replies, Replies}},
+                    {keep_state, D, lists:append(lists:reverse(Acc)) ++ [Next]};
+                Other ->
+                    case activation(Other, D#{out := queue:drop(Out)}) of
+                        {keep_state, D1, Actions} -> replies(More, D1, [Actions]);
+                        Stop -> Stop
+                    end
+            end;
+        _ ->
+            replies(More, D, Acc)             % of a state it no longer has
+    end.
+
+%% The window is full: the oldest answer, awaited, with those that came
+%% with it.
 oldest(D) ->
     case flush(D) of
         {ok, D1 = #{out := Out}} ->
-            {{value, Oldest}, Out1} = queue:out(Out),
-            activation(toroco_lua_port:await(conn(D1), Oldest), D1#{out := Out1});
+            {value, {Oldest, _}} = queue:peek(Out),
+            case toroco_lua_port:await_replies(conn(D1), Oldest) of
+                {replies, Replies} -> replies(Replies, D1);
+                Error -> activation(Error, D1)
+            end;
         {Error, D1} ->
             activation(Error, D1)
     end.
@@ -444,22 +498,45 @@ drain(D) ->
     end.
 
 drain(D = #{out := Out}, Acc) ->
-    case queue:out(Out) of
-        {empty, _} -> {keep_state, D, lists:append(lists:reverse(Acc))};
-        {{value, Ref}, Out1} ->
-            case activation(toroco_lua_port:await(conn(D), Ref), D#{out := Out1}) of
-                {keep_state, D1, Actions} -> drain(D1, [Actions | Acc]);
-                Stop -> Stop
+    case queue:peek(Out) of
+        empty -> {keep_state, D, lists:append(lists:reverse(Acc))};
+        {value, {Ref, _}} ->
+            case toroco_lua_port:await_replies(conn(D), Ref) of
+                {replies, Replies} -> drained(Replies, D, Acc);
+                Error ->
+                    case activation(Error, D#{out := queue:drop(Out)}) of
+                        {keep_state, D1, Actions} -> drain(D1, [Actions | Acc]);
+                        Stop -> Stop
+                    end
             end
+    end.
+
+%% The answers awaited while draining, each in turn.
+drained([], D, Acc) ->
+    drain(D, Acc);
+drained([{Ref, Bin} | More], D = #{out := Out}, Acc) ->
+    case queue:peek(Out) of
+        {value, {Ref, _}} ->
+            case activation(toroco_lua_port:answer(Ref, Bin), D#{out := queue:drop(Out)}) of
+                {keep_state, D1, Actions} -> drained(More, D1, [Actions | Acc]);
+                Stop -> Stop
+            end;
+        _ -> drained(More, D, Acc)
     end.
 
 then(Actions, {keep_state, D, More}) -> {keep_state, D, Actions ++ More};
 then(_Actions, Stop) -> Stop.
 
 %% A request unanswered for stuck_ms gets the program killed (the owner
-%% checks it is still the one running); checked for the oldest in flight.
-watchdog(Ref) ->
-    erlang:start_timer(toroco_lua_port:stuck_ms(), self(), {lua_stuck, Ref}).
+%% checks it is still the one running). Each request in flight carries the
+%% time it is due by; one timer at a time checks the oldest and is set again
+%% for the next one's due time, rather than one timer (and its message, two
+%% seconds later) for every activation.
+watchdog(D = #{watched := true}) ->
+    D;
+watchdog(D = #{stuck_ms := Ms}) ->
+    _ = erlang:start_timer(Ms, self(), lua_stuck),
+    D#{watched := true}.
 
 activation({ok, Actions}, D) ->
     {keep_state, D, actions(Actions, D)};

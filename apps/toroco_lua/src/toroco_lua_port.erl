@@ -14,7 +14,11 @@
 %% first bytes (no decoding) and forwards the bytes to the state's process,
 %% which decodes them. This saves the hop through this process on the way
 %% in and the decoding in it on the way out; what the program answers is
-%% what the behavior reads, in order, so nothing else is matched.
+%% what the behavior reads, in order, so nothing else is matched. The
+%% answers to a state's pipelined requests (`Seq' > 0) that one read brought
+%% go to its process in one message, `{toroco_lua_port, replies, [{Ref,
+%% Bytes}]}', one event for the behavior instead of one each; a `Seq' 0
+%% answer (`call/2''s, awaited alone) goes alone.
 %%
 %% Its own requests (`open', `close', `ping', `raw') carry negative refs and
 %% wait in a FIFO queue (a frame the program could not read, a `bad_frame',
@@ -39,7 +43,8 @@
 %%     <td>the program's result for that request</td></tr>
 %% <tr><td>frame `{Op, Id, Id, ...}'</td><td>a Lua behavior → the program</td>
 %%     <td>`input', `timer', `waits', `memory'</td>
-%%     <td>`{toroco_lua_port, reply, Id, Bytes}' forwarded by the owner</td></tr>
+%%     <td>`{toroco_lua_port, reply, Ref, Bytes}' (`Seq' 0) or
+%%     `{toroco_lua_port, replies, [{Ref, Bytes}]}' forwarded by the owner</td></tr>
 %% <tr><td>cast `{stuck, Port, Op}'</td><td>a Lua behavior → owner</td>
 %%     <td>no answer in `stuck_ms'</td><td>none: the program is killed</td></tr>
 %% <tr><td>`{toroco_lua_port, down, Ids, Why}'</td><td>owner → each behavior with a state</td>
@@ -60,7 +65,7 @@
 
 -export([start_link/0, os_pid/0, ping/0, raw/1, states/0,
          open/5, input/4, timer/4, waits/1, memory/1, close/1, close_all/0, crossable/1,
-         request/3, encode/3, write/2, answer/2, await/2, stuck/1, stuck_ms/0]).
+         request/3, encode/3, write/2, answer/2, await/2, await_replies/2, stuck/1, stuck_ms/0]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3]).
 -export_type([id/0, conn/0, ref/0, request/0, action/0, result/0, limits/0]).
 
@@ -160,10 +165,12 @@ memory(C) ->
     call(C, memory).
 
 %% @doc Writes a request of the state to the program without waiting:
-%% `{ok, Ref}', and its answer comes to the calling process as
-%% `{toroco_lua_port, reply, Ref, Bytes}' (read it with `answer/2', or
-%% wait for it with `await/2'). `Seq' (1..65535) tells apart the requests
-%% of one state in flight together; 0 is `call/2''s.
+%% `{ok, Ref}', and its answer comes to the calling process: for `Seq' 0
+%% (`call/2''s) as `{toroco_lua_port, reply, Ref, Bytes}' (read it with
+%% `answer/2', or wait for it with `await/2'); for `Seq' 1..65535, which
+%% tells apart the requests of one state in flight together, in a
+%% `{toroco_lua_port, replies, [{Ref, Bytes}]}' with the answers after it
+%% that came in the same read (wait for it with `await_replies/2').
 -spec request(conn(), 0..65535, request()) -> {ok, ref()} | {error, term()}.
 request(C, Seq, Req) ->
     case encode(C, Seq, Req) of
@@ -208,7 +215,14 @@ answer(Ref, Bin) ->
 %% owner is asked to kill the program and its word is awaited.
 -spec await(conn(), ref()) -> term().
 await({Id, Port, OwnerMon}, Ref) ->
-    await(Id, Ref, Port, OwnerMon, stuck_ms()).
+    await(Id, Ref, one, Port, OwnerMon, stuck_ms()).
+
+%% @doc As `await/2', for a pipelined request: `{replies, [{Ref, Bytes} |
+%% Later]}', its answer and those to the state's later requests that came
+%% with it, or an error.
+-spec await_replies(conn(), ref()) -> {replies, [{ref(), binary()}, ...]} | {error, term()}.
+await_replies({Id, Port, OwnerMon}, Ref) ->
+    await(Id, Ref, many, Port, OwnerMon, stuck_ms()).
 
 %% One request, its answer awaited.
 call(C, Req) ->
@@ -250,14 +264,16 @@ list_crossable([], _D) -> true;
 list_crossable([H | T], D) -> crossable(H, D) andalso list_crossable(T, D);
 list_crossable(_Improper, _D) -> false.
 
-await(Id, Ref, Port, OwnerMon, Wait) ->
+await(Id, Ref, Kind, Port, OwnerMon, Wait) ->
     receive
-        {?MODULE, reply, Ref, Bin} ->
+        {?MODULE, reply, Ref, Bin} when Kind =:= one ->
             answer(Ref, Bin);
+        {?MODULE, replies, [{Ref, _} | _] = Replies} when Kind =:= many ->
+            {replies, Replies};
         ?LUA_PORT_DOWN(Ids, Why) ->
             case lists:member(Id, Ids) of
                 true -> {error, {lua_port_down, Why}};
-                false -> await(Id, Ref, Port, OwnerMon, Wait)  % about a state it had before
+                false -> await(Id, Ref, Kind, Port, OwnerMon, Wait)  % about a state it had before
             end;
         {'DOWN', OwnerMon, process, _, Why} ->
             {error, {lua_port_owner_down, Why}}
@@ -266,7 +282,7 @@ await(Id, Ref, Port, OwnerMon, Wait) ->
                 ?CALL_TIMEOUT -> {error, {lua_port_timeout, Ref}};
                 _ ->
                     stuck(Port),
-                    await(Id, Ref, Port, OwnerMon, ?CALL_TIMEOUT)
+                    await(Id, Ref, Kind, Port, OwnerMon, ?CALL_TIMEOUT)
             end
     end.
 
@@ -367,7 +383,7 @@ handle_event({call, From}, {close_all, Pid}, _S, D = #d{clients = Cs}) ->
     end;
 handle_event(info, {Port, {data, Bytes}}, _S, D = #d{port = Port, rest = Rest}) ->
     {Frames, Rest1} = cut(case Rest of <<>> -> Bytes; _ -> <<Rest/binary, Bytes/binary>> end, []),
-    keep(D, lists:foldl(fun frame_in/2, D#d{rest = Rest1}, Frames));
+    keep(D, frames_in(Frames, none, D#d{rest = Rest1}));
 handle_event(cast, {stuck, Port}, _S, #d{port = Port, os_pid = OsPid}) ->
     logger:error("toroco_lua_port: lua_port has not answered a Lua behavior in ~b ms; "
                  "killing it", [stuck_ms()], ?LOG),
@@ -427,10 +443,35 @@ watch(#d{pending = Q0}, #d{pending = Q}) ->
 cut(<<Len:32, Frame:Len/binary, Rest/binary>>, Acc) -> cut(Rest, [Frame | Acc]);
 cut(Rest, Acc) -> {lists:reverse(Acc), binary:copy(Rest)}.
 
+%% The answers one read brought, in order. A state's answers to pipelined
+%% requests are gathered while they follow each other (`Run': the state's
+%% id, its process and the answers so far, last first) and go to its
+%% process in one message.
+frames_in([], Run, D) ->
+    replies(Run),
+    D;
+frames_in([Bin | Bins], Run, D = #d{routes = Routes}) ->
+    case ref(Bin) of
+        Ref when is_integer(Ref), Ref band 16#ffff =/= 0, is_map_key(Ref bsr 16, Routes) ->
+            Id = Ref bsr 16,
+            case Run of
+                {Id, Pid, Rs} -> frames_in(Bins, {Id, Pid, [{Ref, Bin} | Rs]}, D);
+                _ ->
+                    replies(Run),
+                    frames_in(Bins, {Id, map_get(Id, Routes), [{Ref, Bin}]}, D)
+            end;
+        _ ->
+            replies(Run),
+            frames_in(Bins, none, frame_in(Bin, D))
+    end.
+
+replies(none) -> ok;
+replies({_Id, Pid, Rs}) -> Pid ! {?MODULE, replies, lists:reverse(Rs)}, ok.
+
 frame_in(Bin, D = #d{routes = Routes}) ->
     case ref(Bin) of
         Ref when is_integer(Ref), is_map_key(Ref bsr 16, Routes) ->
-            %% a state's answer, to its process as it came
+            %% a state's answer to call/2, to its process as it came
             map_get(Ref bsr 16, Routes) ! {?MODULE, reply, Ref, Bin},
             D;
         Ref when is_integer(Ref), Ref > 0 ->

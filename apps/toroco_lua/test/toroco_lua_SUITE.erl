@@ -13,7 +13,8 @@
 -export([interface_from_the_file/1, values_cross_both_ways/1, a_burst_arrives_whole_and_in_order/1,
          wait_for_input_with_and_without_timeout/1, sleep_on_the_runtime_clock/1,
          latches_reach_the_actuator/1, print_goes_to_the_logger/1,
-         lua_error_names_file_and_line/1, endless_loop_hits_the_budget/1,
+         lua_error_names_file_and_line/1, emissions_before_a_fault_in_a_burst_go_out/1,
+         endless_loop_hits_the_budget/1,
          endless_allocation_hits_the_memory_cap/1, hung_port_is_killed/1,
          lua_faults_leave_erlang_layers_flowing/1, reset_starts_a_fresh_state/1,
          port_killed_every_lua_behavior_back/1, bad_frames_are_answered/1,
@@ -35,7 +36,8 @@ groups() ->
                 latches_reach_the_actuator, print_goes_to_the_logger, reset_starts_a_fresh_state,
                 load_main_errors_name_the_line, load_main_from_the_program_folder,
                 configure_polling_sets_the_period]},
-     {faults, [], [lua_error_names_file_and_line, endless_loop_hits_the_budget,
+     {faults, [], [lua_error_names_file_and_line, emissions_before_a_fault_in_a_burst_go_out,
+                   endless_loop_hits_the_budget,
                    endless_allocation_hits_the_memory_cap, hung_port_is_killed,
                    lua_faults_leave_erlang_layers_flowing,
                    port_killed_every_lua_behavior_back,
@@ -296,6 +298,21 @@ lua_error_names_file_and_line(Config) ->
     await(a, alive, [<<"ok">>, <<"again">>]),
     ok = toroco:inject({e, value}, 2),
     await(a, erl, [1, 2]).
+
+emissions_before_a_fault_in_a_burst_go_out(doc) ->
+    ["A burst of inputs whose last one makes the Lua code fail: their answers come back "
+     "together, and the emissions of those before the failure reach the actuator, in "
+     "order, before the behavior stops"];
+emissions_before_a_fault_in_a_burst_go_out(Config) ->
+    faulty(data(Config, "faulty.lua")),
+    Ref = erlang:monitor(process, whereis(toroco_names:process(f))),
+    Kinds = [<<"k", (integer_to_binary(K))/binary>> || K <- lists:seq(1, 20)],
+    [ok = toroco:inject({s, kind}, K) || K <- Kinds ++ [<<"error">>]],
+    receive {'DOWN', Ref, process, _, Why} -> ?assertMatch({lua_error, _, 7, _}, Why)
+    after 2 * ?WAIT -> ct:fail({not_stopped, f})
+    end,
+    await(a, alive, [<<"ok">> | Kinds]),
+    back(f).
 
 endless_loop_hits_the_budget(doc) ->
     ["An endless loop (in a required module) ends the behavior with {lua_limit, "

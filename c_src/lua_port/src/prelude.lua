@@ -323,13 +323,15 @@ function entry.boot(chunk)
   end)
 end
 
+local function by_order(a, b) return a.order < b.order end
+
 function entry.input(name, ...)
   local vals = {n = select('#', ...), ...}
   local ready = {}
   for _, t in pairs(tasks) do
     if t.input == name then ready[#ready + 1] = t end
   end
-  sort(ready, function(a, b) return a.order < b.order end)
+  if #ready > 1 then sort(ready, by_order) end
   for _, t in ipairs(ready) do
     if tasks[t.id] and t.input == name then
       t.input = nil
