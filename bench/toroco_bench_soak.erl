@@ -44,8 +44,8 @@ main([Dir]) ->
     {ok, _} = application:ensure_all_started(toroco_live),
     {ok, #{http := Http, foxglove := Fox}} = toroco_live:start(#{http => 0, foxglove => 0}),
     ok = toroco_live:record(File, #{}),
-    Page = reader(fun() -> page(Http) end),
-    Foxglove = reader(fun() -> foxglove(Fox) end),
+    Page = reader(soak_page, fun() -> page(Http) end),
+    Foxglove = reader(soak_foxglove, fun() -> foxglove(Fox) end),
     T0 = erlang:monotonic_time(millisecond),
     Src ! {run, {paced, ?PACE_MS}, Total},
     {Samples, Then, Got} = sample(T0, Secs, min(60, Secs), [], none, 0),
@@ -75,7 +75,8 @@ sample(T0, Secs, Snap, Acc, Then, Got) when length(Acc) < Secs ->
     K = length(Acc) + 1,
     Arrived = arrivals(T0 + K * 1000, 0),
     Mem = maps:from_list(erlang:memory()),
-    S = #{mem => Mem, procs => erlang:system_info(process_count), arrived => Arrived},
+    S = #{mem => Mem, own => own_memory(), procs => erlang:system_info(process_count),
+          arrived => Arrived},
     Then1 = case K of Snap -> proc_mems(); _ -> Then end,
     sample(T0, Secs, Snap, [S | Acc], Then1, Got + Arrived);
 sample(_T0, _Secs, _Snap, Acc, Then, Got) ->
@@ -98,28 +99,43 @@ settle(Src, Total, Got, Deadline) ->
                         Deadline)
     end.
 
+%% What the benchmark's own processes hold: this one (its samples), the
+%% clients' readers and the page's socket. The page and the Foxglove client
+%% are a browser and Foxglove on another machine in real use, not part of
+%% the robot's node.
+own_memory() ->
+    lists:sum([M || P <- [self() | [whereis(N) || N <- [soak_page, soak_page_socket, soak_foxglove]]],
+                    is_pid(P), {memory, M} <- [erlang:process_info(P, memory)]]).
+
 proc_mems() ->
     maps:from_list([{P, M} || P <- processes(), {memory, M} <- [erlang:process_info(P, memory)]]).
 
-%% The five processes alive at both times that grew most, and what
-%% processes started since `Then' hold at the end.
+%% The five processes alive at both times that grew most (with their
+%% message queues at the end), and what processes started since `Then'
+%% hold at the end.
 grown(Then, Now) ->
     Both = [{M - maps:get(P, Then), P, maps:get(P, Then), M}
             || {P, M} <- maps:to_list(Now), is_map_key(P, Then)],
     Top = lists:sublist(lists:reverse(lists:sort(Both)), 5),
     New = maps:without(maps:keys(Then), Now),
-    #{top => [{who(P), Was, Is} || {_, P, Was, Is} <- Top],
+    Queue = fun(P) -> case erlang:process_info(P, message_queue_len) of
+                          {message_queue_len, Q} -> Q;
+                          undefined -> 0
+                      end
+            end,
+    #{top => [{who(P), Was, Is, Queue(P)} || {_, P, Was, Is} <- Top],
       new => {map_size(New), lists:sum(maps:values(New))}}.
 
-%% A process's registered name, else its pid and what it was started with.
+%% A process's registered name, else its pid, what it was started with
+%% and where it is now.
 who(P) when P =:= self() ->
     "this benchmark (its samples)";
 who(P) ->
-    case erlang:process_info(P, [registered_name, dictionary, initial_call]) of
+    case erlang:process_info(P, [registered_name, dictionary, initial_call, current_function]) of
         [{registered_name, Name} | _] when is_atom(Name) -> atom_to_list(Name);
-        [_, {dictionary, D}, {initial_call, Call}] ->
+        [_, {dictionary, D}, {initial_call, Call}, {current_function, {M1, F1, A1}}] ->
             {M, F, A} = proplists:get_value('$initial_call', D, Call),
-            lists:flatten(io_lib:format("~w (~w:~w/~w)", [P, M, F, A]));
+            lists:flatten(io_lib:format("~w (~w:~w/~w, in ~w:~w/~w)", [P, M, F, A, M1, F1, A1]));
         undefined -> pid_to_list(P)
     end.
 
@@ -127,13 +143,14 @@ who(P) ->
 %% The observers' clients
 %%====================================================================
 
-%% A process holding one client: Start() connects it and returns the
-%% function that takes its counts to the counts after its next message (or
-%% a short wait), how to close it, and the counts to start from. {stop,
-%% From} closes it and answers the counts.
-reader(Start) ->
+%% A process holding one client, registered as `Name': Start() connects
+%% it and returns the function that takes its counts to the counts after
+%% its next message (or a short wait), how to close it, and the counts to
+%% start from. {stop, From} closes it and answers the counts.
+reader(Name, Start) ->
     Parent = self(),
     Pid = spawn_link(fun() ->
+                             true = register(Name, self()),
                              {Next, Close, Counts} = Start(),
                              Parent ! {self(), ready},
                              read(Next, Close, Counts)
@@ -155,6 +172,7 @@ bump(K, N, Counts) -> maps:update_with(K, fun(X) -> X + N end, N, Counts).
 %% A page: every frame the dashboard pushes, read and decoded.
 page(Port) ->
     C = toroco_live_test_client:ws(Port, ""),
+    true = register(soak_page_socket, C),
     {fun(Counts) -> receive {wsc, C, _} -> bump(frames, 1, Counts) after 200 -> Counts end end,
      fun() -> toroco_live_test_client:ws_close(C) end, #{frames => 0}}.
 
@@ -198,28 +216,39 @@ table(#{secs := Secs, samples := Samples, injected := Injected, delivered := Del
     MiB = fun(B) -> B / 1048576 end,
     Med = fun(F, Ss) -> median([F(S) || S <- Ss]) end,
     Mem = fun(K) -> fun(#{mem := M}) -> maps:get(K, M) end end,
+    Robot = fun(#{mem := #{total := T}, own := Own}) -> T - Own end,
     Row = fun({I, Ss}) ->
-                  io_lib:format("| ~b | ~.1f | ~.1f | ~.1f | ~.1f | ~b | ~b |~n",
-                                [I, MiB(Med(Mem(total), Ss)), MiB(Med(Mem(processes), Ss)),
-                                 MiB(Med(Mem(binary), Ss)), MiB(Med(Mem(ets), Ss)),
-                                 Med(fun(#{procs := P}) -> P end, Ss),
+                  io_lib:format("| ~b | ~.1f | ~.1f | ~.1f | ~.1f | ~.1f | ~b | ~b |~n",
+                                [I, MiB(Med(Mem(total), Ss)), MiB(Med(Robot, Ss)),
+                                 MiB(Med(Mem(processes), Ss)), MiB(Med(Mem(binary), Ss)),
+                                 MiB(Med(Mem(ets), Ss)), Med(fun(#{procs := P}) -> P end, Ss),
                                  lists:sum([A || #{arrived := A} <- Ss])])
           end,
-    First = Med(Mem(total), element(2, hd(Minutes))),
-    Last = Med(Mem(total), element(2, lists:last(Minutes))),
-    Change = 100 * (Last - First) / First,
+    %% First and last minute's medians of F, and the change in %.
+    Change = fun(F) ->
+                     First = Med(F, element(2, hd(Minutes))),
+                     Last = Med(F, element(2, lists:last(Minutes))),
+                     {MiB(First), MiB(Last), 100 * (Last - First) / First}
+             end,
+    {First, Last, Whole} = Change(Mem(total)),
+    {RFirst, RLast, Less} = Change(Robot),
+    Flat = fun(C) -> io_lib:format("~s (~ts~.1f %)", [yes(abs(C) =< 100 * ?FLAT), sign(C), C]) end,
     Lost = Injected - Delivered,
     Text = [io_lib:format("~n## Soak: ~b s at 1 kHz with the dashboard, a Foxglove client and a "
                           "recording~n~nThe chain source → relay → sink paced at ~b ms; one page "
                           "connected to the dashboard (flight recorder on), one Foxglove client "
                           "subscribed to all ~b channels, every topic recorded to MCAP. Node "
-                          "memory sampled once a second; medians per minute.~n~n",
+                          "memory sampled once a second; medians per minute. \"Less the "
+                          "benchmark's own\" leaves out this benchmark's process (its samples), "
+                          "the clients' readers and the page's socket.~n~n",
                           [Secs, ?PACE_MS, maps:get(channels, Fx)]),
-            "| minute | memory MiB | processes MiB | binary MiB | ETS MiB | processes | events delivered |\n",
-            "|---:|---:|---:|---:|---:|---:|---:|\n",
+            "| minute | memory MiB | less the benchmark's own MiB | processes MiB | binary MiB "
+            "| ETS MiB | processes | events delivered |\n",
+            "|---:|---:|---:|---:|---:|---:|---:|---:|\n",
             [Row(M) || M <- Minutes],
             io_lib:format("~n| | |~n|---|---:|~n"
-                          "| memory, first minute → last minute | ~.1f → ~.1f MiB (~ts~.1f %) |~n"
+                          "| memory, first minute → last minute | ~.1f → ~.1f MiB |~n"
+                          "| less the benchmark's own, first minute → last minute | ~.1f → ~.1f MiB |~n"
                           "| events injected (source) | ~b |~n"
                           "| events delivered (sink) | ~b |~n"
                           "| tap events dropped: dashboard | ~b |~n"
@@ -228,18 +257,21 @@ table(#{secs := Secs, samples := Samples, injected := Injected, delivered := Del
                           "| recording size | ~.1f MiB |~n"
                           "| Foxglove client: messages received, drops it was told of | ~b, ~b |~n"
                           "| page: frames received | ~b |~n",
-                          [MiB(First), MiB(Last), sign(Change), Change, Injected, Delivered,
+                          [First, Last, RFirst, RLast, Injected, Delivered,
                            maps:get(hub_dropped, R), maps:get(flight_dropped, R),
                            maps:get(recorded, R), maps:get(rec_dropped, R), MiB(maps:get(bytes, R)),
                            maps:get(messages, Fx, 0), maps:get(dropped, Fx, 0), maps:get(frames, R)]),
-            io_lib:format("~nMemory flat (first and last minute within ~b %): ~s~n"
+            io_lib:format("~nMemory flat (first and last minute within ~b %): ~ts; less the "
+                          "benchmark's own: ~ts~n"
                           "Lost on the robot's side = 0: ~s (~b lost)~n",
-                          [round(100 * ?FLAT), yes(abs(Change) =< 100 * ?FLAT), yes(Lost =:= 0), Lost]),
+                          [round(100 * ?FLAT), Flat(Whole), Flat(Less), yes(Lost =:= 0), Lost]),
             io_lib:format("~nProcesses that grew most from the end of the first minute to the end "
                           "(~b processes started meanwhile hold ~.1f KiB):~n~n"
-                          "| process | KiB then | KiB at the end |~n|---|---:|---:|~n",
+                          "| process | KiB then | KiB at the end | messages queued at the end |~n"
+                          "|---|---:|---:|---:|~n",
                           [NewN, NewBytes / 1024]),
-            [io_lib:format("| ~ts | ~.1f | ~.1f |~n", [W, Was / 1024, Is / 1024]) || {W, Was, Is} <- Top]],
+            [io_lib:format("| ~ts | ~.1f | ~.1f | ~b |~n", [W, Was / 1024, Is / 1024, Q])
+             || {W, Was, Is, Q} <- Top]],
     io:format("~ts", [Text]),
     ok = file:write_file(filename:join(Dir, "soak.md"), unicode:characters_to_binary(Text)).
 
