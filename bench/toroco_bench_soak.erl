@@ -16,8 +16,10 @@
 %% what the source injected and the sink got, what each observer dropped or
 %% received, the recording's size, and two verdicts: memory flat (first and
 %% last minute's medians within 10 %) and nothing lost on the robot's side
-%% (delivered = injected). Then the processes that grew most between the
-%% end of the first minute and the end, to say where memory went.
+%% (delivered = injected). Then where memory went: the node's live memory
+%% (every process garbage-collected, which tells data kept from garbage
+%% waiting in old heaps for a full sweep) at the end of the first minute
+%% and at the end, and the processes that grew most in between.
 %% TOROCO_SOAK_S sets the length in seconds (default 600, quick run or not).
 -module(toroco_bench_soak).
 -export([main/1]).
@@ -48,9 +50,10 @@ main([Dir]) ->
     Foxglove = reader(soak_foxglove, fun() -> foxglove(Fox) end),
     T0 = erlang:monotonic_time(millisecond),
     Src ! {run, {paced, ?PACE_MS}, Total},
-    {Samples, Then, Got} = sample(T0, Secs, min(60, Secs), [], none, 0),
+    {Samples, {Then, LiveThen}, Got} = sample(T0, Secs, min(60, Secs), [], none, 0),
     {Injected, Delivered} = settle(Src, Total, Got, erlang:monotonic_time(millisecond) + ?GRACE_MS),
     Grown = grown(Then, proc_mems()),
+    Live = {LiveThen, live_memory()},
     Frames = stop_reader(Page),
     Fx = stop_reader(Foxglove),
     #{tap_dropped := HubDropped} = toroco_live_hub:stats(),
@@ -60,7 +63,7 @@ main([Dir]) ->
     table(#{secs => Secs, samples => lists:reverse(Samples), injected => Injected,
             delivered => Delivered, hub_dropped => HubDropped, flight_dropped => FlightDropped,
             recorded => Recorded, rec_dropped => RecDropped, bytes => filelib:file_size(File),
-            frames => maps:get(frames, Frames), fox => Fx, grown => Grown}, Dir),
+            frames => maps:get(frames, Frames), fox => Fx, grown => Grown, live => Live}, Dir),
     halt(0).
 
 %%====================================================================
@@ -68,16 +71,19 @@ main([Dir]) ->
 %%====================================================================
 
 %% One sample a second, on absolute deadlines, counting the sink's
-%% arrivals in between; the processes' memory at second `Snap' (the end of
-%% the first minute). Returns the samples (newest first), that snapshot and
-%% the arrivals.
+%% arrivals in between; at second `Snap' (the end of the first minute),
+%% after its sample, each process's memory and then the live memory.
+%% Returns the samples (newest first), that snapshot and the arrivals.
 sample(T0, Secs, Snap, Acc, Then, Got) when length(Acc) < Secs ->
     K = length(Acc) + 1,
     Arrived = arrivals(T0 + K * 1000, 0),
     Mem = maps:from_list(erlang:memory()),
     S = #{mem => Mem, own => own_memory(), procs => erlang:system_info(process_count),
           arrived => Arrived},
-    Then1 = case K of Snap -> proc_mems(); _ -> Then end,
+    Then1 = case K of
+                Snap -> Procs = proc_mems(), {Procs, live_memory()};
+                _ -> Then
+            end,
     sample(T0, Secs, Snap, [S | Acc], Then1, Got + Arrived);
 sample(_T0, _Secs, _Snap, Acc, Then, Got) ->
     {Acc, Then, Got}.
@@ -106,6 +112,11 @@ settle(Src, Total, Got, Deadline) ->
 own_memory() ->
     lists:sum([M || P <- [self() | [whereis(N) || N <- [soak_page, soak_page_socket, soak_foxglove]]],
                     is_pid(P), {memory, M} <- [erlang:process_info(P, memory)]]).
+
+%% The node's memory once every process has been garbage-collected.
+live_memory() ->
+    _ = [erlang:garbage_collect(P) || P <- processes()],
+    erlang:memory(total).
 
 proc_mems() ->
     maps:from_list([{P, M} || P <- processes(), {memory, M} <- [erlang:process_info(P, memory)]]).
@@ -211,7 +222,8 @@ foxglove(Port) ->
 %%====================================================================
 
 table(#{secs := Secs, samples := Samples, injected := Injected, delivered := Delivered,
-        fox := Fx, grown := #{top := Top, new := {NewN, NewBytes}}} = R, Dir) ->
+        fox := Fx, grown := #{top := Top, new := {NewN, NewBytes}}, live := {LiveThen, LiveEnd}} = R,
+      Dir) ->
     Minutes = minutes(Samples),
     MiB = fun(B) -> B / 1048576 end,
     Med = fun(F, Ss) -> median([F(S) || S <- Ss]) end,
@@ -232,6 +244,7 @@ table(#{secs := Secs, samples := Samples, injected := Injected, delivered := Del
              end,
     {First, Last, Whole} = Change(Mem(total)),
     {RFirst, RLast, Less} = Change(Robot),
+    LiveChange = 100 * (LiveEnd - LiveThen) / LiveThen,
     Flat = fun(C) -> io_lib:format("~s (~ts~.1f %)", [yes(abs(C) =< 100 * ?FLAT), sign(C), C]) end,
     Lost = Injected - Delivered,
     Text = [io_lib:format("~n## Soak: ~b s at 1 kHz with the dashboard, a Foxglove client and a "
@@ -240,7 +253,9 @@ table(#{secs := Secs, samples := Samples, injected := Injected, delivered := Del
                           "subscribed to all ~b channels, every topic recorded to MCAP. Node "
                           "memory sampled once a second; medians per minute. \"Less the "
                           "benchmark's own\" leaves out this benchmark's process (its samples), "
-                          "the clients' readers and the page's socket.~n~n",
+                          "the clients' readers and the page's socket. Live memory: with every "
+                          "process garbage-collected, at the end of the first minute (after its "
+                          "sample) and at the end.~n~n",
                           [Secs, ?PACE_MS, maps:get(channels, Fx)]),
             "| minute | memory MiB | less the benchmark's own MiB | processes MiB | binary MiB "
             "| ETS MiB | processes | events delivered |\n",
@@ -249,6 +264,8 @@ table(#{secs := Secs, samples := Samples, injected := Injected, delivered := Del
             io_lib:format("~n| | |~n|---|---:|~n"
                           "| memory, first minute → last minute | ~.1f → ~.1f MiB |~n"
                           "| less the benchmark's own, first minute → last minute | ~.1f → ~.1f MiB |~n"
+                          "| live (every process garbage-collected), end of the first minute → end "
+                          "| ~.1f → ~.1f MiB |~n"
                           "| events injected (source) | ~b |~n"
                           "| events delivered (sink) | ~b |~n"
                           "| tap events dropped: dashboard | ~b |~n"
@@ -257,14 +274,15 @@ table(#{secs := Secs, samples := Samples, injected := Injected, delivered := Del
                           "| recording size | ~.1f MiB |~n"
                           "| Foxglove client: messages received, drops it was told of | ~b, ~b |~n"
                           "| page: frames received | ~b |~n",
-                          [First, Last, RFirst, RLast, Injected, Delivered,
+                          [First, Last, RFirst, RLast, MiB(LiveThen), MiB(LiveEnd), Injected, Delivered,
                            maps:get(hub_dropped, R), maps:get(flight_dropped, R),
                            maps:get(recorded, R), maps:get(rec_dropped, R), MiB(maps:get(bytes, R)),
                            maps:get(messages, Fx, 0), maps:get(dropped, Fx, 0), maps:get(frames, R)]),
             io_lib:format("~nMemory flat (first and last minute within ~b %): ~ts; less the "
-                          "benchmark's own: ~ts~n"
+                          "benchmark's own: ~ts; live: ~ts~n"
                           "Lost on the robot's side = 0: ~s (~b lost)~n",
-                          [round(100 * ?FLAT), Flat(Whole), Flat(Less), yes(Lost =:= 0), Lost]),
+                          [round(100 * ?FLAT), Flat(Whole), Flat(Less), Flat(LiveChange),
+                           yes(Lost =:= 0), Lost]),
             io_lib:format("~nProcesses that grew most from the end of the first minute to the end "
                           "(~b processes started meanwhile hold ~.1f KiB):~n~n"
                           "| process | KiB then | KiB at the end | messages queued at the end |~n"
