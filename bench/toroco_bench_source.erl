@@ -2,6 +2,7 @@
 %% told to by the benchmark controller: closed loop (the next event when the
 %% sink reports the previous one arrived), paced every N ms (absolute
 %% deadlines, no drift), or open loop with a bounded window of events in flight.
+%% `{sent, From}' asks how many events it has emitted since the last run began.
 -module(toroco_bench_source).
 -behaviour(toroco_behavior).
 -export([interface/0, init/1, handle_input/4, handle_event/4]).
@@ -42,6 +43,9 @@ handle_event(info, {run, {window, W}, N}, _S, D) ->
     window(0, W, N, D#{sent => 0});
 handle_event(info, {acked, Acked}, {window, W, N, _}, D) ->
     window(Acked, W, N, D);
+handle_event(info, {sent, From}, _S, D) ->
+    From ! {sent, self(), maps:get(sent, D, 0)},
+    keep_state_and_data;
 handle_event(_Type, _Msg, _S, _D) ->
     keep_state_and_data.
 
