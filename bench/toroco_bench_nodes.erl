@@ -77,16 +77,31 @@ closed_loop(B, N, Prefix) ->
     after 60000 -> error(closed_loop_timeout)
     end.
 
+%% At most ?WIRE_WINDOW events in flight, the sink on B acking every 100:
+%% a congested connection swallows what is sent to it (toroco_wire:send/2,
+%% as a cut wire would), so a burst of N could lose events and never end.
+-define(WIRE_WINDOW, 1000).
+
 wire_rate(B, N) ->
     ok = toroco:add_device(wire_src, toroco_fake_sensor, #{outputs => [out]}),
     ok = toroco:add_device(wire_sink, toroco_bench_sink,
-                           #{expect => N, mode => none, source => none, controller => self(),
-                             node => B}),
+                           #{expect => N, mode => {window, 100}, source => self(),
+                             controller => self(), node => B}),
     ok = toroco:set_inputs(wire_sink, #{in => [{wire_src, out}]}),
     T0 = erlang:monotonic_time(microsecond),
-    [ok = toroco:inject({wire_src, out}, {0, I}) || I <- lists:seq(1, N)],
+    ok = wire_inject(1, N, 0),
     receive {sink_done, _, _, _} -> ok after 60000 -> error(wire_timeout) end,
     round(N / ((erlang:monotonic_time(microsecond) - T0) / 1.0e6)).
+
+wire_inject(I, N, _Acked) when I > N ->
+    ok;
+wire_inject(I, N, Acked) when I - 1 - Acked < ?WIRE_WINDOW ->
+    ok = toroco:inject({wire_src, out}, {0, I}),
+    wire_inject(I + 1, N, Acked);
+wire_inject(I, N, Acked) ->
+    receive {acked, A} -> wire_inject(I, N, max(A, Acked))
+    after 10000 -> error({wire_stalled, {sent, I - 1}, {acked, Acked}})
+    end.
 
 %% Bytes and messages per second per idle latched source with a consumer on
 %% B, from the A -> B connection's counters.

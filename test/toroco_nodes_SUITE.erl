@@ -13,7 +13,8 @@ all() ->
      hierarchy_uses_remote_layers, reset_from_another_node, remote_emitter_restart_caught_up,
      stale_source_dropped_and_back, stale_gate_default_max_age, node_killed_and_restarted, partition_heals_with_wiring_as_before,
      wiring_file_places_on_nodes, clash_after_partition_reported, over_tls,
-     remote_behavior_shows_running_with_restarts, remote_events_bounded_and_counted].
+     remote_behavior_shows_running_with_restarts, remote_events_bounded_and_counted,
+     swallowed_sends_counted].
 
 init_per_suite(Config) ->
     ok = toroco_test_lib:stop(),
@@ -496,3 +497,20 @@ stale_gate_default_max_age(Config) ->
     await_values(B, act, [low, high]),
     frozen_let_go_within(A, B, 350, "gated, default max age 300"),
     end_per_testcase(x, [{peers, Ps} | Config]).
+
+swallowed_sends_counted() ->
+    [{doc, "An event sent to a node whose connection is not up (or is congested) is swallowed, "
+      "as a cut wire would; it is counted, logged, and top says how many"}].
+swallowed_sends_counted(_Config) ->
+    ok = toroco_test_lib:start(),
+    try
+        #{not_connected := Before} = toroco_wire:swallowed(),
+        Ghost = list_to_atom("ghost" ++ integer_to_list(erlang:unique_integer([positive])) ++ "@127.0.0.1"),
+        [ok = toroco_wire:send({toroco_router_x, Ghost}, {event, I}) || I <- lists:seq(1, 3)],
+        #{not_connected := After} = toroco_wire:swallowed(),
+        3 = After - Before,
+        Top = unicode:characters_to_list(toroco_top:iodata()),
+        true = string:find(Top, "swallowed  ") =/= nomatch
+    after
+        toroco_test_lib:stop()
+    end.

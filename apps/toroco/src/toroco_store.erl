@@ -49,6 +49,7 @@ init([]) ->
     _ = ets:new(toroco_wiring, [named_table, protected, set, compressed, {read_concurrency, true},
                                 {heir, self(), lent}]),
     _ = ets:new(toroco_lives, [named_table, public, set, {write_concurrency, true}]),
+    ok = toroco_wire:new_swallowed(),
     {ok, #s{}}.
 
 -spec handle_call(term(), gen_server:from(), #s{}) -> {reply, term(), #s{}} | {noreply, #s{}}.

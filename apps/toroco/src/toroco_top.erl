@@ -55,7 +55,13 @@ iodata() ->
      "taken out  ", case Removed of
                         [] -> "none";
                         _ -> lists:join(" ", [integer_to_list(L) || L <- Removed])
-                    end, "\n\n",
+                    end, "\n",
+     case toroco_wire:swallowed() of
+         #{congested := 0, not_connected := 0} -> [];
+         #{congested := Busy, not_connected := Down} ->
+             io_lib:format("swallowed  ~b sends to other nodes: ~b congested, ~b not up~n",
+                           [Busy + Down, Busy, Down])
+     end, "\n",
      case map_size(Where) of
          0 ->
              table(["NODE", "KIND", "LAYER", "STATUS", "STATE", "QUEUE", "RESTARTS", "MODULE"],

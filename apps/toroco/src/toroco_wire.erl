@@ -68,6 +68,7 @@
 -include("toroco_wire.hrl").
 
 -export([address/1, send/2, call/4, start_opts/0, keepalive_ms/0, max_age_ms/0, remote/1]).
+-export([new_swallowed/0, swallowed/0]).
 -export([idle_arm/0, idle_tick/1, step_done/2]).
 -export([new_links/0, start_sync/4, sync_answer/5, sync_down/2, sync_expire/1, sync_done/1,
          sync_fresh/3, finish_sync/2, detach_all/2, hello/4, late_state/4, down/3, carries/3,
@@ -132,9 +133,46 @@ send(Pid, Msg) when is_pid(Pid), node(Pid) =:= node() ->
     end;
 send(To, Msg) ->
     try erlang:send(To, Msg, [noconnect, nosuspend]) of
-        _ -> ok
+        ok -> ok;
+        nosuspend -> swallowed(1, congested, To);
+        noconnect -> swallowed(2, not_connected, To)
     catch
         error:badarg -> ok
+    end.
+
+-define(SWALLOWED, toroco_wire_swallowed).
+
+%% @doc Creates the node's counts of {@link swallowed/0} unless they exist
+%% (they outlive a restart of the runtime: `toroco_store' calls this).
+-spec new_swallowed() -> ok.
+new_swallowed() ->
+    case persistent_term:get(?SWALLOWED, none) of
+        none -> persistent_term:put(?SWALLOWED, counters:new(2, [write_concurrency]));
+        _ -> ok
+    end.
+
+%% @doc How many sends to another node were swallowed since this node
+%% started: its connection `congested' (busy) or `not_connected'.
+-spec swallowed() -> #{congested := non_neg_integer(), not_connected := non_neg_integer()}.
+swallowed() ->
+    case persistent_term:get(?SWALLOWED, none) of
+        none -> #{congested => 0, not_connected => 0};
+        C -> #{congested => counters:get(C, 1), not_connected => counters:get(C, 2)}
+    end.
+
+%% Counted, and logged at the 1st, 2nd, 4th, 8th, ... of each kind.
+swallowed(I, Why, To) ->
+    case persistent_term:get(?SWALLOWED, none) of
+        none -> ok;
+        C ->
+            counters:add(C, I, 1),
+            N = counters:get(C, I),
+            _ = N band (N - 1) =:= 0 andalso
+                logger:warning("~b sends to other nodes swallowed so far, the connection ~s "
+                               "(the last to ~0p): the event path does not wait for another node",
+                               [N, case Why of congested -> "congested"; not_connected -> "not up" end, To],
+                               #{domain => [toroco, wire]}),
+            ok
     end.
 
 %% @doc A call to a process of the network, with a time limit; what goes
