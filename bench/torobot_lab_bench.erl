@@ -13,9 +13,11 @@ main([Dir, Root]) ->
     Wiring = filename:join([Root, "config", "torobot.wiring"]),
     World = filename:join([Root, "config", "worlds", "default.world"]),
     io:format("~n## Simulated lab~n~n"),
+    %% A quick run takes its reference outcome from lockstep (the same
+    %% outcome, SPEC §14) rather than from 60 s of real time at speed 1.
     speeds(World, Wiring, Dir, case Quick of
-                                   true -> [10, 40, 80];
-                                   false -> [2, 5, 10, 20, 40, 80, 160]
+                                   true -> {lockstep, [10, 40, 80]};
+                                   false -> {1, [2, 5, 10, 20, 40, 80, 160]}
                                end),
     robots(Wiring, Dir, case Quick of
                             true -> [1, 4];
@@ -27,25 +29,25 @@ main([Dir, Root]) ->
 %% Speed
 %%--------------------------------------------------------------------
 
-speeds(World, Wiring, Dir, Speeds) ->
-    {Reference, RefWall} = timed(World, Wiring, 1),
-    Rows = [row(1, Reference, RefWall, Reference)
+speeds(World, Wiring, Dir, {Ref, Speeds}) ->
+    {Reference, RefWall} = timed(World, Wiring, Ref),
+    Rows = [row(Ref, Reference, RefWall, Reference)
             | [begin {S, W} = timed(World, Wiring, Speed), row(Speed, S, W, Reference) end
                || Speed <- Speeds]],
-    Highest = lists:foldl(fun(#{speed := Sp, same := true}, _) -> Sp;
+    Highest = lists:foldl(fun(#{speed := Sp, same := true}, _) when is_number(Sp) -> Sp;
                              (_, Acc) -> Acc
                           end, 1, Rows),
-    Ok = [R || R = #{speed := Sp} <- Rows, Sp =< Highest],
+    Ok = [R || R = #{speed := Sp} <- Rows, not is_number(Sp) orelse Sp =< Highest],
     #{wall_per_min_s := PerMin} = lists:last(Ok),
     io:format("### Speed: the default world (config/worlds/default.world) at each speed~n~n"
               "| speed | red touched (s) | wall contacts | blue contacts | distance (m) | "
-              "same outcome as speed 1 | wall time (s) | wall time per simulated minute (s) |~n"
+              "same outcome as the first row | wall time (s) | wall time per simulated minute (s) |~n"
               "|---:|---:|---:|---:|---:|---|---:|---:|~n"),
     [io:format("| ~p | ~s | ~b | ~b | ~.2f | ~s | ~.1f | ~.2f |~n",
                [Sp, red(R), Wc, Bc, D, yes(Same), Wall, Pm])
      || #{speed := Sp, red := R, walls := Wc, blues := Bc, distance := D, same := Same,
           wall_s := Wall, wall_per_min_s := Pm} <- Rows],
-    io:format("~nHighest speed (of those tried, every one up to it) keeping the speed-1 "
+    io:format("~nHighest speed (of those tried, every one up to it) keeping the first row's "
               "outcome: ~p, ~.2f s of wall time per simulated minute.~n~n", [Highest, PerMin]),
     csv(filename:join(Dir, "lab_speeds.csv"),
         [speed, red_touched_ms, wall_contacts, blue_contacts, distance_m, same, wall_s],
@@ -55,7 +57,11 @@ speeds(World, Wiring, Dir, Speeds) ->
 
 timed(World, Wiring, Speed) ->
     T0 = erlang:monotonic_time(millisecond),
-    {ok, Summary} = torobot_sim:run(World, #{speed => Speed, wiring => Wiring}),
+    Time = case Speed of
+               lockstep -> #{time => lockstep};
+               _ -> #{speed => Speed}
+           end,
+    {ok, Summary} = torobot_sim:run(World, Time#{wiring => Wiring}),
     {Summary, (erlang:monotonic_time(millisecond) - T0) / 1000}.
 
 row(Speed, S = #{red_touched_ms := Red}, Wall, Reference) ->

@@ -47,7 +47,8 @@ section(memory, Quick, _N, _Dir) ->
     %% enough for that, and the settling waits for it (5 s by default).
     ok = application:set_env(toroco, hibernate_after_ms, 1000),
     put(settle_tries, case Quick of true -> 3; false -> 10 end),
-    memory_table(case Quick of true -> [10, 1000]; false -> [10, 1000, 10000] end);
+    %% At 10 the VM's noise swamps the figure: a quick run shows 1,000 only.
+    memory_table(case Quick of true -> [1000]; false -> [10, 1000, 10000] end);
 section(internal, _Quick, N, Dir) ->
     table("Internal test", [internal(I, N, Dir) || I <- [closed, 10]], Dir, "internal");
 section(tap, _Quick, N, Dir) ->
