@@ -9,7 +9,7 @@
 %% and returns the `clients()'.
 -module(toroco_live_clients).
 
--export([new/1, join/2, down/2, stop/1]).
+-export([new/1, join/2, stop/1]).
 -export([member/2, pids/1, size/1, subscriptions/1]).
 -export([subscribe/3, unsubscribe/3, forget/2, subscribers/2, subscribed/2]).
 -export([offer/5, broadcast/2, handle/2]).
@@ -36,19 +36,16 @@ join(Conn, Cl = #clients{conns = Conns, tap = Tap}) ->
              end,
     Cl#clients{conns = Conns1, tap = toroco_live_tap:ensure_on(Tap)}.
 
-%% @doc A `'DOWN'' of a client: it is forgotten with its subscriptions,
-%% and the tap is let go when it was the last. `not_client' for another pid.
--spec down(pid(), clients()) -> {ok, clients()} | not_client.
-down(Conn, Cl = #clients{conns = Conns}) when is_map_key(Conn, Conns) ->
+%% A client gone: it is forgotten with its subscriptions, and the tap is
+%% let go when it was the last.
+down(Conn, Cl = #clients{conns = Conns}) ->
     Cl1 = unsubscribe(Conn, maps:keys(Cl#clients.subs),
                       Cl#clients{conns = maps:remove(Conn, Conns),
                                  dropped = maps:remove(Conn, Cl#clients.dropped)}),
     case map_size(Cl1#clients.conns) of
-        0 -> {ok, Cl1#clients{tap = toroco_live_tap:off(Cl1#clients.tap), subs = #{}}};
-        _ -> {ok, Cl1}
-    end;
-down(_, _) ->
-    not_client.
+        0 -> Cl1#clients{tap = toroco_live_tap:off(Cl1#clients.tap), subs = #{}};
+        _ -> Cl1
+    end.
 
 %% @doc The hub stops: the tap is let go.
 -spec stop(clients()) -> ok.
@@ -114,11 +111,15 @@ broadcast(Msg, #clients{conns = Conns}) ->
     _ = [C ! Msg || C <- maps:keys(Conns)],
     ok.
 
-%% @doc A message that may be the tap's: `{event, E}' for an event (or
-%% `{dropped, N}'), `{retapped, Cl}' when the tap was taken again after the
-%% runtime came back (with clients connected), `{ok, Cl}' for the tap's own
-%% bookkeeping and `ignore' for anything else.
--spec handle(term(), clients()) -> {event, term()} | {retapped | ok, clients()} | ignore.
+%% @doc A message that may be about the clients or the tap: `{down, Conn,
+%% Cl}' when a client's process went (forgotten, see above), `{event, E}'
+%% for an event (or `{dropped, N}'), `{retapped, Cl}' when the tap was
+%% taken again after the runtime came back (with clients connected),
+%% `{ok, Cl}' for the tap's own bookkeeping and `ignore' for anything else.
+-spec handle(term(), clients()) ->
+          {down, pid(), clients()} | {event, term()} | {retapped | ok, clients()} | ignore.
+handle({'DOWN', _, process, Conn, _}, Cl = #clients{conns = Conns}) when is_map_key(Conn, Conns) ->
+    {down, Conn, down(Conn, Cl)};
 handle(Info, Cl = #clients{tap = Tap, conns = Conns}) ->
     case toroco_live_tap:handle(Info, Tap) of
         {event, Event} -> {event, Event};

@@ -190,15 +190,12 @@ handle_info(refresh, H) ->
 handle_info({'EXIT', L, Why}, H = #hub{listener = L}) ->
     {stop, {listener, Why}, H};
 handle_info(Info, H = #hub{clients = Cl}) ->
-    case client_down(Info, Cl) of
+    case toroco_live_clients:handle(Info, Cl) of
+        {event, Event} -> {noreply, event(Event, H)};
+        {retapped, Cl1} -> {noreply, refresh(H#hub{clients = Cl1})};
+        {down, _Conn, Cl1} -> {noreply, H#hub{clients = Cl1}};
         {ok, Cl1} -> {noreply, H#hub{clients = Cl1}};
-        not_client ->
-            case toroco_live_clients:handle(Info, Cl) of
-                {event, Event} -> {noreply, event(Event, H)};
-                {retapped, Cl1} -> {noreply, refresh(H#hub{clients = Cl1})};
-                {ok, Cl1} -> {noreply, H#hub{clients = Cl1}};
-                ignore -> {noreply, H}
-            end
+        ignore -> {noreply, H}
     end.
 
 -spec terminate(term(), #hub{}) -> ok.
@@ -209,9 +206,6 @@ terminate(_, #hub{listener = L, clients = Cl}) ->
 %%====================================================================
 %% Inside
 %%====================================================================
-
-client_down({'DOWN', _, process, Conn, _}, Cl) -> toroco_live_clients:down(Conn, Cl);
-client_down(_, _) -> not_client.
 
 event(Event = {lifecycle, _, _, _}, H) ->
     send_event(Event, refresh(H));

@@ -226,15 +226,12 @@ handle_info({toroco_live_world, changed}, H) ->
 handle_info({'EXIT', L, Why}, H = #hub{listener = L}) ->
     {stop, {listener, Why}, H};
 handle_info(Info, H = #hub{clients = Cl}) ->
-    case client_down(Info, Cl) of
-        {ok, Conn, Cl1} ->
+    case toroco_live_clients:handle(Info, Cl) of
+        {event, Event} -> {noreply, event(Event, H)};
+        {down, Conn, Cl1} ->
             {noreply, unadvertise_all(Conn, maps:keys(H#hub.relayed), H#hub{clients = Cl1})};
-        not_client ->
-            case toroco_live_clients:handle(Info, Cl) of
-                {event, Event} -> {noreply, event(Event, H)};
-                {_, Cl1} -> {noreply, H#hub{clients = Cl1}};
-                ignore -> {noreply, H}
-            end
+        {_, Cl1} -> {noreply, H#hub{clients = Cl1}};
+        ignore -> {noreply, H}
     end.
 
 -spec terminate(term(), #hub{}) -> ok.
@@ -262,14 +259,6 @@ fresh_topics(H = #hub{topics = {_, At}}) ->
                      end,
             H#hub{topics = {Topics, Now}}
     end.
-
-client_down({'DOWN', _, process, Conn, _}, Cl) ->
-    case toroco_live_clients:down(Conn, Cl) of
-        {ok, Cl1} -> {ok, Conn, Cl1};
-        not_client -> not_client
-    end;
-client_down(_, _) ->
-    not_client.
 
 event({lifecycle, _, _, _}, H = #hub{topics = {Topics, _}}) ->
     %% The wiring may have changed: read the topics again when next asked.
