@@ -4,6 +4,10 @@
 %% each observer in turn, in the same run, for several rounds:
 %%   - one tap subscriber taking every event (a plain process reading
 %%     `{toroco_event, Ref, Event}');
+%%   - the same subscriber with room for one event (`buffer => 1'): the
+%%     producers tap every event and drop nearly all of them, so the row is
+%%     what tapping costs the event path itself, the subscriber's own work
+%%     left out;
 %%   - the dashboard with one connected page (the suites' WebSocket client,
 %%     which reads and decodes every frame as a page does), its flight
 %%     recorder on;
@@ -27,7 +31,7 @@ main([Dir]) ->
     File = filename:join(Dir, "observers.mcap"),
     toroco_bench:warm_up(),
     Cases = case os:getenv("TOROCO_BENCH_OBSERVERS") of
-                false -> [none, tap, dashboard, flight, recording];
+                false -> [none, tap, tap_full, dashboard, flight, recording];
                 Only -> [none | [list_to_existing_atom(C) || C <- string:lexemes(Only, ",")]]
             end,
     Runs = lists:append([[run(Case, N, Window, File) || Case <- Cases] || _ <- lists:seq(1, Rounds)]),
@@ -67,16 +71,9 @@ paced(Case, N, File) ->
 observed(none, _File, Fun) ->
     {Fun(), 0};
 observed(tap, _File, Fun) ->
-    Parent = self(),
-    Reader = spawn(fun() ->
-                           {ok, Ref} = toroco:subscribe_events(#{}),
-                           Parent ! {self(), subscribed},
-                           read(Ref, 0)
-                   end),
-    receive {Reader, subscribed} -> ok end,
-    R = Fun(),
-    Reader ! {stop, self()},
-    receive {Reader, Dropped} -> {R, Dropped} end;
+    subscribed(#{}, Fun);
+observed(tap_full, _File, Fun) ->
+    subscribed(#{buffer => 1}, Fun);
 observed(dashboard, _File, Fun) ->
     live(),
     {ok, #{http := Port}} = toroco_live:start(#{http => 0, foxglove => off}),
@@ -109,6 +106,19 @@ live() ->
     ok = application:set_env(toroco_live, enabled, false),
     {ok, _} = application:ensure_all_started(toroco_live),
     ok.
+
+%% Runs Fun with a plain process subscribed to every event (Opts).
+subscribed(Opts, Fun) ->
+    Parent = self(),
+    Reader = spawn(fun() ->
+                           {ok, Ref} = toroco:subscribe_events(Opts),
+                           Parent ! {self(), subscribed},
+                           read(Ref, 0)
+                   end),
+    receive {Reader, subscribed} -> ok end,
+    R = Fun(),
+    Reader ! {stop, self()},
+    receive {Reader, Dropped} -> {R, Dropped} end.
 
 read(Ref, Dropped) ->
     receive
@@ -198,6 +208,7 @@ table(Cases, Runs, PacedRuns, Page, N, Window, Paced, Rounds, Dir) ->
 
 label(none) -> "none";
 label(tap) -> "one tap subscriber taking every event";
+label(tap_full) -> "the same with room for 1 event (what tapping costs the producers)";
 label(dashboard) -> "dashboard with one connected page";
 label(flight) -> "flight recorder alone";
 label(recording) -> "recording every topic".

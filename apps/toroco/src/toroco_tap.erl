@@ -35,8 +35,10 @@
 %% time and gives back what its batch did not use), (2) events dropped, (3)
 %% how many of the subscriber's messages the feeder counts as pending. A
 %% producer takes room only while taken + pending &lt;= buffer, else counts
-%% a drop. The feeder adds what it passes on to the pending count and gives
-%% the room back by looking at the subscriber's queue: when a batch leaves
+%% a drop; having found the sink full, it counts the rest of that batch's
+%% events as dropped without looking again (at most `?FLUSH_MS'). The
+%% feeder adds what it passes on to the pending count and gives the room
+%% back by looking at the subscriber's queue: when a batch leaves
 %% the subscriber half full or more, and then every 5 ms only while it
 %% stays so or drops wait to be reported (a subscriber that keeps up costs
 %% no timer and no polling). As soon as the subscriber has room the
@@ -79,10 +81,10 @@
 -type sinks() :: #{kind() => [sink()]}.
 %% The events a producer tapped and has not sent yet, per subscription
 %% (newest first); `[]' when there are none.
-%% With each, the room taken for it and not used yet, and the events
-%% dropped.
--type batch() :: [{reference(), pid(), atomics:atomics_ref(), non_neg_integer(), non_neg_integer(),
-                   non_neg_integer(), [event()]}].
+%% With each, the room taken for it and not used yet (`full': none is left,
+%% see {@link tap/3}), and the events dropped.
+-type batch() :: [{reference(), pid(), atomics:atomics_ref(), non_neg_integer(),
+                   non_neg_integer() | full, non_neg_integer(), [event()]}].
 
 -define(TABLE, toroco_tap).
 -define(SCOPE, toroco_tap_pg).
@@ -215,22 +217,28 @@ select(Subs, Kinds, Name) ->
 
 %% @doc Keeps `Event' in the producer's batch for each sink with room for
 %% it, counting a drop where there is none; a batch that reaches
-%% `?BATCH_MAX' events is sent at once.
+%% `?BATCH_MAX' events is sent at once. A sink found full stays full for
+%% the rest of the batch (`full'): what comes until the batch goes is
+%% counted as dropped without looking at the sink again, so a producer
+%% tapping faster than its subscriber reads pays no more per event than
+%% one with room.
 -spec tap([sink()], event(), batch()) -> batch().
 tap([], _Event, Batch) ->
     Batch;
 tap([{Ref, Feeder, A, Max} | Rest], Event, Batch) ->
     case lists:keytake(Ref, 1, Batch) of
+        {value, {_, _, _, N, full, D, Evs}, Others} ->
+            tap(Rest, Event, [{Ref, Feeder, A, N, full, D + 1, Evs} | Others]);
         {value, {_, _, _, N, Room, D, Evs}, Others} when Room > 0 ->
             tap(Rest, Event, add(Ref, Feeder, A, N + 1, Room - 1, D, [Event | Evs], Others));
         {value, {_, _, _, N, 0, D, Evs}, Others} ->
             case reserve(A, Max) of
-                0 -> tap(Rest, Event, [{Ref, Feeder, A, N, 0, D + 1, Evs} | Others]);
+                0 -> tap(Rest, Event, [{Ref, Feeder, A, N, full, D + 1, Evs} | Others]);
                 Room -> tap(Rest, Event, add(Ref, Feeder, A, N + 1, Room - 1, D, [Event | Evs], Others))
             end;
         false ->
             case reserve(A, Max) of
-                0 -> tap(Rest, Event, [{Ref, Feeder, A, 0, 0, 1, []} | Batch]);
+                0 -> tap(Rest, Event, [{Ref, Feeder, A, 0, full, 1, []} | Batch]);
                 Room -> tap(Rest, Event, add(Ref, Feeder, A, 1, Room - 1, 0, [Event], Batch))
             end
     end.
@@ -265,7 +273,7 @@ send({Ref, Feeder, A, N, Room, D, Evs}) ->
     _ = D > 0 andalso atomics:add_get(A, ?DROPPED, D) =:= D andalso N =:= 0
         andalso (Feeder ! ?NUDGE),
     _ = N > 0 andalso (Feeder ! ?BATCH(Ref, self(), lists:reverse(Evs), N)),
-    _ = Room > 0 andalso atomics:sub(A, ?HELD, Room),
+    _ = is_integer(Room) andalso Room > 0 andalso atomics:sub(A, ?HELD, Room),
     ok.
 
 %% @doc What a producer (a gen_statem) does with its batch after an event:
