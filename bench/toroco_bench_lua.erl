@@ -3,6 +3,12 @@
 %% in Lua (bench/lua/relay.lua), closed loop (one event in flight: latency)
 %% and open loop (a window of events in flight: throughput), the same chain
 %% with the Erlang relay beside it, and the memory of an idle Lua behavior.
+%% Beside them, a reference with no Lua and no VM (bench/pipe_pingpong.c): a
+%% one-byte round trip between two C processes over pipes, the least one
+%% activation of a Lua behavior costs, since the runtime and lua_port
+%% exchange each event and its reply that way. With both relays in Lua the
+%% closed loop makes two such round trips in series on top of the event
+%% path the Erlang row measures: the table says what floor that gives.
 -module(toroco_bench_lua).
 -behaviour(toroco_device).
 
@@ -19,18 +25,20 @@ main([Dir | _]) ->
     {ok, _} = application:ensure_all_started(toroco_lua),
     Relay = filename:absname("bench/lua/relay.lua"),
     Rows = [chain(lua, Relay, N), chain(erlang, Relay, N)],
+    Pipe = pipe(filename:join(filename:dirname(Dir), "pipe_pingpong"), N),
     Idle = idle(Relay),
     Out = io_lib:format(
             "~n### Lua behaviors~n~n"
             "Internal test, source -> relay -> relay -> sink, ~b events, the relays in Lua "
             "(one lua_port program) and in Erlang:~n~n"
             "| relays | closed loop p50 | p99 | open loop (window ~b) |~n|---|---|---|---|~n"
-            "~ts~n"
+            "~ts~ts~n"
             "Idle Lua behavior (one trigger, ~b of them): ~.1f KiB of Lua state + ~.1f KiB "
             "for its gen_statem, ~.1f KiB in all.~n",
             [N, ?WINDOW,
              [io_lib:format("| ~p | ~.1f \x{b5}s | ~.1f \x{b5}s | ~b events/s |~n", [K, P50, P99, Rate])
               || #{kind := K, p50 := P50, p99 := P99, rate := Rate} <- Rows],
+             floor(Pipe, Rows),
              ?IDLE, maps:get(lua_kib, Idle), maps:get(process_kib, Idle),
              maps:get(lua_kib, Idle) + maps:get(process_kib, Idle)]),
     ok = io:setopts([{encoding, unicode}]),
@@ -86,6 +94,28 @@ idle(Relay) ->
                       || B <- Names]),
     [ok = toroco:remove_behavior(B) || B <- Names],
     #{lua_kib => Lua / ?IDLE / 1024, process_kib => Proc / ?IDLE / 1024}.
+
+%% The reference: Count pipe round trips between two C processes, or none
+%% if the program is not built.
+pipe(Prog, Count) ->
+    case filelib:is_regular(Prog) of
+        false -> none;
+        true ->
+            Rtts = lists:sort([list_to_integer(Ns) / 1000
+                               || "rtt " ++ Ns <- string:lexemes(os:cmd(Prog ++ " " ++ integer_to_list(Count)),
+                                                                 "\n")]),
+            #{p50 => pct(Rtts, 0.50), p99 => pct(Rtts, 0.99)}
+    end.
+
+floor(none, _Rows) ->
+    "";
+floor(#{p50 := P50, p99 := P99}, Rows) ->
+    [Erlang] = [E || #{kind := erlang, p50 := E} <- Rows],
+    io_lib:format("| a pipe round trip between two C processes (no Lua, no VM) | ~.1f \x{b5}s | "
+                  "~.1f \x{b5}s | \x{2013} |~n~n"
+                  "The floor of the closed loop with both relays in Lua, each activation a round "
+                  "trip to lua_port: 2 \x{d7} ~.1f + ~.1f (the Erlang relays' p50) = ~.1f \x{b5}s.~n",
+                  [P50, P99, P50, Erlang, 2 * P50 + Erlang]).
 
 pct(Sorted, P) ->
     lists:nth(max(1, round(P * length(Sorted))), Sorted).
