@@ -377,7 +377,10 @@ own_reload(Name) ->
 %% `deliver', `router', `lifecycle'; default all) about `names' (default
 %% `all'), with at most `buffer' (default 10000) pending; past that, events
 %% are counted and reported as `{dropped, N}' (SPEC §10). A subscriber that
-%% dies is unsubscribed.
+%% dies is unsubscribed. With `delivery => batch' the same events come
+%% several to a message, in order, as `{toroco_events, Ref, [Event]}' (a
+%% `{dropped, N}' among them): for a subscriber that takes many events,
+%% one wake-up and one message per batch instead of one per event.
 -spec subscribe_events(toroco_tap:opts()) -> {ok, reference()} | {error, error_reason()}.
 subscribe_events(Opts) ->
     %% A robot on several nodes: the other nodes' events come through a

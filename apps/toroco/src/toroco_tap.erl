@@ -26,8 +26,10 @@
 %% <li>one feeder process per subscription, beside the subscriber: it holds
 %%     the batches that come within `?MERGE_MS' of each other, merges them by
 %%     time stamp (each producer's own order kept), unpacks them into
-%%     `{toroco_event, Ref, Event}' messages and reports what the producers
-%%     dropped.</li>
+%%     `{toroco_event, Ref, Event}' messages (or, for a subscriber that
+%%     asked for `delivery => batch', sends the merged events as one
+%%     `{toroco_events, Ref, Events}', whose events the credit counts) and
+%%     reports what the producers dropped.</li>
 %% </ul>
 %%
 %% Credit. A sink carries an `atomics' array: (1) room the producers took
@@ -62,7 +64,7 @@
 -export([current/0, join/0, select/3, tap/3, after_event/3, flush/1, notify/2, timestamp/0]).
 -export([lifecycle/2, lifecycle/3, lifecycle/4, relayed/4]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
--export_type([sinks/0, batch/0, kind/0, event/0, opts/0, sub/0]).
+-export_type([sinks/0, batch/0, kind/0, event/0, opts/0, sub/0, delivery/0]).
 
 -type kind() :: emit | deliver | router | lifecycle.
 -type lifecycle() :: started | restarted | stopped | suspended | resumed | reset
@@ -72,7 +74,12 @@
                | {router, integer(), {atom(), atom()}, map()}
                | {lifecycle, integer(), atom(), lifecycle()}
                | {dropped, pos_integer()}.
--type opts() :: #{kinds => [kind()], names => all | [atom()], buffer => pos_integer()}.
+-type opts() :: #{kinds => [kind()], names => all | [atom()], buffer => pos_integer(),
+                  delivery => delivery()}.
+%% How the events reach the subscriber: `{toroco_event, Ref, Event}' each
+%% (`event', the default), or `{toroco_events, Ref, [Event]}', several in
+%% order to a message (`batch').
+-type delivery() :: event | batch.
 %% One subscription as the producers see it: its feeder, credit and bound.
 -opaque sub() :: {reference(), pid(), atomics:atomics_ref(), pos_integer(),
                   [kind()], all | [atom()]}.
@@ -118,13 +125,16 @@ start_link() ->
     gen_server:start_link({local, ?MODULE}, ?MODULE, [], []).
 
 %% @doc Subscribes the calling process to the events of `kinds' (default
-%% all) about `names' (default all), at most `buffer' pending (default
-%% 10000). Events come as `{toroco_event, Ref, Event}'.
+%% all) about `names' (default all), at most `buffer' events pending
+%% (default 10000). Events come as `{toroco_event, Ref, Event}', or with
+%% `delivery => batch' as `{toroco_events, Ref, Events}', the same events
+%% in the same order several to a message: a subscriber that takes many
+%% events is woken and sent to once per batch, not once per event.
 -spec subscribe(opts()) -> {ok, reference()} | {error, term()}.
 subscribe(Opts) when is_map(Opts) ->
     case options(Opts) of
-        {ok, Kinds, Names, Buffer} ->
-            try gen_server:call(?MODULE, {subscribe, self(), Kinds, Names, Buffer}, 10000)
+        {ok, Kinds, Names, Buffer, Delivery} ->
+            try gen_server:call(?MODULE, {subscribe, self(), Kinds, Names, Buffer, Delivery}, 10000)
             catch exit:{noproc, _} -> {error, not_running}
             end;
         Err -> Err
@@ -154,8 +164,10 @@ options(Opts) ->
     Kinds = maps:get(kinds, Opts, ?KINDS),
     Names = maps:get(names, Opts, all),
     Buffer = maps:get(buffer, Opts, ?DEFAULT_BUFFER),
-    case maps:keys(maps:without([kinds, names, buffer], Opts)) of
+    Delivery = maps:get(delivery, Opts, event),
+    case maps:keys(maps:without([kinds, names, buffer, delivery], Opts)) of
         [Bad | _] -> {error, {bad_option, Bad}};
+        [] when Delivery =/= event, Delivery =/= batch -> {error, {bad_delivery, Delivery}};
         [] when not is_list(Kinds); Kinds =:= [] -> {error, {bad_kinds, Kinds}};
         [] ->
             case [K || K <- Kinds, not lists:member(K, ?KINDS)] of
@@ -165,7 +177,7 @@ options(Opts) ->
                     case Names =:= all orelse lists:all(fun is_atom/1, Names) of
                         false -> {error, {bad_names, Names}};
                         true when not is_integer(Buffer); Buffer < 1 -> {error, {bad_buffer, Buffer}};
-                        true -> {ok, lists:usort(Kinds), Names, Buffer}
+                        true -> {ok, lists:usort(Kinds), Names, Buffer, Delivery}
                     end
             end
     end.
@@ -359,10 +371,10 @@ init([]) ->
 
 -spec handle_call(term(), gen_server:from(), State) -> {reply, term(), State}
               when State :: {map(), map()}.
-handle_call({subscribe, Pid, Kinds, Names, Buffer}, _From, {Subs, Fs}) ->
+handle_call({subscribe, Pid, Kinds, Names, Buffer, Delivery}, _From, {Subs, Fs}) ->
     Ref = make_ref(),
     A = atomics:new(3, [{signed, true}]),
-    F = spawn_feeder(Pid, Ref, A, Buffer),
+    F = spawn_feeder(Pid, Ref, A, Buffer, Delivery),
     Subs1 = Subs#{Ref => {Ref, F, A, Buffer, Kinds, Names}},
     publish(Subs1),
     {reply, {ok, Ref}, {Subs1, Fs#{Ref => F}}};
@@ -418,6 +430,10 @@ publish(SubsMap) ->
                ref :: reference(),
                a :: atomics:atomics_ref(),
                max :: pos_integer(),
+               delivery :: delivery(),
+               %% with batch delivery: how many events each message sent
+               %% and maybe not read yet holds, newest first
+               sent = [] :: [pos_integer()],
                %% batches held for the merge, per producer (each newest
                %% first), how many events, and whether the release is due
                held = #{} :: #{pid() => [[event()]]},
@@ -429,13 +445,14 @@ publish(SubsMap) ->
 %% what they leave in its old heap goes at the next full sweep, not at the
 %% default's 65,535th collection (a 10-minute soak under load grew 13 %,
 %% most of it in feeders' old heaps).
-spawn_feeder(Sub, Ref, A, Max) ->
+spawn_feeder(Sub, Ref, A, Max, Delivery) ->
     spawn_opt(fun() ->
                       %% The robot first: under load the feeder waits, its
                       %% credit runs out, and the producers drop (cheaply).
                       process_flag(priority, low),
                       Mon = erlang:monitor(process, Sub),
-                      feed(#feed{sub = Sub, mon = Mon, ref = Ref, a = A, max = Max})
+                      feed(#feed{sub = Sub, mon = Mon, ref = Ref, a = A, max = Max,
+                                 delivery = Delivery})
               end, [link, {fullsweep_after, 10}]).
 
 feed(F = #feed{ref = Ref, mon = Mon, a = A}) ->
@@ -450,9 +467,9 @@ feed(F = #feed{ref = Ref, mon = Mon, a = A}) ->
             Admitted = admit(N, F),
             _ = Dropped + N - Admitted > 0
                 andalso atomics:add(A, ?DROPPED, Dropped + N - Admitted),
-            pass(lists:sublist(Events, Admitted), Admitted, F),
+            F1 = pass(lists:sublist(Events, Admitted), Admitted, F),
             atomics:sub(A, ?HELD, Admitted),
-            feed(settle(F));
+            feed(settle(F1));
         look ->
             feed(look(F#feed{timer = off}));
         ?NUDGE ->
@@ -474,9 +491,9 @@ hold(Producer, Events, N, F = #feed{held = H, n = Held}) ->
 release(F = #feed{held = H, n = N, a = A}) ->
     Runs = [lists:append(lists:reverse(Bs)) || Bs <- maps:values(H)],
     Merged = lists:foldl(fun(Run, Acc) -> lists:merge(fun earlier/2, Acc, Run) end, [], Runs),
-    pass(Merged, N, F),
+    F1 = pass(Merged, N, F),
     atomics:sub(A, ?HELD, N),
-    F#feed{held = #{}, n = 0}.
+    F1#feed{held = #{}, n = 0}.
 
 earlier(A, B) -> element(2, A) =< element(2, B).
 
@@ -493,10 +510,25 @@ admit(N, #feed{a = A, max = Max}) ->
     end.
 
 %% The events go on, counted as pending before their room is given back.
-pass(Events, N, #feed{sub = Sub, ref = Ref, a = A}) ->
+pass(_Events, 0, F) ->
+    F;
+pass(Events, N, F = #feed{sub = Sub, ref = Ref, a = A, delivery = event}) ->
     atomics:add(A, ?SEEN, N),
     _ = [Sub ! {toroco_event, Ref, E} || E <- Events],
-    ok.
+    F;
+pass(Events, N, F = #feed{sub = Sub, ref = Ref, a = A, delivery = batch, sent = Sent}) ->
+    atomics:add(A, ?SEEN, N),
+    Sub ! {toroco_events, Ref, Events},
+    F#feed{sent = [N | Sent]}.
+
+%% Events pending in the subscriber's queue of `Len' messages: one each,
+%% or with batch delivery what the newest `Len' batches held (the older
+%% ones were read).
+pending(Len, F = #feed{delivery = event}) ->
+    {Len, F};
+pending(Len, F = #feed{sent = Sent}) ->
+    Unread = lists:sublist(Sent, Len),
+    {lists:sum(Unread), F#feed{sent = Unread}}.
 
 %% After passing a batch on: look at the subscriber's queue only if it may
 %% be filling up or drops wait to be reported.
@@ -510,19 +542,20 @@ tight(A, Max) ->
     Pending = atomics:get(A, ?SEEN) + atomics:get(A, ?HELD),
     (Pending > 0 andalso 2 * Pending >= Max) orelse atomics:get(A, ?DROPPED) > 0.
 
-look(F = #feed{sub = Sub, ref = Ref, a = A, max = Max, timer = T}) ->
+look(F0 = #feed{sub = Sub, a = A, max = Max, timer = T}) ->
     case erlang:process_info(Sub, message_queue_len) of
         {message_queue_len, Len} ->
+            {Pending, F1} = pending(Len, F0),
             Dropped = atomics:get(A, ?DROPPED),
-            Seen = case Dropped > 0 andalso Len < Max of
-                       true ->
-                           Sub ! {toroco_event, Ref, {dropped, Dropped}},
-                           atomics:sub(A, ?DROPPED, Dropped),
-                           Len + 1;
-                       false ->
-                           Len
-                   end,
-            atomics:put(A, ?SEEN, Seen),
+            F = case Dropped > 0 andalso Pending < Max of
+                    true ->
+                        atomics:sub(A, ?DROPPED, Dropped),
+                        atomics:put(A, ?SEEN, Pending),
+                        pass([{dropped, Dropped}], 1, F1);
+                    false ->
+                        atomics:put(A, ?SEEN, Pending),
+                        F1
+                end,
             case {tight(A, Max), T} of
                 {false, _} -> F;
                 {true, off} -> _ = erlang:send_after(?LOOK_MS, self(), look),

@@ -48,7 +48,9 @@ stop(Ref) ->
     ok.
 
 init(Caller, Feeder, Ref, Opts) ->
-    case toroco_tap:subscribe(Opts) of
+    %% Whatever the subscriber asked for, the relay takes its node's events
+    %% in batches: they leave as batches too.
+    case toroco_tap:subscribe(Opts#{delivery => batch}) of
         {ok, Local} ->
             ok = pg:join(?SCOPE, {tap_relay, Ref}, self()),
             Mon = erlang:monitor(process, Feeder),
@@ -61,8 +63,8 @@ init(Caller, Feeder, Ref, Opts) ->
 %% `Dropped': events lost on this side not reported yet.
 relay(R = {_, Ref, Local, Mon}, Dropped) ->
     receive
-        {toroco_event, Local, Event} ->
-            relay(R, pass(R, take(Local, [Event], 1, Dropped)));
+        {toroco_events, Local, Events} ->
+            relay(R, pass(R, take(Local, Events, Dropped)));
         {'DOWN', Mon, process, _, _} ->
             toroco_tap:unsubscribe(Local);
         {stop, Ref} ->
@@ -71,22 +73,25 @@ relay(R = {_, Ref, Local, Mon}, Dropped) ->
             relay(R, pass(R, {[], Dropped}))
     end.
 
-%% What else is already here, up to a batch.
-take(_Local, Events, ?BATCH_MAX, Dropped) ->
-    {lists:reverse(Events), Dropped};
-take(Local, Events, N, Dropped) ->
-    receive
-        {toroco_event, Local, {dropped, K}} -> take(Local, Events, N, Dropped + K);
-        {toroco_event, Local, Event} -> take(Local, [Event | Events], N + 1, Dropped)
-    after 0 ->
-            {lists:reverse(Events), Dropped}
-    end.
+%% The events of a batch, and what else is already here up to ?BATCH_MAX,
+%% with the drops they report counted apart.
+take(Local, Events, Dropped) ->
+    take(Local, Events, [], 0, Dropped).
 
-pass({Feeder, Ref, _, _}, {Events0, Dropped0}) ->
-    {Events, Dropped} = case Events0 of
-                            [{dropped, K} | Rest] -> {Rest, Dropped0 + K};
-                            _ -> {Events0, Dropped0}
-                        end,
+take(Local, [], Acc, N, Dropped) when N < ?BATCH_MAX ->
+    receive
+        {toroco_events, Local, Events} -> take(Local, Events, Acc, N, Dropped)
+    after 0 ->
+            {lists:reverse(Acc), Dropped}
+    end;
+take(_Local, [], Acc, _N, Dropped) ->
+    {lists:reverse(Acc), Dropped};
+take(Local, [{dropped, K} | Events], Acc, N, Dropped) ->
+    take(Local, Events, Acc, N, Dropped + K);
+take(Local, [Event | Events], Acc, N, Dropped) ->
+    take(Local, Events, [Event | Acc], N + 1, Dropped).
+
+pass({Feeder, Ref, _, _}, {Events, Dropped}) ->
     case toroco_tap:relayed(Feeder, Ref, Events, Dropped) of
         ok -> 0;
         busy -> Dropped + length(Events)

@@ -13,6 +13,7 @@ all() ->
 groups() ->
     [{tap, [], [event_shapes, names_filter, kinds_filter, lifecycle_events,
                 slow_subscriber_loses_and_counts, dropped_reported_without_later_events,
+                batch_delivery_same_events, slow_batch_subscriber_loses_and_counts,
                 per_source_order, unsubscribe_stops_events, dead_subscriber_is_unsubscribed,
                 bad_options_refused, no_subscriber_no_tap_state, burst_goes_in_batches,
                 idle_subscription_costs_nothing, network_hears_through_pg]},
@@ -156,6 +157,83 @@ slow_subscriber_loses_and_counts(_Config) ->
     after 10000 -> ct:fail(no_count)
     end.
 
+batch_delivery_same_events() ->
+    [{doc, "With delivery => batch a subscriber gets the events a subscriber taking them one "
+      "at a time gets, each source's in the same order, several to a message."}].
+batch_delivery_same_events(_Config) ->
+    chain(),
+    {ok, One} = toroco:subscribe_events(#{kinds => [emit, deliver]}),
+    {ok, Many} = toroco:subscribe_events(#{kinds => [emit, deliver], delivery => batch}),
+    N = 1000,
+    [ok = toroco:inject({s, v}, I) || I <- lists:seq(1, N)],
+    %% each value: emitted by s and b, delivered to b and a
+    Singles = take_events(One, 4 * N, []),
+    {Messages, Batched} = take_batches(Many, 4 * N, 0, []),
+    ct:pal("~b events in ~b messages", [length(Batched), Messages]),
+    BySource = fun(Es) -> maps:groups_from_list(fun(E) -> element(3, E) end, Es) end,
+    true = BySource(Singles) =:= BySource(Batched),
+    [{s, v}, {b, out}] = lists:usort(fun(X, Y) -> X >= Y end,
+                                     [Src || {emit, _, Src, send, _} <- Batched]),
+    true = Messages < N.
+
+take_events(_Ref, 0, Acc) ->
+    lists:reverse(Acc);
+take_events(Ref, K, Acc) ->
+    receive {toroco_event, Ref, E} -> take_events(Ref, K - 1, [E | Acc])
+    after 5000 -> ct:fail({missing, K, events})
+    end.
+
+take_batches(_Ref, K, M, Acc) when K =< 0 ->
+    {M, lists:append(lists:reverse(Acc))};
+take_batches(Ref, K, M, Acc) ->
+    receive {toroco_events, Ref, Es} -> take_batches(Ref, K - length(Es), M + 1, [Es | Acc])
+    after 5000 -> ct:fail({missing, K, events})
+    end.
+
+slow_batch_subscriber_loses_and_counts() ->
+    [{doc, "A batch subscriber that does not read keeps at most about `buffer' events in its "
+      "batches; every event is received or counted."}].
+slow_batch_subscriber_loses_and_counts(_Config) ->
+    sensor(s, [v]),
+    Parent = self(),
+    N = 5000,
+    Buffer = 100,
+    Sub = spawn_link(fun() ->
+                             {ok, Ref} = toroco:subscribe_events(#{kinds => [emit], buffer => Buffer,
+                                                                   delivery => batch}),
+                             Parent ! {subscribed, self()},
+                             receive read -> ok end,
+                             Parent ! {counted, self(), count_batches(Ref, 0, 0, [])}
+                     end),
+    receive {subscribed, Sub} -> ok end,
+    [ok = toroco:inject({s, v}, I) || I <- lists:seq(1, N)],
+    Queued = fun() ->
+                     {messages, Ms} = process_info(Sub, messages),
+                     lists:sum([length(Es) || {toroco_events, _, Es} <- Ms])
+             end,
+    ok = wait_until(fun() -> Queued() > 0 end, 2000),
+    true = Queued() =< Buffer + 1,
+    Sub ! read,
+    receive {counted, Sub, {Received, Dropped, Seq}} ->
+            ct:pal("received ~b, dropped ~b of ~b (buffer ~b)", [Received, Dropped, N, Buffer]),
+            N = Received + Dropped,
+            true = Dropped > 0,
+            Seq = lists:sort(Seq)
+    after 10000 -> ct:fail(no_count)
+    end.
+
+count_batches(_Ref, R, D, Seq) when R + D >= 5000 ->
+    {R, D, lists:reverse(Seq)};
+count_batches(Ref, R, D, Seq) ->
+    receive
+        {toroco_events, Ref, Es} ->
+            {R1, D1, Seq1} = lists:foldl(fun({dropped, K}, {Ra, Da, Sa}) -> {Ra, Da + K, Sa};
+                                            ({emit, _, _, send, I}, {Ra, Da, Sa}) -> {Ra + 1, Da, [I | Sa]}
+                                         end, {R, D, Seq}, Es),
+            count_batches(Ref, R1, D1, Seq1)
+    after 3000 -> {R, D, lists:reverse(Seq)}
+    end.
+
 count(_Ref, R, D, Seq) when R + D >= 5000 ->
     {R, D, lists:reverse(Seq)};
 count(Ref, R, D, Seq) ->
@@ -222,6 +300,7 @@ bad_options_refused(_Config) ->
     {error, {bad_buffer, 0}} = toroco:subscribe_events(#{buffer => 0}),
     {error, {bad_names, x}} = toroco:subscribe_events(#{names => x}),
     {error, {bad_option, colour}} = toroco:subscribe_events(#{colour => red}),
+    {error, {bad_delivery, sometimes}} = toroco:subscribe_events(#{delivery => sometimes}),
     {error, {bad_options, nope}} = toroco:subscribe_events(nope),
     [] = toroco_tap:current().
 

@@ -112,17 +112,17 @@ broadcast(Msg, #clients{conns = Conns}) ->
     ok.
 
 %% @doc A message that may be about the clients or the tap: `{down, Conn,
-%% Cl}' when a client's process went (forgotten, see above), `{event, E}'
-%% for an event (or `{dropped, N}'), `{retapped, Cl}' when the tap was
+%% Cl}' when a client's process went (forgotten, see above), `{events, Es}'
+%% for a batch of events (among them `{dropped, N}'), `{retapped, Cl}' when the tap was
 %% taken again after the runtime came back (with clients connected),
 %% `{ok, Cl}' for the tap's own bookkeeping and `ignore' for anything else.
 -spec handle(term(), clients()) ->
-          {down, pid(), clients()} | {event, term()} | {retapped | ok, clients()} | ignore.
+          {down, pid(), clients()} | {events, [term()]} | {retapped | ok, clients()} | ignore.
 handle({'DOWN', _, process, Conn, _}, Cl = #clients{conns = Conns}) when is_map_key(Conn, Conns) ->
     {down, Conn, down(Conn, Cl)};
 handle(Info, Cl = #clients{tap = Tap, conns = Conns}) ->
     case toroco_live_tap:handle(Info, Tap) of
-        {event, Event} -> {event, Event};
+        {events, Events} -> {events, Events};
         {down, Tap1} -> {ok, Cl#clients{tap = Tap1}};
         {retry, Tap1} when map_size(Conns) > 0 ->
             {retapped, Cl#clients{tap = toroco_live_tap:ensure_on(Tap1)}};

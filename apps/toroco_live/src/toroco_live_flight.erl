@@ -164,7 +164,7 @@ handle_info({toroco_live_world, changed}, F = #flight{recording = R}) ->
                         F#flight{scene = Scene, recording = R1}, Msgs));
 handle_info(Info, F = #flight{tap = Tap}) ->
     case toroco_live_tap:handle(Info, Tap) of
-        {event, Event} -> noreply(event(Event, F));
+        {events, Events} -> noreply(lists:foldl(fun event/2, F, Events));
         {down, Tap1} -> {noreply, F#flight{tap = Tap1}};
         {retry, Tap1} -> {_, Tap2} = toroco_live_tap:on(Tap1), {noreply, F#flight{tap = Tap2}};
         _ -> {noreply, F}
@@ -211,7 +211,7 @@ drain(F = #flight{tap = T}, Until) ->
     Tap = toroco_live_tap:ref(T),
     Wait = min(?QUIET_MS, max(0, Until - erlang:monotonic_time(millisecond))),
     receive
-        {toroco_event, Tap, Event} -> drain(event(Event, F), Until)
+        {toroco_events, Tap, Events} -> drain(lists:foldl(fun event/2, F, Events), Until)
     after Wait -> F
     end.
 

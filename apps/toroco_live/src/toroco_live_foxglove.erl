@@ -191,7 +191,7 @@ handle_info({'EXIT', L, Why}, H = #hub{listener = L}) ->
     {stop, {listener, Why}, H};
 handle_info(Info, H = #hub{clients = Cl}) ->
     case toroco_live_clients:handle(Info, Cl) of
-        {event, Event} -> {noreply, event(Event, H)};
+        {events, Events} -> {noreply, lists:foldl(fun event/2, H, Events)};
         {retapped, Cl1} -> {noreply, refresh(H#hub{clients = Cl1})};
         {down, _Conn, Cl1} -> {noreply, H#hub{clients = Cl1}};
         {ok, Cl1} -> {noreply, H#hub{clients = Cl1}};

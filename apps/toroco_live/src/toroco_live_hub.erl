@@ -177,7 +177,7 @@ handle_info(Info, H) ->
 
 handle_info_tap(Info, H = #h{tap = Tap}) ->
     case toroco_live_tap:handle(Info, Tap) of
-        {event, Event} -> {noreply, event(Event, H)};
+        {events, Events} -> {noreply, lists:foldl(fun event/2, H, Events)};
         {down, Tap1} -> {noreply, H#h{tap = Tap1, dirty = true}};
         {retry, Tap1} -> {_, Tap2} = toroco_live_tap:on(Tap1), {noreply, H#h{tap = Tap2}};
         _ -> {noreply, H}

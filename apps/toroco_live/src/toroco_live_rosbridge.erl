@@ -227,7 +227,7 @@ handle_info({'EXIT', L, Why}, H = #hub{listener = L}) ->
     {stop, {listener, Why}, H};
 handle_info(Info, H = #hub{clients = Cl}) ->
     case toroco_live_clients:handle(Info, Cl) of
-        {event, Event} -> {noreply, event(Event, H)};
+        {events, Events} -> {noreply, lists:foldl(fun event/2, H, Events)};
         {down, Conn, Cl1} ->
             {noreply, unadvertise_all(Conn, maps:keys(H#hub.relayed), H#hub{clients = Cl1})};
         {_, Cl1} -> {noreply, H#hub{clients = Cl1}};

@@ -192,7 +192,8 @@ init({Url, Opts}) ->
     case options(Url, Opts) of
         {ok, {U, Host, Port, Resource}, Options} ->
             logger:notice("rosbridge client: connecting to ~ts", [U], ?LOG),
-            Tap = toroco_live_tap:new(#{kinds => [emit, lifecycle],
+            %% one event at a time: each is a message to the remote end
+            Tap = toroco_live_tap:new(#{kinds => [emit, lifecycle], delivery => event,
                                         buffer => maps:get(max_queue, Options),
                                         retry_ms => ?REFRESH_MS, world => true,
                                         who => <<"rosbridge client">>}),

@@ -10,13 +10,18 @@
 %% `{down, Tap}'; `retry_ms' later (and `retry_ms' after a subscription
 %% that failed) it is told `{retry, Tap}' and subscribes again with
 %% {@link on/1} if it still wants events.
+%%
+%% The events come in batches (`delivery => batch', the default here):
+%% `{events, Events}', in order, several to a message, so a client taking
+%% the robot's every event is woken once per batch; a client that asks for
+%% `delivery => event' gets `{event, Event}' one at a time.
 %% <pre>
 %% T0 = toroco_live_tap:new(#{buffer => 1000}),
 %% {_, T} = toroco_live_tap:on(T0),
 %% ...
 %% handle_info(Msg, S = #s{tap = T}) ->
 %%     case toroco_live_tap:handle(Msg, T) of
-%%         {event, Event} -> ...;
+%%         {events, Events} -> ...;
 %%         {down, T1} -> ...;
 %%         {retry, T1} -> {_, T2} = toroco_live_tap:on(T1), ...;
 %%         ignore -> ...;
@@ -34,6 +39,7 @@
 %% (default `false'), for `who' (named in the log when the runtime
 %% refuses, default `<<"toroco_live">>').
 -type opts() :: #{kinds => [atom()], names => all | [atom()], buffer => pos_integer(),
+                  delivery => toroco_tap:delivery(),
                   retry_ms => pos_integer(), world => boolean(), who => binary()}.
 
 -record(tap, {opts :: map(),
@@ -52,7 +58,8 @@
 %% @doc A client's tap, not subscribed yet.
 -spec new(opts()) -> tap().
 new(Opts) ->
-    #tap{opts = maps:without([retry_ms, world, who], Opts), retry_ms = maps:get(retry_ms, Opts, 1000),
+    #tap{opts = maps:merge(#{delivery => batch}, maps:without([retry_ms, world, who], Opts)),
+         retry_ms = maps:get(retry_ms, Opts, 1000),
          world = maps:get(world, Opts, false), who = maps:get(who, Opts, <<"toroco_live">>)}.
 
 %% @doc Subscribes, unless it is already. If the runtime refuses or is not
@@ -96,9 +103,13 @@ off(T = #tap{ref = Ref, mon = Mon}) ->
 %% subscription gone, time to subscribe again, an event of an earlier
 %% subscription (`ignore'), or not the tap's (`unknown').
 -spec handle(term(), tap()) ->
-          {event, term()} | {down, tap()} | {retry, tap()} | ignore | unknown.
+          {events, [term()]} | {event, term()} | {down, tap()} | {retry, tap()} | ignore | unknown.
+handle({toroco_events, Ref, Events}, #tap{ref = Ref}) ->
+    {events, Events};
 handle({toroco_event, Ref, Event}, #tap{ref = Ref}) ->
     {event, Event};
+handle({toroco_events, _, _}, _T) ->
+    ignore;
 handle({toroco_event, _, _}, _T) ->
     ignore;
 handle({'DOWN', Mon, process, _, _}, T = #tap{mon = Mon}) when Mon =/= none ->
