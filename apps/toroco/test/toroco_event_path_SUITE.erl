@@ -132,22 +132,38 @@ lifecycle_events(_Config) ->
 slow_subscriber_loses_and_counts() ->
     [{doc, "A subscriber that does not read keeps at most about `buffer' events; every event is received or counted."}].
 slow_subscriber_loses_and_counts(_Config) ->
+    slow_subscriber(event).
+
+slow_batch_subscriber_loses_and_counts() ->
+    [{doc, "A batch subscriber that does not read keeps at most about `buffer' events in its "
+      "batches; every event is received or counted."}].
+slow_batch_subscriber_loses_and_counts(_Config) ->
+    slow_subscriber(batch).
+
+%% 5000 emissions while a subscriber (of Delivery) with room for 100 does
+%% not read: its mailbox holds at most about 100 events, then it reads, and
+%% what it got and what it was told it lost add up to 5000, in order.
+slow_subscriber(Delivery) ->
     sensor(s, [v]),
     Parent = self(),
     N = 5000,
     Buffer = 100,
     Sub = spawn_link(fun() ->
-                             {ok, Ref} = toroco:subscribe_events(#{kinds => [emit], buffer => Buffer}),
+                             {ok, Ref} = toroco:subscribe_events(#{kinds => [emit], buffer => Buffer,
+                                                                   delivery => Delivery}),
                              Parent ! {subscribed, self()},
                              receive read -> ok end,
-                             Parent ! {counted, self(), count(Ref, 0, 0, [])}
+                             Parent ! {counted, self(), count(Ref, N, {0, 0, []})}
                      end),
     receive {subscribed, Sub} -> ok end,
     [ok = toroco:inject({s, v}, I) || I <- lists:seq(1, N)],
-    %% The subscriber's mailbox stays bounded while it does not read.
-    ok = wait_until(fun() -> element(2, process_info(Sub, message_queue_len)) > 0 end, 2000),
-    {message_queue_len, Len} = process_info(Sub, message_queue_len),
-    true = Len =< Buffer + 1,
+    Queued = fun() ->
+                     {messages, Ms} = process_info(Sub, messages),
+                     length([E || {toroco_event, _, E} <- Ms])
+                         + lists:sum([length(Es) || {toroco_events, _, Es} <- Ms])
+             end,
+    ok = wait_until(fun() -> Queued() > 0 end, 2000),
+    true = Queued() =< Buffer + 1,
     Sub ! read,
     receive {counted, Sub, {Received, Dropped, Seq}} ->
             ct:pal("received ~b, dropped ~b of ~b (buffer ~b)", [Received, Dropped, N, Buffer]),
@@ -156,6 +172,20 @@ slow_subscriber_loses_and_counts(_Config) ->
             Seq = lists:sort(Seq)                       % in emission order
     after 10000 -> ct:fail(no_count)
     end.
+
+%% Received, dropped and the values received, until they add up to N (or
+%% nothing more comes for 3 s).
+count(_Ref, N, {R, D, Seq}) when R + D >= N ->
+    {R, D, lists:reverse(Seq)};
+count(Ref, N, Acc) ->
+    receive
+        {toroco_event, Ref, E} -> count(Ref, N, counted(E, Acc));
+        {toroco_events, Ref, Es} -> count(Ref, N, lists:foldl(fun counted/2, Acc, Es))
+    after 3000 -> {R, D, Seq} = Acc, {R, D, lists:reverse(Seq)}
+    end.
+
+counted({dropped, K}, {R, D, Seq}) -> {R, D + K, Seq};
+counted({emit, _, _, send, I}, {R, D, Seq}) -> {R + 1, D, [I | Seq]}.
 
 batch_delivery_same_events() ->
     [{doc, "With delivery => batch a subscriber gets the events a subscriber taking them one "
@@ -188,59 +218,6 @@ take_batches(_Ref, K, M, Acc) when K =< 0 ->
 take_batches(Ref, K, M, Acc) ->
     receive {toroco_events, Ref, Es} -> take_batches(Ref, K - length(Es), M + 1, [Es | Acc])
     after 5000 -> ct:fail({missing, K, events})
-    end.
-
-slow_batch_subscriber_loses_and_counts() ->
-    [{doc, "A batch subscriber that does not read keeps at most about `buffer' events in its "
-      "batches; every event is received or counted."}].
-slow_batch_subscriber_loses_and_counts(_Config) ->
-    sensor(s, [v]),
-    Parent = self(),
-    N = 5000,
-    Buffer = 100,
-    Sub = spawn_link(fun() ->
-                             {ok, Ref} = toroco:subscribe_events(#{kinds => [emit], buffer => Buffer,
-                                                                   delivery => batch}),
-                             Parent ! {subscribed, self()},
-                             receive read -> ok end,
-                             Parent ! {counted, self(), count_batches(Ref, 0, 0, [])}
-                     end),
-    receive {subscribed, Sub} -> ok end,
-    [ok = toroco:inject({s, v}, I) || I <- lists:seq(1, N)],
-    Queued = fun() ->
-                     {messages, Ms} = process_info(Sub, messages),
-                     lists:sum([length(Es) || {toroco_events, _, Es} <- Ms])
-             end,
-    ok = wait_until(fun() -> Queued() > 0 end, 2000),
-    true = Queued() =< Buffer + 1,
-    Sub ! read,
-    receive {counted, Sub, {Received, Dropped, Seq}} ->
-            ct:pal("received ~b, dropped ~b of ~b (buffer ~b)", [Received, Dropped, N, Buffer]),
-            N = Received + Dropped,
-            true = Dropped > 0,
-            Seq = lists:sort(Seq)
-    after 10000 -> ct:fail(no_count)
-    end.
-
-count_batches(_Ref, R, D, Seq) when R + D >= 5000 ->
-    {R, D, lists:reverse(Seq)};
-count_batches(Ref, R, D, Seq) ->
-    receive
-        {toroco_events, Ref, Es} ->
-            {R1, D1, Seq1} = lists:foldl(fun({dropped, K}, {Ra, Da, Sa}) -> {Ra, Da + K, Sa};
-                                            ({emit, _, _, send, I}, {Ra, Da, Sa}) -> {Ra + 1, Da, [I | Sa]}
-                                         end, {R, D, Seq}, Es),
-            count_batches(Ref, R1, D1, Seq1)
-    after 3000 -> {R, D, lists:reverse(Seq)}
-    end.
-
-count(_Ref, R, D, Seq) when R + D >= 5000 ->
-    {R, D, lists:reverse(Seq)};
-count(Ref, R, D, Seq) ->
-    receive
-        {toroco_event, Ref, {dropped, K}} -> count(Ref, R, D + K, Seq);
-        {toroco_event, Ref, {emit, _, _, send, I}} -> count(Ref, R + 1, D, [I | Seq])
-    after 3000 -> {R, D, lists:reverse(Seq)}
     end.
 
 dropped_reported_without_later_events() ->
