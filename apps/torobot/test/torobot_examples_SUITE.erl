@@ -19,6 +19,8 @@
 -include_lib("common_test/include/ct.hrl").
 -compile([export_all, nowarn_export_all]).
 
+-import(toroco_test_lib, [lockstep/0, settle/0, pass/1]).
+
 suite() -> [{timetrap, {seconds, 60}}].
 
 all() -> [{group, verification}, {group, line_follower}, {group, devices}, {group, runner}].
@@ -66,22 +68,6 @@ run(Example) -> run(Example, #{}).
 run(Example, Opts) -> ok = torobot_examples:run(Example, maps:merge(#{console => false}, Opts)).
 
 mouse(Button, Event) -> ok = toroco:inject({mouse, Button}, Event), settle().
-
-lockstep() -> toroco_clock:mode() =:= lockstep.
-
-%% In lockstep: returns once everything the events so far caused is handled.
-settle() ->
-    case lockstep() of
-        true -> ok = toroco_clock:settle();
-        false -> ok
-    end.
-
-%% Lets `Ms' of the runtime's time pass: simulated in lockstep, else real.
-pass(Ms) ->
-    case lockstep() of
-        true -> {ok, _} = toroco_clock:tick(toroco_clock:now_ms() + Ms, []), ok;
-        false -> timer:sleep(Ms)
-    end.
 
 %% In lockstep a measured delay is exact; in real time within its bounds.
 delay(Ms, Exact, Low, High) ->

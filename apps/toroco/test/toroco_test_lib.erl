@@ -1,7 +1,7 @@
 %% Helpers shared by the runtime's suites.
 -module(toroco_test_lib).
 -export([root/0, start/0, stop/0, clear/0, values/1, values/2, await_values/2, await_values/3,
-         await_input/4, settle/1,
+         await_input/4, settle/1, lockstep/0, settle/0, pass/1,
          sensor/2, actuator/2, wait_until/2, wait_until/3, poll/2, poll/3]).
 
 %% The project's top folder (this file is apps/toroco/test/toroco_test_lib.erl).
@@ -57,6 +57,24 @@ settle(A) ->
     _ = toroco:inspect(A),
     _ = toroco_fake_actuator:history(A),
     ok.
+
+%% Whether the runtime runs in lockstep (SPEC §14).
+lockstep() -> toroco_clock:mode() =:= lockstep.
+
+%% In lockstep: returns once everything the events so far caused is
+%% handled; in real time at once.
+settle() ->
+    case lockstep() of
+        true -> ok = toroco_clock:settle();
+        false -> ok
+    end.
+
+%% Lets `Ms' of the runtime's time pass: simulated in lockstep, else real.
+pass(Ms) ->
+    case lockstep() of
+        true -> {ok, _} = toroco_clock:tick(toroco_clock:now_ms() + Ms, []), ok;
+        false -> timer:sleep(Ms)
+    end.
 
 %% The one bounded wait of the suites: checks `Fun()' every 5 ms until it
 %% returns `true', for at most `Timeout' ms of real time. `poll/2' answers

@@ -2,6 +2,12 @@
 %% `toroco_fake_sensor' drives its inputs and a `toroco_fake_actuator'
 %% (`motors', its `setvel' idle value {0, 0}) records what reaches the
 %% motors. Parameters are checked for every behavior of the catalogue.
+%%
+%% The behaviors run in lockstep (SPEC §14): each injected event is handled
+%% to quiescence before the next, and waiting moves simulated time in 10 ms
+%% steps, so a behavior's timeouts (a stall, a search, a stale command) are
+%% measured in simulated milliseconds, not at the mercy of the machine's
+%% load. Teleoperation over a real UDP socket runs in real time.
 -module(toroco_lib_SUITE).
 
 -include_lib("common_test/include/ct.hrl").
@@ -9,23 +15,40 @@
 
 -compile([export_all, nowarn_export_all]).
 
+-import(toroco_test_lib, [lockstep/0, settle/0, pass/1]).
+
 suite() ->
     [{timetrap, {seconds, 60}}].
 
 all() ->
-    [{group, params}, {group, behaviors}].
+    [{group, params}, {group, behaviors}, {group, links}].
 
 groups() ->
     [{params, [], [unknown_param_refused, bad_values_refused, inconsistent_params_refused,
                    params_documented]},
+     %% in lockstep (SPEC §14): each event handled before the next, time
+     %% simulated, so the behaviors' timeouts are exact
      {behaviors, [], [cruise_latches_forward, wander_is_seeded, avoid_spins_away,
                       avoid_keeps_its_side, follow_wall_keeps_distance, follow_wall_searches,
                       escape_after_bump, escape_after_stall, seek_colour_steers,
-                      dock_homes_and_stops, stale_stop_times_out, teleop_overrides_from_link,
-                      fear_and_love]}].
+                      dock_homes_and_stops, stale_stop_times_out, fear_and_love]},
+     %% in real time: commands come over a real UDP socket
+     {links, [], [teleop_overrides_from_link]}].
+
+init_per_group(behaviors, Config) ->
+    [{lockstep, true} | Config];
+init_per_group(_, Config) ->
+    Config.
+
+end_per_group(_, _Config) ->
+    ok.
 
 init_per_testcase(_Case, Config) ->
     ok = toroco_test_lib:start(),
+    case ?config(lockstep, Config) of
+        true -> ok = toroco_clock:lockstep(#{});
+        _ -> ok
+    end,
     ok = toroco:add_device(sensor, toroco_fake_sensor,
                            #{outputs => [a, b, c, bump, command, odometry]}),
     ok = toroco:add_device(motors, toroco_fake_actuator, #{inputs => [setvel]}),
@@ -36,6 +59,7 @@ init_per_testcase(_Case, Config) ->
     Config.
 
 end_per_testcase(_Case, _Config) ->
+    _ = (catch toroco_clock:realtime()),
     toroco_test_lib:stop().
 
 %%====================================================================
@@ -124,14 +148,14 @@ wander_is_seeded(_Config) ->
                     [V || {V, _} <- wander_arcs(Params#{seed => 43}, 6)]),
     [?assert(abs(L - 50) =< 30 andalso L + R =:= 100) || {{L, R}, _} <- First],
     Gaps = gaps([T || {_, T} <- First]),
-    ct:log("wander intervals ~p ms", [Gaps]),
-    [?assert(G >= 50 andalso G =< 400) || G <- tl(Gaps)].
+    ct:log("wander intervals ~w ms", [Gaps]),
+    [?assert(G >= 60 andalso G =< 120) || G <- Gaps].
 
 wander_arcs(Params, N) ->
     ok = toroco_fake_actuator:clear(motors),
     ok = toroco:add_behavior(wander, toroco_lib_wander, #{params => Params}),
     motors([wander]),
-    ok = toroco_fake_actuator:await(motors, fun(H) -> length(H) >= N end, 3000),
+    await_motors(fun(H) -> length(H) >= N end, fun() -> {fewer_than, N, values()} end),
     ok = toroco:remove_behavior(wander),
     [{V, T} || {setvel, V, T} <- lists:sublist(toroco_fake_actuator:history(motors), N)].
 
@@ -206,8 +230,7 @@ follow_wall_searches(_Config) ->
     send(a, 1.2),
     {_, _, T0} = await_last({80, 40}),
     {_, _, T1} = await_last({60, 60}),
-    ct:log("searched for ~b ms", [T1 - T0]),
-    ?assert(T1 - T0 >= 250 andalso T1 - T0 =< 1000).
+    ?assertEqual(300, T1 - T0).
 
 escape_after_bump() ->
     [{doc, "A bump on the left backs up for back_ms, spins right for turn_ms, then lets "
@@ -222,9 +245,7 @@ escape_after_bump(_Config) ->
     {_, _, T} = await_last({0, 0}),
     [{_, {-40, -40}, T0}, {_, {45, -45}, T1}, {_, {0, 0}, T2}] =
         toroco_fake_actuator:history(motors),
-    ct:log("backed ~b ms, turned ~b ms", [T1 - T0, T2 - T1]),
-    ?assert(T1 - T0 >= 280 andalso T1 - T0 =< 600),
-    ?assert(T2 - T1 >= 180 andalso T2 - T1 =< 500),
+    ?assertEqual({300, 200}, {T1 - T0, T2 - T1}),
     ?assertEqual(T2, T),
     ok = toroco_fake_actuator:clear(motors),
     send(bump, right),
@@ -232,7 +253,7 @@ escape_after_bump(_Config) ->
     send(bump, rear),
     {_, {-45, 45}, Tr} = await_last({-45, 45}),
     [{_, _, Tb} | _] = toroco_fake_actuator:history(motors),
-    ?assert(Tr - Tb < 250).
+    ?assertEqual(0, Tr - Tb).                  % at once, in the same simulated ms
 
 escape_after_stall() ->
     [{doc, "Wheels commanded but not turning for stall_ms start an escape; wheels "
@@ -245,15 +266,14 @@ escape_after_stall(_Config) ->
     send(command, {60, 60}),
     send(odometry, {58, 61}),
     send(odometry, {5, 0}),                    % stalled ...
-    timer:sleep(150),
+    pass(150),
     send(odometry, {55, 60}),                  % ... but not for long
-    timer:sleep(400),
+    pass(400),
     ?assertEqual([], toroco_fake_actuator:history(motors)),
-    T0 = erlang:monotonic_time(millisecond),
+    T0 = toroco_clock:now_ms(),                % the runtime's time, as the motors' stamps
     send(odometry, {0, 0}),
     {_, _, T1} = await_last({-50, -50}),
-    ct:log("stall noticed after ~b ms", [T1 - T0]),
-    ?assert(T1 - T0 >= 250 andalso T1 - T0 =< 1000),
+    ?assertEqual(300, T1 - T0),
     await_last({0, 0}).
 
 seek_colour_steers() ->
@@ -302,12 +322,11 @@ stale_stop_times_out(_Config) ->
     wire(stale, #{command => command}),
     motors([stale]),
     send(command, {70, 70}),
-    timer:sleep(100),
+    pass(100),
     send(command, {60, 60}),
     {_, _, T0} = await_last({60, 60}),
     {_, _, T1} = await_last({1, 1}),
-    ct:log("stale after ~b ms", [T1 - T0]),
-    ?assert(T1 - T0 >= 180 andalso T1 - T0 =< 600),
+    ?assertEqual(200, T1 - T0),
     ?assertEqual([{70, 70}, {60, 60}, {1, 1}], values()).
 
 teleop_overrides_from_link() ->
@@ -377,11 +396,36 @@ motors(Sources) ->
                                                  idle => {0, 0}}}).
 
 send(Out, V) ->
-    ok = toroco:inject({sensor, Out}, V, #{latch => true}).
+    ok = toroco:inject({sensor, Out}, V, #{latch => true}),
+    settle().
+
+%% Waits until `Holds(History)' of the motors, for at most 3 s of the
+%% runtime's time: in lockstep simulated time moves in 10 ms steps, in real
+%% time the actuator checks at each delivery. Fails with `Why()'.
+await_motors(Holds, Why) ->
+    case lockstep() of
+        true -> await_ticks(Holds, Why, toroco_clock:now_ms() + 3000);
+        false ->
+            case toroco_fake_actuator:await(motors, Holds, 3000) of
+                ok -> ok;
+                {error, timeout} -> ct:fail(Why())
+            end
+    end.
+
+await_ticks(Holds, Why, Deadline) ->
+    settle(),
+    case Holds(toroco_fake_actuator:history(motors)) of
+        true -> ok;
+        false ->
+            case toroco_clock:now_ms() >= Deadline of
+                true -> ct:fail(Why());
+                false -> pass(10), await_ticks(Holds, Why, Deadline)
+            end
+    end.
 
 %% Waits until behavior `B' has had `V' on input `In': events of different
 %% sources may arrive in any order (SPEC §4), so a case that needs one
-%% first waits for it.
+%% first waits for it (in lockstep it has: send/2 settles).
 fed(B, In, V) ->
     toroco_test_lib:wait_until(fun() -> case toroco:inspect(B) of
                                             #{inputs := #{In := #{last := {value, V}}}} -> true;
@@ -393,19 +437,14 @@ values() ->
     [V || {_, V, _} <- toroco_fake_actuator:history(motors)].
 
 await(Expected) ->
-    case toroco_fake_actuator:await(motors, fun(H) -> [V || {_, V, _} <- H] =:= Expected end,
-                                    3000) of
-        ok -> ok;
-        {error, timeout} -> ct:fail({expected, Expected, got, values()})
-    end.
+    await_motors(fun(H) -> [V || {_, V, _} <- H] =:= Expected end,
+                 fun() -> {expected, Expected, got, values()} end).
 
 %% Waits until the last delivery is `V'; that delivery.
 await_last(V) ->
-    case toroco_fake_actuator:await(motors, fun(H) -> element(2, lists:last(H)) =:= V end,
-                                    3000) of
-        ok -> lists:last(toroco_fake_actuator:history(motors));
-        {error, timeout} -> ct:fail({expected_last, V, got, values()})
-    end.
+    await_motors(fun([]) -> false; (H) -> element(2, lists:last(H)) =:= V end,
+                 fun() -> {expected_last, V, got, values()} end),
+    lists:last(toroco_fake_actuator:history(motors)).
 
 gaps([_]) -> [];
 gaps([A, B | Rest]) -> [B - A | gaps([B | Rest])].
