@@ -14,6 +14,8 @@
 
 -compile([export_all, nowarn_export_all]).
 
+-import(toroco_test_lib, [settle/0]).
+
 -define(FORWARD, {80, 80}).
 -define(SPIN_RIGHT, {50, -50}).          % avoid_left's turn
 -define(SPIN_LEFT, {-50, 50}).           % avoid_right's turn
@@ -230,9 +232,6 @@ press() ->
 inject(Output, V) ->
     ok = toroco:inject(Output, V),
     settle().
-
-settle() ->
-    ok = toroco_clock:settle().
 
 values(Input) ->
     [V || {In, V, _} <- toroco_fake_actuator:history(motors), In =:= Input].

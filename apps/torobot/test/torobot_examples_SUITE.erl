@@ -136,18 +136,7 @@ wait_until(Fun, Timeout) ->
     wait_until(Fun, Timeout, fun() -> ct:fail({condition_not_met_within, Timeout}) end).
 
 wait_until(Fun, Timeout, Fail) ->
-    settle(),
-    wait_until(Fun, now_ms() + Timeout, Timeout, Fail).
-
-wait_until(Fun, Deadline, Timeout, Fail) ->
-    case Fun() of
-        true -> ok;
-        _ ->
-            case now_ms() > Deadline of
-                true -> Fail();
-                false -> pass(10), wait_until(Fun, Deadline, Timeout, Fail)
-            end
-    end.
+    toroco_test_lib:await_runtime(Fun, Timeout, Fail).
 
 input_info(Name, In) -> maps:get(In, maps:get(inputs, toroco:inspect(Name))).
 

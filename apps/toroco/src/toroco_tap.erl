@@ -546,14 +546,13 @@ look(F0 = #feed{sub = Sub, a = A, max = Max, timer = T}) ->
     case erlang:process_info(Sub, message_queue_len) of
         {message_queue_len, Len} ->
             {Pending, F1} = pending(Len, F0),
+            atomics:put(A, ?SEEN, Pending),
             Dropped = atomics:get(A, ?DROPPED),
             F = case Dropped > 0 andalso Pending < Max of
                     true ->
                         atomics:sub(A, ?DROPPED, Dropped),
-                        atomics:put(A, ?SEEN, Pending),
                         pass([{dropped, Dropped}], 1, F1);
                     false ->
-                        atomics:put(A, ?SEEN, Pending),
                         F1
                 end,
             case {tight(A, Max), T} of

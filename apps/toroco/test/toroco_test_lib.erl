@@ -1,7 +1,7 @@
 %% Helpers shared by the runtime's suites.
 -module(toroco_test_lib).
 -export([root/0, start/0, stop/0, clear/0, values/1, values/2, await_values/2, await_values/3,
-         await_input/4, settle/1, lockstep/0, settle/0, pass/1,
+         await_input/4, settle/1, lockstep/0, settle/0, pass/1, await_runtime/3,
          sensor/2, actuator/2, wait_until/2, wait_until/3, poll/2, poll/3]).
 
 %% The project's top folder (this file is apps/toroco/test/toroco_test_lib.erl).
@@ -74,6 +74,23 @@ pass(Ms) ->
     case lockstep() of
         true -> {ok, _} = toroco_clock:tick(toroco_clock:now_ms() + Ms, []), ok;
         false -> timer:sleep(Ms)
+    end.
+
+%% Checks `Fun()' every 10 ms of the runtime's time (simulated in lockstep,
+%% where each step ticks the clock; else real) until it returns `true', for
+%% at most `Timeout' ms; then `Fail()'.
+await_runtime(Fun, Timeout, Fail) ->
+    settle(),
+    await_runtime(Fun, toroco_clock:now_ms() + Timeout, Timeout, Fail).
+
+await_runtime(Fun, Deadline, Timeout, Fail) ->
+    case Fun() of
+        true -> ok;
+        _ ->
+            case toroco_clock:now_ms() > Deadline of
+                true -> Fail();
+                false -> pass(10), await_runtime(Fun, Deadline, Timeout, Fail)
+            end
     end.
 
 %% The one bounded wait of the suites: checks `Fun()' every 5 ms until it

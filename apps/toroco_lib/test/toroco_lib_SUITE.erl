@@ -404,22 +404,13 @@ send(Out, V) ->
 %% time the actuator checks at each delivery. Fails with `Why()'.
 await_motors(Holds, Why) ->
     case lockstep() of
-        true -> await_ticks(Holds, Why, toroco_clock:now_ms() + 3000);
+        true -> toroco_test_lib:await_runtime(
+                  fun() -> Holds(toroco_fake_actuator:history(motors)) end, 3000,
+                  fun() -> ct:fail(Why()) end);
         false ->
             case toroco_fake_actuator:await(motors, Holds, 3000) of
                 ok -> ok;
                 {error, timeout} -> ct:fail(Why())
-            end
-    end.
-
-await_ticks(Holds, Why, Deadline) ->
-    settle(),
-    case Holds(toroco_fake_actuator:history(motors)) of
-        true -> ok;
-        false ->
-            case toroco_clock:now_ms() >= Deadline of
-                true -> ct:fail(Why());
-                false -> pass(10), await_ticks(Holds, Why, Deadline)
             end
     end.
 

@@ -113,9 +113,10 @@ broadcast(Msg, #clients{conns = Conns}) ->
 
 %% @doc A message that may be about the clients or the tap: `{down, Conn,
 %% Cl}' when a client's process went (forgotten, see above), `{events, Es}'
-%% for a batch of events (among them `{dropped, N}'), `{retapped, Cl}' when the tap was
-%% taken again after the runtime came back (with clients connected),
-%% `{ok, Cl}' for the tap's own bookkeeping and `ignore' for anything else.
+%% for a batch of events (among them `{dropped, N}'), `{retapped, Cl}' when
+%% the tap was taken again after the runtime came back (with clients
+%% connected), `{ok, Cl}' for the tap's own bookkeeping and `ignore' for
+%% anything else.
 -spec handle(term(), clients()) ->
           {down, pid(), clients()} | {events, [term()]} | {retapped | ok, clients()} | ignore.
 handle({'DOWN', _, process, Conn, _}, Cl = #clients{conns = Conns}) when is_map_key(Conn, Conns) ->
