@@ -7,7 +7,11 @@
 %% delivers them one at a time, in the order it received them: it sends one
 %% as `WIRE_STEP(Token, Msg)', monitors the receiver, and sends the next
 %% only when the receiver says `done' (the engine and the consumer shell do,
-%% once the message and every event it inserted were handled) or dies. Since
+%% once the message and every event it inserted were handled) or dies. A
+%% message to a registered name goes to the process that had the name when
+%% it was sent, as `Name ! Msg' would in real time, not to one that took the
+%% name while the message waited its turn (a behavior removed and added
+%% again must not get the unsubscription meant for the one before). Since
 %% only one process of the event path works at a time, and what it sends is
 %% queued in the order it sends it, the order of everything that happens
 %% depends only on the stimuli and the wiring: not on the schedulers, the
@@ -33,7 +37,8 @@
 %% Messages (all from processes of this node):
 %% <table>
 %% <tr><th>message</th><th>from</th><th>effect</th></tr>
-%% <tr><td>`{Tag, send, To, Msg}'</td><td>`toroco_wire:send/2'</td><td>queued</td></tr>
+%% <tr><td>`{Tag, send, To, Pid, Msg}'</td><td>`toroco_wire:send/2'</td><td>queued
+%%     for `Pid', the process `To' named then (`undefined' if none)</td></tr>
 %% <tr><td>`{Tag, timer, Pid, Kind, Deadline, Msg}'</td><td>the timer's owner</td>
 %%     <td>sets (or replaces) the owner's timer `Kind'</td></tr>
 %% <tr><td>`{Tag, cancel, Pid, Kind}'</td><td>the owner</td><td>cancels it</td></tr>
@@ -57,7 +62,10 @@
 -define(CALL_MS, 60000).
 -define(LOG, #{domain => [toroco, clock]}).
 
--record(s, {queue = queue:new() :: queue:queue({term(), term()}),
+%% a queued message: its address, the process it was sent to, the message
+-type item() :: {term(), pid() | undefined | remote, term()}.
+
+-record(s, {queue = queue:new() :: queue:queue(item()),
             inflight = none :: none | {reference(), reference()},
             timers = gb_trees:empty() :: gb_trees:tree({integer(), non_neg_integer()},
                                                        {pid(), term(), term()}),
@@ -81,10 +89,11 @@
 start_link() ->
     gen_server:start_link({local, ?MODULE}, ?MODULE, [], []).
 
-%% @doc Queues `Msg' for `To' (an address of this node).
+%% @doc Queues `Msg' for `To' (an address of this node), that is for the
+%% process `To' names now.
 -spec send(pid(), term(), term()) -> ok.
 send(Server, To, Msg) ->
-    Server ! {?TAG, send, To, Msg},
+    Server ! {?TAG, send, To, whereis_local(To), Msg},
     ok.
 
 %% @doc Sets the calling process's timer `Kind' to fire at simulated
@@ -165,7 +174,7 @@ handle_call(stop, _From, S = #s{cell = undefined}) ->
 handle_call(stop, _From, #s{queue = Q}) ->
     _ = persistent_term:erase(?MODULE),
     ok = toroco_clock:lockstep_cell(undefined),
-    _ = [toroco_wire:send(To, Msg) || {To, Msg} <- queue:to_list(Q)],
+    _ = [forward(To, Pid, Msg) || {To, Pid, Msg} <- queue:to_list(Q)],
     {reply, ok, #s{}};
 handle_call({tick, _, _}, _From, S = #s{cell = undefined}) ->
     {reply, {error, not_lockstep}, S};
@@ -185,14 +194,14 @@ handle_cast(_Msg, S) ->
     {noreply, S}.
 
 -spec handle_info(term(), #s{}) -> {noreply, #s{}}.
-handle_info({?TAG, send, To, Msg}, S = #s{cell = undefined}) ->
+handle_info({?TAG, send, To, Pid, Msg}, S = #s{cell = undefined}) ->
     %% sent as lockstep ended: on its way as in real time
-    toroco_wire:send(To, Msg),
+    forward(To, Pid, Msg),
     {noreply, S};
-handle_info({?TAG, send, To, Msg}, S = #s{queue = Q}) ->
+handle_info({?TAG, send, To, Pid, Msg}, S = #s{queue = Q}) ->
     case is_step(Msg) of
-        true -> {noreply, run(S#s{queue = queue:in({To, Msg}, Q)})};
-        false -> raw(To, Msg), {noreply, S}
+        true -> {noreply, run(S#s{queue = queue:in({To, Pid, Msg}, Q)})};
+        false -> forward(To, Pid, Msg), {noreply, S}
     end;
 handle_info({?TAG, timer, Pid, Kind, Deadline, Msg}, S) ->
     #s{timers = Ts, owned = Owned, seq = Seq} = S1 = drop_timer(Pid, Kind, S),
@@ -224,8 +233,8 @@ run(S = #s{cell = undefined}) ->
     S;
 run(S = #s{queue = Q}) ->
     case queue:out(Q) of
-        {{value, {To, Msg}}, Q1} ->
-            run(deliver(To, Msg, S#s{queue = Q1}));
+        {{value, {To, Pid, Msg}}, Q1} ->
+            run(deliver(To, Pid, Msg, S#s{queue = Q1}));
         {empty, _} ->
             due(S)
     end.
@@ -238,7 +247,7 @@ due(S = #s{timers = Ts, target = Target}) ->
                     S1 = set_now(max(S#s.now, Deadline), S),
                     S2 = S1#s{timers = gb_trees:delete(Key, Ts),
                               owned = maps:remove({Pid, Kind}, S1#s.owned)},
-                    run(deliver(Pid, ?WIRE_TIMER(Kind, Msg), S2));
+                    run(deliver(Pid, Pid, ?WIRE_TIMER(Kind, Msg), S2));
                 _ ->
                     stimuli(S)
             end;
@@ -250,7 +259,8 @@ stimuli(S = #s{stimuli = []}) ->
     quiescent(S);
 stimuli(S = #s{stimuli = Stimuli, queue = Q}) ->
     Q1 = lists:foldl(fun({Name, Msg}, Acc) ->
-                             queue:in({{toroco_names:process(Name), node()}, {stimulus, Msg}}, Acc)
+                             To = {toroco_names:process(Name), node()},
+                             queue:in({To, whereis_local(To), {stimulus, Msg}}, Acc)
                      end, Q, Stimuli),
     run(set_now(S#s.target, S#s{stimuli = [], queue = Q1})).
 
@@ -271,8 +281,8 @@ set_now(T, S = #s{cell = Cell}) ->
     atomics:put(Cell, 1, T),
     S#s{now = T}.
 
-deliver(To, Msg, S = #s{steps = N}) ->
-    case whereis_local(To) of
+deliver(To, Target, Msg, S = #s{steps = N}) ->
+    case Target of
         Pid when is_pid(Pid) ->
             Token = make_ref(),
             Mon = erlang:monitor(process, Pid),
@@ -305,12 +315,10 @@ is_step(?WIRE_UNSUB(_, _)) -> true;
 is_step(?WIRE_RESUBSCRIBE) -> true;
 is_step(_) -> false.
 
-raw(To, Msg) ->
-    try erlang:send(To, Msg, [noconnect, nosuspend]) of
-        _ -> ok
-    catch
-        error:badarg -> ok
-    end.
+%% Sent as in real time, to the process the address named when it was sent.
+forward(_To, Pid, Msg) when is_pid(Pid) -> Pid ! Msg, ok;
+forward(To, remote, Msg) -> toroco_wire:send(To, Msg);
+forward(_To, undefined, _Msg) -> ok.
 
 whereis_local(Pid) when is_pid(Pid), node(Pid) =:= node() -> Pid;
 whereis_local(Pid) when is_pid(Pid) -> remote;

@@ -9,6 +9,7 @@
 
 -include_lib("common_test/include/ct.hrl").
 -include_lib("stdlib/include/assert.hrl").
+-include_lib("toroco/src/toroco_wire.hrl").
 
 -compile([export_all, nowarn_export_all]).
 
@@ -18,7 +19,7 @@ suite() ->
 all() ->
     [cascade_of_20_ends_in_its_tick, timers_fire_at_simulated_deadlines,
      holds_end_in_simulated_time, tap_carries_simulated_time, same_stimuli_same_trace,
-     speed_is_refused_in_lockstep].
+     speed_is_refused_in_lockstep, name_resolved_when_sent].
 
 init_per_testcase(_TC, Config) ->
     toroco_test_lib:start(),
@@ -140,9 +141,57 @@ speed_is_refused_in_lockstep(_Config) ->
     ?assertEqual(realtime, toroco_clock:mode()),
     ?assertEqual(ok, toroco_clock:set_speed(1)).
 
+name_resolved_when_sent() ->
+    [{doc, "A step queued for a registered name goes to the process that had the name when "
+      "it was sent, as `Name ! Msg' would: not to one that took the name while the step "
+      "waited its turn (a behavior removed and added again must not get the "
+      "unsubscription meant for the one before)."}].
+name_resolved_when_sent(_Config) ->
+    ok = toroco_clock:lockstep(#{}),
+    Me = self(),
+    Blocker = stepper(ls_blocker, fun(Token, _Msg) ->
+                                          Me ! blocked,
+                                          receive release -> toroco_lockstep:done(Token) end
+                                  end),
+    Old = stepper(ls_target, fun(Token, Msg) -> Me ! {old, Msg}, toroco_lockstep:done(Token) end),
+    try
+        %% the blocker holds the queue, so the next step waits behind it
+        ok = toroco_wire:send({ls_blocker, node()}, ?WIRE_ACK(first)),
+        receive blocked -> ok after 5000 -> ct:fail(blocker_not_stepped) end,
+        ok = toroco_wire:send({ls_target, node()}, ?WIRE_ACK(for_old)),
+        Ref = erlang:monitor(process, Old),
+        exit(Old, kill),
+        receive {'DOWN', Ref, process, Old, _} -> ok end,
+        New = stepper(ls_target, fun(Token, Msg) -> Me ! {new, Msg}, toroco_lockstep:done(Token) end),
+        Blocker ! release,
+        ok = toroco_clock:settle(),
+        %% quiescent: the queued step was handled (lost with the old one)
+        receive {new, Stray} -> ct:fail({new_process_got, Stray}) after 0 -> ok end,
+        ok = toroco_wire:send({ls_target, node()}, ?WIRE_ACK(for_new)),
+        ok = toroco_clock:settle(),
+        receive {new, Got} -> ?assertEqual(?WIRE_ACK(for_new), Got) after 0 -> ct:fail(no_step) end,
+        exit(New, kill)
+    after
+        exit(Blocker, kill)
+    end.
+
 %%====================================================================
 %% Helpers
 %%====================================================================
+
+%% A process registered as `Name' that hands every step to `Fun(Token, Msg)'.
+stepper(Name, Fun) ->
+    Me = self(),
+    Pid = spawn(fun() ->
+                        true = register(Name, self()),
+                        Me ! {registered, self()},
+                        step_loop(Fun)
+                end),
+    receive {registered, Pid} -> Pid after 5000 -> ct:fail({not_registered, Name}) end.
+
+step_loop(Fun) ->
+    receive ?WIRE_STEP(Token, Msg) -> Fun(Token, Msg) end,
+    step_loop(Fun).
 
 %% sensor s -> w1 -> ... -> wN -> actuator motors
 chain(N) ->
