@@ -52,10 +52,6 @@ init_per_testcase(_Case, Config) ->
     ok = toroco:add_device(sensor, toroco_fake_sensor,
                            #{outputs => [a, b, c, bump, command, odometry]}),
     ok = toroco:add_device(motors, toroco_fake_actuator, #{inputs => [setvel]}),
-    %% Layer 0 exists before a behavior is refused in it: the wiring server
-    %% forgets a layer it started for a behavior that then failed to start,
-    %% and the next add to that layer crashes it (noted for the runtime).
-    ok = toroco:add_behavior(floor, toroco_lib_cruise, #{}),
     Config.
 
 end_per_testcase(_Case, _Config) ->
