@@ -120,7 +120,9 @@ sensor(At, Name) ->
 values(Node, A) ->
     [V || {_, V, _} <- erpc:call(Node, toroco_fake_actuator, history, [A])].
 
-%% The first look at `Receiver''s input `In' (on `Node') for which `Pred' holds.
+%% A look at `Receiver''s input `In' (on `Node') taken once `Pred' held of
+%% an earlier one: for a `Pred' that stays true once it holds (a latch that
+%% arrived), it holds of this one too.
 wait_router(Node, Receiver, In, Pred) ->
     Look = fun() -> maps:get(In, maps:get(inputs, t(Node, inspect, [Receiver]))) end,
     wait_until(fun() -> Pred(Look()) end, 3000, {router, Receiver, In}),

@@ -81,23 +81,23 @@ pass(Ms) ->
 %% at most `Timeout' ms; then `Fail()'.
 await_runtime(Fun, Timeout, Fail) ->
     settle(),
-    await_runtime(Fun, toroco_clock:now_ms() + Timeout, Timeout, Fail).
+    runtime_until(Fun, toroco_clock:now_ms() + Timeout, Fail).
 
-await_runtime(Fun, Deadline, Timeout, Fail) ->
+runtime_until(Fun, Deadline, Fail) ->
     case Fun() of
         true -> ok;
         _ ->
             case toroco_clock:now_ms() > Deadline of
                 true -> Fail();
-                false -> pass(10), await_runtime(Fun, Deadline, Timeout, Fail)
+                false -> pass(10), runtime_until(Fun, Deadline, Fail)
             end
     end.
 
 %% The one bounded wait of the suites: checks `Fun()' every 5 ms until it
 %% returns `true', for at most `Timeout' ms of real time. `poll/2' answers
 %% `ok' or `timeout'; `wait_until/2,3' fail the case with `{timeout, Ms,
-%% What}'. (A wait in simulated time ticks the lockstep clock instead: see
-%% torobot_examples_SUITE.)
+%% What}'. (A wait in the runtime's time, which in lockstep ticks the
+%% clock, is await_runtime/3.)
 %% `poll/3' checks every `Every' ms, for a check that is costly (a shell
 %% command, a call to another node).
 -spec poll(fun(() -> term()), non_neg_integer()) -> ok | timeout.
