@@ -224,9 +224,14 @@ init(#{kind := Kind, name := Name, module := M, layer := Layer, args := Args}) -
                    tap = tap(toroco_tap:current(), Name), idle = toroco_wire:idle_arm()},
             toroco_tap:lifecycle(E#e.tap, Name, toroco_restarts:started(Name)),
             announce(E),
+            Up = fun() -> toroco_lockstep:up(Name, parent(), case Kind of
+                                                                 behavior -> Layer;
+                                                                 device -> none
+                                                             end)
+                 end,
             case start_user(E) of
-                {ok, S, E1} -> {ok, S, E1#e{batch = toroco_tap:flush(E1#e.batch)}};
-                {ok, S, E1, A} -> {ok, S, E1#e{batch = toroco_tap:flush(E1#e.batch)}, A};
+                {ok, S, E1} -> Up(), {ok, S, E1#e{batch = toroco_tap:flush(E1#e.batch)}};
+                {ok, S, E1, A} -> Up(), {ok, S, E1#e{batch = toroco_tap:flush(E1#e.batch)}, A};
                 Stop -> Stop
             end;
         {error, Reason} ->
@@ -241,6 +246,13 @@ announce(#e{name = Name, outputs = Outs, inputs = Ins, kind = Kind}) ->
                           || C <- Consumers]
                  end, Outs),
     receiver_up(Name, case Kind of behavior -> [?RESET | Ins]; device -> Ins end).
+
+%% The supervisor that started this process (proc_lib's first ancestor).
+parent() ->
+    case get('$ancestors') of
+        [Parent | _] -> Parent;
+        _ -> undefined
+    end.
 
 receiver_up(Name, Inputs) ->
     [toroco_wire:send(toroco_wire:address(toroco_names:router(Name, I)), ?WIRE_RX(I, self()))
@@ -271,7 +283,10 @@ start_user(E = #e{kind = Kind, module = M, args = Args, name = Name}) ->
 -spec handle_event(gen_statem:event_type(), term(), term(), #e{}) ->
           gen_statem:event_handler_result(term()).
 %% Every event, then what becomes of the observer tap's batch
-%% (toroco_tap:after_event/3).
+%% (toroco_tap:after_event/3); a lockstep barrier is answered at once.
+handle_event(info, ?WIRE_BARRIER(Ref), _S, _E) ->
+    toroco_lockstep:synced(Ref),
+    keep_state_and_data;
 handle_event(Type, Content, S, E) ->
     tap_after(event(Type, Content, S, E), E).
 

@@ -139,6 +139,10 @@ init({Mod, Key, Caller}) ->
         {ok, Cfg} ->
             C = #c{mod = Mod, key = Key, data = Mod:init(Key, Cfg), idle = toroco_wire:idle_arm()},
             {St, C1, Actions} = start_sync(Cfg, Caller, none, C),
+            toroco_lockstep:up(Mod:reg(Key), case get('$ancestors') of
+                                                 [Parent | _] -> Parent;
+                                                 _ -> undefined
+                                             end, consumer),
             {ok, St, C1, Actions};
         error ->
             %% Unwired while (re)starting: end at once, not to be restarted
@@ -149,7 +153,16 @@ init({Mod, Key, Caller}) ->
 -spec handle_event(gen_statem:event_type(), term(), ready | syncing | gone, #c{} | none) ->
           gen_statem:event_handler_result(ready | syncing | gone).
 %% Every event, then what becomes of the kind's tapped events
-%% (toroco_tap:after_event/3).
+%% (toroco_tap:after_event/3). In lockstep a barrier is answered at once,
+%% and a death is handed to toroco_lockstep, to come back as a step.
+handle_event(info, ?WIRE_BARRIER(Ref), _, _) ->
+    toroco_lockstep:synced(Ref),
+    keep_state_and_data;
+handle_event(info, {'DOWN', _, process, _, _} = Down, St, C) ->
+    case toroco_lockstep:down(Down) of
+        true -> keep_state_and_data;
+        false -> tap_after(event(info, Down, St, C), C)
+    end;
 handle_event(Type, Content, St, C) ->
     tap_after(event(Type, Content, St, C), C).
 

@@ -4,7 +4,7 @@
 -module(toroco_layers_sup).
 -behaviour(supervisor).
 
--export([start_link/0, start_layer/1, restart/2, init/1]).
+-export([start_link/0, start_layer/1, restart/2, take_out/1, init/1]).
 
 -spec start_link() -> {ok, pid()} | {error, term()}.
 start_link() ->
@@ -18,6 +18,13 @@ start_layer(L) ->
                                       start => {toroco_layer_sup, start_link, [L]},
                                       restart => temporary, type => supervisor,
                                       shutdown => infinity, modules => [toroco_layer_sup]}).
+
+%% @doc Takes layer `L' out as its supervisor does when its restart
+%% intensity is spent (in lockstep, where `toroco_lockstep' counts the
+%% restarts in simulated time); the wiring server sees it go.
+-spec take_out(non_neg_integer()) -> ok | {error, not_found}.
+take_out(L) ->
+    supervisor:terminate_child(?MODULE, {layer, L}).
 
 %% @doc Stops behavior `Name' of layer `L' and starts it again, through
 %% its layer's supervisor (not a crash: the layer's intensity is not spent).

@@ -26,9 +26,30 @@
 %% is read by `toroco_clock:now_ms/0' from an `atomics' cell this process
 %% writes.
 %%
+%% Exits are steps (SPEC §17): every process of the event path (behavior,
+%% device, router, gate) says `up' once its `init' is done, with its name,
+%% its supervisor and its layer, and this process monitors it. When one
+%% dies (a crash while handling its step, a kill from a fault schedule,
+%% {@link kill/2}) the node settles before anything else goes: nothing is
+%% delivered and no timer fires until the dead process's restart is `up'
+%% (its `init', its hellos, re-subscriptions and latch handover queued as
+%% steps), or its layer is out; the consumers that monitored it hand their
+%% `DOWN' over instead of acting on it (`down/1'); then a barrier asks
+%% every process of the path to answer once what it had before is handled,
+%% and what the settle gathered is queued in a fixed order: the `DOWN's by
+%% receiver's name, then what the restarted processes sent and the timers
+%% they set, by sender's name. Restart intensity counts simulated time: a
+%% layer whose behaviors restart more than `layer_restart_intensity'
+%% ({MaxRestarts, Seconds}, app env) allows within that many simulated
+%% seconds is taken out (its supervisor's own real-time intensity is lifted
+%% while lockstep runs: `toroco_layer_sup'). The trace shows each exit
+%% (`exit Reason'), restart (`restarted') and layer taken out (`layer L
+%% out'). A settle that does not resolve within 5 s of real time is given
+%% up with a warning and counted (`unsettled' in {@link info/0}).
+%%
 %% Quiescence: the node is quiescent when nothing is queued, nothing is in
-%% flight and no timer is due at or before now; {@link tick/3} and
-%% {@link settle/0} answer then. No process is polled.
+%% flight, no exit is settling and no timer is due at or before now;
+%% {@link tick/3} and {@link settle/0} answer then. No process is polled.
 %%
 %% The trace: with `trace => true' every step is written down as one
 %% canonical line with its simulated time (emissions, deliveries, acks,
@@ -43,30 +64,69 @@
 %%     <td>sets (or replaces) the owner's timer `Kind'</td></tr>
 %% <tr><td>`{Tag, cancel, Pid, Kind}'</td><td>the owner</td><td>cancels it</td></tr>
 %% <tr><td>`{Tag, done, Token}'</td><td>the receiver of a step</td><td>the next step goes</td></tr>
+%% <tr><td>`{Tag, up, Pid, Name, Sup, Layer}'</td><td>a process of the path,
+%%     at the end of its `init'</td><td>monitored; a restart awaited is done</td></tr>
+%% <tr><td>`{Tag, down, Pid, Down}'</td><td>a consumer given a `DOWN'</td>
+%%     <td>the `DOWN' comes back to it as a step once the exit settles</td></tr>
+%% <tr><td>`WIRE_BARRIER(Ref)' / `{Tag, synced, Ref, Pid}'</td><td>this
+%%     process → the path / back</td><td>the settle's barrier</td></tr>
 %% </table>
 -module(toroco_lockstep).
 -behaviour(gen_server).
 
 -include("toroco_wire.hrl").
 
--export([start_link/0, send/3, timer/4, cancel/2, done/1]).
+-export([start_link/0, send/3, timer/4, cancel/2, done/1, up/3, down/1, synced/1]).
 -export([start/1, stop/0, tick/3, settle/0, info/0]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 -export_type([stimulus/0]).
 
 %% A stimulus from the world: `Msg' to behavior or device `Name' of this
-%% node (a device, as a rule), delivered as a step like any other.
--type stimulus() :: {atom(), term()}.
+%% node (a device, as a rule), delivered as a step like any other; or
+%% `{exit, Name, Reason}', the exit signal `Reason' sent to the process
+%% registered as `Name' (a behavior's, device's, router's or gate's), the
+%% step done once its exit has settled.
+-type stimulus() :: {atom(), term()} | {exit, atom(), term()}.
 
 -define(TAG, '$toroco_lockstep').
 -define(CALL_MS, 60000).
 -define(LOG, #{domain => [toroco, clock]}).
+-define(SETTLE_GUARD_MS, 5000).
 
 %% a queued message: its address, the process it was sent to, the message
 -type item() :: {term(), pid() | undefined | remote, term()}.
 
+%% what a process of the path said when it was up
+-type proc() :: #{name := atom(), sup := pid() | undefined,
+                  layer := non_neg_integer() | none | consumer, mon := reference()}.
+%% a send, a timer or a cancel that arrived while an exit settled, with its sender
+-type held() :: {send, term(), pid() | undefined | remote, term()}
+              | {timer, pid(), term(), integer(), term()}
+              | {cancel, pid(), term()}.
+%% an exit settling: the restarts awaited (name -> supervisor), the layers
+%% being taken out (supervisor -> layer), the barrier's answers awaited
+-record(settle, {awaiting = #{} :: #{atom() => pid() | undefined},
+                 takeout = #{} :: #{pid() => non_neg_integer()},
+                 barrier = none :: none | {reference(), #{pid() => true}},
+                 %% the DOWNs that consumers monitoring the dead will hand over
+                 expect = #{} :: #{{pid(), pid()} => true},
+                 guard :: reference()}).
+
 -record(s, {queue = queue:new() :: queue:queue(item()),
-            inflight = none :: none | {reference(), reference()},
+            inflight = none :: none | {reference() | none, reference(), pid()},
+            procs = #{} :: #{pid() => proc()},
+            %% the supervisors of the processes of the path, monitored
+            sups = #{} :: #{pid() => {reference(), non_neg_integer() | none | consumer}},
+            %% the consumers that monitor the process in flight (or killed)
+            watch = #{} :: #{pid() => [pid()]},
+            settle = none :: none | #settle{},
+            held = [] :: [{non_neg_integer(), pid(), held()}],
+            downs = [] :: [{non_neg_integer(), pid(), term()}],
+            arrival = 0 :: non_neg_integer(),
+            %% each layer supervisor's restarts, in simulated ms, newest first
+            restarts = #{} :: #{pid() => [integer()]},
+            intensity = {5, 10} :: {non_neg_integer(), pos_integer()},
+            unsettled = 0 :: non_neg_integer(),
             timers = gb_trees:empty() :: gb_trees:tree({integer(), non_neg_integer()},
                                                        {pid(), term(), term()}),
             owned = #{} :: #{{pid(), term()} => {integer(), non_neg_integer()}},
@@ -93,7 +153,7 @@ start_link() ->
 %% process `To' names now.
 -spec send(pid(), term(), term()) -> ok.
 send(Server, To, Msg) ->
-    Server ! {?TAG, send, To, whereis_local(To), Msg},
+    Server ! {?TAG, send, To, whereis_local(To), Msg, self()},
     ok.
 
 %% @doc Sets the calling process's timer `Kind' to fire at simulated
@@ -116,6 +176,39 @@ done(Token) ->
         none -> ok;
         Server -> Server ! {?TAG, done, Token}, ok
     end.
+
+%% @doc The calling process of the event path (a behavior's, device's,
+%% router's or gate's) is up as `Name' under supervisor `Sup', in `Layer'
+%% (`none' outside the layers; `consumer' for a router or a gate, which
+%% hand their `DOWN's over): at the end of its `init', in lockstep only.
+-spec up(atom(), pid() | atom() | undefined, non_neg_integer() | none | consumer) -> ok.
+up(Name, Sup, Layer) ->
+    case persistent_term:get(?MODULE, none) of
+        none -> ok;
+        Server -> Server ! {?TAG, up, self(), Name, sup_pid(Sup), Layer}, ok
+    end.
+
+%% @doc In lockstep, a consumer hands over a `DOWN' it was given: it comes
+%% back as a step once the exit has settled. `false' in real time (the
+%% caller acts on it at once).
+-spec down(term()) -> boolean().
+down(Down) ->
+    case persistent_term:get(?MODULE, none) of
+        none -> false;
+        Server -> Server ! {?TAG, down, self(), Down}, true
+    end.
+
+%% @doc The settle's barrier `Ref' reached the calling process.
+-spec synced(reference()) -> ok.
+synced(Ref) ->
+    case persistent_term:get(?MODULE, none) of
+        none -> ok;
+        Server -> Server ! {?TAG, synced, Ref, self()}, ok
+    end.
+
+sup_pid(Pid) when is_pid(Pid) -> Pid;
+sup_pid(Name) when is_atom(Name) -> whereis(Name);
+sup_pid(_) -> undefined.
 
 %%====================================================================
 %% The world's side (through toroco_clock)
@@ -168,10 +261,12 @@ handle_call({start, Trace}, _From, _S) ->
     Cell = atomics:new(1, [{signed, true}]),
     persistent_term:put(?MODULE, self()),
     ok = toroco_clock:lockstep_cell(Cell),
-    {reply, ok, #s{cell = Cell, trace = case Trace of true -> []; false -> off end}};
+    {reply, ok, #s{cell = Cell, trace = case Trace of true -> []; false -> off end,
+                   intensity = application:get_env(toroco, layer_restart_intensity, {5, 10})}};
 handle_call(stop, _From, S = #s{cell = undefined}) ->
     {reply, ok, S};
-handle_call(stop, _From, #s{queue = Q}) ->
+handle_call(stop, _From, S) ->
+    #s{queue = Q} = flush(S),
     _ = persistent_term:erase(?MODULE),
     ok = toroco_clock:lockstep_cell(undefined),
     _ = [forward(To, Pid, Msg) || {To, Pid, Msg} <- queue:to_list(Q)],
@@ -185,7 +280,8 @@ handle_call({tick, T, Stimuli}, From, S = #s{now = Now, waiters = W, stimuli = O
              end,
     {noreply, run(S#s{target = Target, stimuli = Old ++ Stimuli, waiters = [From | W]})};
 handle_call(info, _From, S = #s{steps = N, lost = L, timers = Ts, now = Now}) ->
-    {reply, #{steps => N, lost => L, timers => gb_trees:size(Ts), now_ms => Now}, S};
+    {reply, #{steps => N, lost => L, timers => gb_trees:size(Ts), now_ms => Now,
+              processes => map_size(S#s.procs), unsettled => S#s.unsettled}, S};
 handle_call(_Req, _From, S) ->
     {reply, {error, unknown_call}, S}.
 
@@ -194,31 +290,250 @@ handle_cast(_Msg, S) ->
     {noreply, S}.
 
 -spec handle_info(term(), #s{}) -> {noreply, #s{}}.
-handle_info({?TAG, send, To, Pid, Msg}, S = #s{cell = undefined}) ->
+handle_info({?TAG, send, To, Pid, Msg, _From}, S = #s{cell = undefined}) ->
     %% sent as lockstep ended: on its way as in real time
     forward(To, Pid, Msg),
     {noreply, S};
-handle_info({?TAG, send, To, Pid, Msg}, S = #s{queue = Q}) ->
+handle_info({?TAG, send, To, Pid, Msg, From}, S = #s{queue = Q, settle = Settle}) ->
     case is_step(Msg) of
+        true when Settle =/= none -> {noreply, hold(From, {send, To, Pid, Msg}, S)};
         true -> {noreply, run(S#s{queue = queue:in({To, Pid, Msg}, Q)})};
         false -> forward(To, Pid, Msg), {noreply, S}
     end;
+handle_info({?TAG, timer, Pid, Kind, Deadline, Msg}, S = #s{settle = #settle{}}) ->
+    {noreply, hold(Pid, {timer, Pid, Kind, Deadline, Msg}, S)};
 handle_info({?TAG, timer, Pid, Kind, Deadline, Msg}, S) ->
-    #s{timers = Ts, owned = Owned, seq = Seq} = S1 = drop_timer(Pid, Kind, S),
-    Key = {Deadline, Seq},
-    {noreply, run(S1#s{timers = gb_trees:insert(Key, {Pid, Kind, Msg}, Ts),
-                       owned = Owned#{{Pid, Kind} => Key}, seq = Seq + 1})};
+    {noreply, run(set_timer(Pid, Kind, Deadline, Msg, S))};
+handle_info({?TAG, cancel, Pid, Kind}, S = #s{settle = #settle{}}) ->
+    {noreply, hold(Pid, {cancel, Pid, Kind}, S)};
 handle_info({?TAG, cancel, Pid, Kind}, S) ->
     {noreply, run(drop_timer(Pid, Kind, S))};
-handle_info({?TAG, done, Token}, S = #s{inflight = {Token, Mon}}) ->
+handle_info({?TAG, done, Token}, S = #s{inflight = {Token, Mon, _}}) ->
     erlang:demonitor(Mon, [flush]),
     {noreply, run(S#s{inflight = none})};
 handle_info({?TAG, done, _Stale}, S) ->
     {noreply, S};
-handle_info({'DOWN', Mon, process, _, _}, S = #s{inflight = {_, Mon}}) ->
-    {noreply, run(S#s{inflight = none})};
+handle_info({?TAG, up, Pid, Name, Sup, Layer}, S = #s{cell = Cell}) when Cell =/= undefined ->
+    {noreply, run(progress(up(Pid, Name, Sup, Layer, S)))};
+handle_info({?TAG, down, Pid, Down}, S = #s{cell = Cell, downs = Downs, arrival = A})
+  when Cell =/= undefined ->
+    S1 = settling(S#s{downs = [{A, Pid, Down} | Downs], arrival = A + 1}),
+    St = #settle{expect = E} = S1#s.settle,
+    {noreply, run(progress(S1#s{settle = St#settle{expect = maps:remove({Pid, element(4, Down)},
+                                                                        E)}}))};
+handle_info({?TAG, synced, Ref, Pid}, S = #s{settle = St = #settle{barrier = {Ref, Waiting}}}) ->
+    {noreply, run(progress(S#s{settle = St#settle{barrier = {Ref, maps:remove(Pid, Waiting)}}}))};
+handle_info({?TAG, settle_guard, Guard}, S = #s{settle = #settle{guard = Guard} = St}) ->
+    logger:warning("toroco_lockstep: an exit did not settle within ~b ms (restarts awaited: ~0p, "
+                   "layers going out: ~0p); going on", [?SETTLE_GUARD_MS,
+                                                        maps:keys(St#settle.awaiting),
+                                                        maps:values(St#settle.takeout)], ?LOG),
+    {noreply, run(flush(S#s{unsettled = S#s.unsettled + 1}))};
+handle_info({'DOWN', Mon, process, Pid, Reason}, S = #s{procs = Procs}) ->
+    case Procs of
+        #{Pid := #{mon := Mon}} ->
+            {noreply, run(progress(exited(Pid, Reason, S)))};
+        #{Pid := #{mon := Other}} ->
+            %% the step's own monitor: the death is the path's all the same
+            erlang:demonitor(Other, [flush]),
+            {noreply, run(progress(exited(Pid, Reason, S)))};
+        #{} ->
+            case S#s.inflight of
+                {_, Mon, _} ->
+                    {noreply, run(S#s{inflight = none})};
+                _ ->
+                    {noreply, run(progress(sup_down(Pid, S)))}
+            end
+    end;
 handle_info(_Info, S) ->
     {noreply, S}.
+
+set_timer(Pid, Kind, Deadline, Msg, S) ->
+    #s{timers = Ts, owned = Owned, seq = Seq} = S1 = drop_timer(Pid, Kind, S),
+    Key = {Deadline, Seq},
+    S1#s{timers = gb_trees:insert(Key, {Pid, Kind, Msg}, Ts),
+         owned = Owned#{{Pid, Kind} => Key}, seq = Seq + 1}.
+
+%%====================================================================
+%% Exits
+%%====================================================================
+
+%% A process of the path is up: monitored, with its supervisor; if its
+%% restart was awaited, the restart is done and counted against its
+%% layer's intensity in simulated time.
+up(Pid, Name, Sup, Layer, S = #s{procs = Procs, sups = Sups}) ->
+    Sups1 = case Sup of
+                undefined -> Sups;
+                _ when is_map_key(Sup, Sups) -> Sups;
+                _ -> Sups#{Sup => {erlang:monitor(process, Sup), Layer}}
+            end,
+    S1 = S#s{procs = Procs#{Pid => #{name => Name, sup => Sup, layer => Layer,
+                                     mon => erlang:monitor(process, Pid)}},
+             sups = Sups1},
+    case S1#s.settle of
+        St = #settle{awaiting = #{Name := _} = Awaiting} ->
+            S2 = note(io_lib:format("~s restarted", [Name]),
+                      S1#s{settle = St#settle{awaiting = maps:remove(Name, Awaiting)}}),
+            intensity(Sup, Layer, S2);
+        _ ->
+            S1
+    end.
+
+%% A restart in a layer: more than the intensity allows within its period
+%% of simulated time takes the layer out, as its supervisor would.
+intensity(Sup, Layer, S = #s{restarts = R, intensity = {Max, Period}, now = Now,
+                             settle = St = #settle{takeout = Out}})
+  when is_integer(Layer), is_pid(Sup) ->
+    %% as OTP's supervisor counts: restarts at or after Now - Period
+    Recent = [T || T <- [Now | maps:get(Sup, R, [])], T >= Now - Period * 1000],
+    S1 = S#s{restarts = R#{Sup => Recent}},
+    case length(Recent) > Max andalso not is_map_key(Sup, Out) of
+        true ->
+            S2 = lists:foldl(fun watch/2, S1, [P || {P, #{sup := PS}} <- maps:to_list(S1#s.procs),
+                                                   PS =:= Sup]),
+            _ = spawn(fun() -> toroco_layers_sup:take_out(Layer) end),
+            note(io_lib:format("layer ~b out", [Layer]),
+                 S2#s{settle = St#settle{takeout = Out#{Sup => Layer}}});
+        false ->
+            S1
+    end;
+intensity(_Sup, _Layer, S) ->
+    S.
+
+%% A process of the path died: the exit is written down, its restart is
+%% awaited unless it ended for good (normal, shutdown) or its supervisor
+%% is going, and the node settles.
+exited(Pid, Reason, S = #s{procs = Procs, inflight = Inflight}) ->
+    #{Pid := #{name := Name, sup := Sup}} = Procs,
+    S1 = case Inflight of
+             {_, Mon, Pid} -> erlang:demonitor(Mon, [flush]), S#s{inflight = none};
+             _ -> S
+         end,
+    S2 = settling(note(io_lib:format("~s exit ~ts", [Name, reason(Reason)]),
+                       S1#s{procs = maps:remove(Pid, Procs)})),
+    #settle{awaiting = Awaiting, takeout = Out, barrier = Barrier} = S2#s.settle,
+    %% the new incarnation may have said up before this death was seen
+    Again = [P || {P, #{name := N}} <- maps:to_list(S2#s.procs), N =:= Name],
+    Restarts = not final(Reason) andalso is_pid(Sup) andalso is_map_key(Sup, S2#s.sups)
+        andalso not is_map_key(Sup, Out) andalso Again =:= [],
+    S3 = case Again of
+             [_ | _] when not (is_pid(Sup) andalso is_map_key(Sup, Out)) ->
+                 intensity(Sup, maps:get(layer, maps:get(hd(Again), S2#s.procs)),
+                           note(io_lib:format("~s restarted", [Name]), S2));
+             _ -> S2
+         end,
+    Barrier1 = case Barrier of
+                   {Ref, Waiting} -> {Ref, maps:remove(Pid, Waiting)};
+                   none -> none
+               end,
+    %% the consumers that monitored it hand its DOWN over (those already
+    %% gone or that already did are not waited for), and it will hand none
+    Handed = [C || {_, C, {'DOWN', _, process, D, _}} <- S3#s.downs, D =:= Pid],
+    Expect0 = maps:filter(fun({C, _}, _) -> C =/= Pid end, (S3#s.settle)#settle.expect),
+    Expect = lists:foldl(fun(C, E) -> E#{{C, Pid} => true} end, Expect0,
+                         [C || C <- maps:get(Pid, S3#s.watch, []), is_map_key(C, S3#s.procs),
+                               not lists:member(C, Handed)]),
+    S3#s{watch = maps:remove(Pid, S3#s.watch),
+         settle = (S3#s.settle)#settle{barrier = Barrier1, expect = Expect,
+                            awaiting = case Restarts of
+                                           true -> Awaiting#{Name => Sup};
+                                           false -> Awaiting
+                                       end}}.
+
+final(normal) -> true;
+final(shutdown) -> true;
+final({shutdown, _}) -> true;
+final(_) -> false.
+
+%% A supervisor of the path died (a layer taken out): the restarts it
+%% would have made are not awaited.
+sup_down(Sup, S = #s{sups = Sups}) ->
+    case maps:take(Sup, Sups) of
+        {{_, Layer}, Sups1} ->
+            S1 = S#s{sups = Sups1, restarts = maps:remove(Sup, S#s.restarts)},
+            case S1#s.settle of
+                St = #settle{awaiting = Awaiting, takeout = Out} ->
+                    S2 = case is_map_key(Sup, Out) orelse not is_integer(Layer) of
+                             true -> S1;
+                             false -> note(io_lib:format("layer ~b out", [Layer]), S1)
+                         end,
+                    S2#s{settle = St#settle{awaiting = maps:filter(fun(_, P) -> P =/= Sup end,
+                                                                    Awaiting),
+                                            takeout = maps:remove(Sup, Out)}};
+                none ->
+                    settling(S1)
+            end;
+        error ->
+            S
+    end.
+
+settling(S = #s{settle = none}) ->
+    Guard = make_ref(),
+    erlang:send_after(?SETTLE_GUARD_MS, self(), {?TAG, settle_guard, Guard}),
+    S#s{settle = #settle{guard = Guard}};
+settling(S) ->
+    S.
+
+%% The settle moves on: once no restart nor layer is awaited, the barrier
+%% goes to every process of the path; once all have answered, what the
+%% settle gathered is queued.
+progress(S = #s{settle = none}) ->
+    S;
+progress(S = #s{settle = #settle{awaiting = A, takeout = O, expect = E}})
+  when map_size(A) > 0; map_size(O) > 0; map_size(E) > 0 ->
+    S;
+progress(S = #s{settle = St = #settle{barrier = none}, procs = Procs}) ->
+    Ref = make_ref(),
+    _ = [Pid ! ?WIRE_BARRIER(Ref) || Pid <- maps:keys(Procs)],
+    progress_barrier(S#s{settle = St#settle{barrier = {Ref, maps:map(fun(_, _) -> true end,
+                                                                     Procs)}}});
+progress(S) ->
+    progress_barrier(S).
+
+progress_barrier(S = #s{settle = #settle{barrier = {_, Waiting}}}) when map_size(Waiting) > 0 ->
+    S;
+progress_barrier(S) ->
+    flush(S).
+
+%% The settle's end: the DOWNs by receiver's name, then the sends, timers
+%% and cancels by sender's name (each sender's in the order it made them).
+flush(S = #s{downs = Downs, held = Held, queue = Q}) ->
+    Q1 = lists:foldl(fun({_, _, Pid, Down}, Acc) -> queue:in({Pid, Pid, Down}, Acc) end,
+                     Q, lists:sort([{pname(Pid), A, Pid, Down} || {A, Pid, Down} <- Downs])),
+    S1 = lists:foldl(fun({_, _, H}, Acc) -> apply_held(H, Acc) end,
+                     S#s{queue = Q1, downs = [], held = [], settle = none},
+                     lists:sort([{pname(From), A, H} || {A, From, H} <- Held])),
+    S1.
+
+apply_held({send, To, Pid, Msg}, S = #s{queue = Q}) ->
+    S#s{queue = queue:in({To, Pid, Msg}, Q)};
+apply_held({timer, Pid, Kind, Deadline, Msg}, S) ->
+    set_timer(Pid, Kind, Deadline, Msg, S);
+apply_held({cancel, Pid, Kind}, S) ->
+    drop_timer(Pid, Kind, S).
+
+hold(From, H, S = #s{held = Held, arrival = A}) ->
+    S#s{held = [{A, From, H} | Held], arrival = A + 1}.
+
+pname(Pid) when is_pid(Pid) ->
+    case erlang:process_info(Pid, registered_name) of
+        {registered_name, Reg} -> atom_to_list(Reg);
+        _ -> "~"
+    end;
+pname(_) ->
+    "~".
+
+%% An exit's reason as the trace shows it: no pids, no stack.
+reason({Reason, Stack}) when is_list(Stack), Stack =/= [], is_tuple(hd(Stack)),
+                             tuple_size(hd(Stack)) =:= 4 ->
+    reason(Reason);
+reason(Reason) ->
+    io_lib:format("~0tp", [strip(Reason)]).
+
+note(_Line, S = #s{trace = off}) ->
+    S;
+note(Line, S = #s{trace = Lines, now = Now}) ->
+    S#s{trace = [io_lib:format("~b ~ts~n", [Now, Line]) | Lines]}.
 
 %%====================================================================
 %% Stepping
@@ -227,9 +542,11 @@ handle_info(_Info, S) ->
 %% One step at a time: the queue first, then the earliest timer due by the
 %% time being reached; with neither, time is there: the tick's stimuli
 %% go, and once they are handled the waiters are answered.
-run(S = #s{inflight = {_, _}}) ->
+run(S = #s{inflight = {_, _, _}}) ->
     S;
 run(S = #s{cell = undefined}) ->
+    S;
+run(S = #s{settle = #settle{}}) ->
     S;
 run(S = #s{queue = Q}) ->
     case queue:out(Q) of
@@ -258,7 +575,9 @@ due(S = #s{timers = Ts, target = Target}) ->
 stimuli(S = #s{stimuli = []}) ->
     quiescent(S);
 stimuli(S = #s{stimuli = Stimuli, queue = Q}) ->
-    Q1 = lists:foldl(fun({Name, Msg}, Acc) ->
+    Q1 = lists:foldl(fun({exit, Name, Reason}, Acc) ->
+                             queue:in({{Name, node()}, whereis(Name), {exit, Reason}}, Acc);
+                        ({Name, Msg}, Acc) ->
                              To = {toroco_names:process(Name), node()},
                              queue:in({To, whereis_local(To), {stimulus, Msg}}, Acc)
                      end, Q, Stimuli),
@@ -281,22 +600,46 @@ set_now(T, S = #s{cell = Cell}) ->
     atomics:put(Cell, 1, T),
     S#s{now = T}.
 
+deliver(To, Target, {exit, Reason} = Msg, S = #s{steps = N}) when is_pid(Target) ->
+    %% a fault: the exit signal, the step done once the exit has settled
+    Mon = erlang:monitor(process, Target),
+    S1 = watch(Target, S),
+    exit(Target, Reason),
+    trace(To, Target, Msg, S1#s{inflight = {none, Mon, Target}, steps = N + 1});
 deliver(To, Target, Msg, S = #s{steps = N}) ->
     case Target of
         Pid when is_pid(Pid) ->
             Token = make_ref(),
             Mon = erlang:monitor(process, Pid),
+            S1 = watch(Pid, S),
             Pid ! ?WIRE_STEP(Token, case Msg of
                                         {stimulus, M} -> M;
                                         _ -> Msg
                                     end),
-            trace(To, Pid, Msg, S#s{inflight = {Token, Mon}, steps = N + 1});
+            trace(To, Pid, Msg, S1#s{inflight = {Token, Mon, Pid}, steps = N + 1});
         remote ->
             toroco_wire:send(To, Msg),
             S;
         undefined ->
             trace(To, undefined, Msg, S#s{lost = S#s.lost + 1})
     end.
+
+%% Who will hand over `Pid''s DOWN should it die now: the consumers that
+%% monitor it (read as its step goes, when only it works, or before it is
+%% killed). Only processes of the path are looked at.
+watch(Pid, S = #s{procs = Procs, watch = W}) when is_map_key(Pid, Procs) ->
+    case erlang:process_info(Pid, monitored_by) of
+        {monitored_by, By} ->
+            S#s{watch = W#{Pid => [C || C <- By, is_pid(C),
+                                        case Procs of
+                                            #{C := #{layer := consumer}} -> true;
+                                            #{} -> false
+                                        end]}};
+        undefined ->
+            S
+    end;
+watch(_Pid, S) ->
+    S.
 
 %% The messages that are steps: those of the event path, which every
 %% receiver of them (the engine, the consumer shell) hands back as done.
@@ -316,6 +659,7 @@ is_step(?WIRE_RESUBSCRIBE) -> true;
 is_step(_) -> false.
 
 %% Sent as in real time, to the process the address named when it was sent.
+forward(_To, _Pid, {exit, _}) -> ok;
 forward(_To, Pid, Msg) when is_pid(Pid) -> Pid ! Msg, ok;
 forward(To, remote, Msg) -> toroco_wire:send(To, Msg);
 forward(_To, undefined, _Msg) -> ok.
@@ -361,6 +705,8 @@ line(?WIRE_IN(I, V, _)) -> io_lib:format("deliver ~s ~0tp", [I, V]);
 line(?WIRE_ACK(I)) -> io_lib:format("ack ~s", [I]);
 line(?WIRE_TIMER(Kind, Msg)) -> io_lib:format("timer ~0tp ~0tp", [Kind, Msg]);
 line({stimulus, Msg}) -> io_lib:format("stimulus ~0tp", [Msg]);
+line({exit, Reason}) -> io_lib:format("fault exit ~0tp", [strip(Reason)]);
+line({'DOWN', _, process, _, Reason}) -> io_lib:format("down ~ts", [reason(Reason)]);
 line(Msg) -> io_lib:format("~0tp", [strip(Msg)]).
 
 op({send, V, Hold}) -> io_lib:format("send ~0tp ~0tp", [V, Hold]);

@@ -56,6 +56,11 @@
 %%         timer (`WIRE_TIMER(Kind, Msg)'), in its turn</td>
 %%     <td>`toroco_lockstep:done(Token)' once it and the events it inserted
 %%         (the last one `WIRE_STEP_DONE(Token)') are handled</td></tr>
+%% <tr><td>`WIRE_BARRIER(Ref)'</td><td>`toroco_lockstep' → every process of
+%%     the path</td><td>lockstep: an exit settles (SPEC §17)</td>
+%%     <td>`toroco_lockstep:synced(Ref)' at once; a consumer in lockstep
+%%         hands a `DOWN' to `toroco_lockstep:down/1', and acts on it when
+%%         it comes back as a step</td></tr>
 %% </table>
 %%
 %% The wiring server reaches consumers with calls (`toroco_consumer':

@@ -40,6 +40,7 @@
 %% one message of the path (or a stimulus) to handle; the receiver answers
 %% toroco_lockstep:done(Token) once it and the events it inserted are handled.
 -define(WIRE_STEP(Token, Msg), {'$toroco_step', Token, Msg}).
+-define(WIRE_BARRIER(Ref), {'$toroco_barrier', Ref}).
 %% a process -> itself: the step is handled (an internal event queued after
 %% the step's own, see toroco_wire:step_done/2).
 -define(WIRE_STEP_DONE(Token), {'$toroco_step_done', Token}).

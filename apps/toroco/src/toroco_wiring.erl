@@ -287,7 +287,18 @@ start_reason(Reason) -> Reason.
 
 layer_sup(L, S = #s{layers = Layers, removed = Removed}) ->
     case Layers of
-        #{L := {Pid, _}} -> {Pid, S};
+        #{L := {Pid, Mon}} ->
+            %% an empty layer started under the other clock counts its
+            %% restarts in the wrong time: started again under this one
+            case toroco_layer_sup:mode(Pid) =/= toroco_clock:mode()
+                andalso supervisor:which_children(Pid) =:= [] of
+                true ->
+                    erlang:demonitor(Mon, [flush]),
+                    _ = toroco_layers_sup:take_out(L),
+                    layer_sup(L, S#s{layers = maps:remove(L, Layers)});
+                false ->
+                    {Pid, S}
+            end;
         #{} ->
             Pid = case toroco_layers_sup:start_layer(L) of
                       {ok, P} -> P;
