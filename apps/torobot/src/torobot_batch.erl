@@ -56,7 +56,7 @@
 %% (options of `torobot_worlds:generate/2' for generated worlds).
 -module(torobot_batch).
 
--export([run/1, percentile/2]).
+-export([run/1, percentile/2, calls/3]).
 %% the node side of a batch: what another node runs for it
 -export([worker/2]).
 
@@ -84,6 +84,8 @@
 -define(PEER_BOOT_MS, 30000).
 %% How long past a run's own limit (torobot_sim's) a worker waits for it.
 -define(RUN_GRACE_MS, 60000).
+%% A call of calls/3 (one lockstep run of the robustness lab, or a few).
+-define(CALL_LIMIT_MS, 600000).
 
 %% @doc Runs the batch and reports; nothing runs unless every option, every
 %% world and the wiring are good.
@@ -302,7 +304,10 @@ next(Node, Pid, [], Workers, Done, Why) ->
                       wiring := file:name_all(), text := binary()}) -> ok.
 worker(Batch, #{time := Time, speed := Speed} = Work) ->
     monitor(process, Batch),
-    Wiring = wiring_here(Batch, Work),
+    Wiring = case Work of
+                 #{text := <<>>} -> maps:get(wiring, Work);
+                 _ -> wiring_here(Batch, Work)
+             end,
     SimOpts = case Time of
                   lockstep -> #{time => lockstep, wiring => Wiring, nodes => local};
                   realtime -> #{time => realtime, speed => Speed, wiring => Wiring,
@@ -318,6 +323,12 @@ worker(Batch, #{time := Time, speed := Speed} = Work) ->
 
 work(Batch, Peer, SimOpts) ->
     receive
+        {run, I, {M, F, A}} ->
+            Result = try peer:call(Peer, M, F, A, ?CALL_LIMIT_MS)
+                     catch Class:Reason -> {error, {run, Class, Reason}}
+                     end,
+            Batch ! {self(), I, Result},
+            work(Batch, Peer, SimOpts);
         {run, I, Spec} ->
             Result = try peer:call(Peer, torobot_sim, simulate, [Spec, SimOpts],
                                    run_limit(Spec, SimOpts))
@@ -396,6 +407,17 @@ stop_worker_peer(Peer) ->
     try peer:stop(Peer)
     catch exit:_ -> ok
     end.
+
+%% @doc Runs calls `{M, F, A}' of this code on worker nodes as a batch's
+%% runs are (one worker peer per slot, `parallel' slots on each of
+%% `nodes', dealt in turn) and answers their results in order; a call
+%% whose node or worker fails is `{error, {node, Node, Reason}}'. The
+%% robustness lab (`torobot_chaos') runs its schedules so.
+-spec calls([{module(), atom(), [term()]}], [node(), ...], pos_integer() | auto) -> [term()].
+calls(Calls, Nodes, Parallel) ->
+    Setup = #{parallel => Parallel, time => lockstep, speed => 1,
+              wiring => "config/torobot.wiring", text => <<>>},
+    spread(lists:enumerate([{call, MFA, 1} || MFA <- Calls]), Nodes, Setup).
 
 %%====================================================================
 %% Scoring

@@ -67,7 +67,7 @@
 -module(torobot_sim).
 -behaviour(gen_server).
 
--export([run/2, simulate/2, summary_json/1, batch/1]).
+-export([run/2, simulate/2, observe/2, summary_json/1, batch/1]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2, terminate/2]).
 
 -export_type([opts/0, status/0, world_spec/0, summary/0]).
@@ -75,7 +75,8 @@
 -type status() :: boolean() | tty | fun((iodata()) -> any()).
 -type opts() :: #{svg => file:name_all(), wiring => file:name_all(), status => status(),
                   speed => number(), nodes => local | peer, time => realtime | lockstep,
-                  trace => file:name_all()}.
+                  trace => file:name_all(), faults => torobot_faults:concrete(),
+                  seed => integer()}.
 %% A world file, or the terms of one (as `torobot_worlds:generate/2' makes).
 -type world_spec() :: file:name_all() | [tuple()].
 %% One robot's summary, or one per robot for a world of named robots.
@@ -92,7 +93,11 @@
               sensors :: torobot_sensors:state(),
               readings = #{} :: map(),
               winner = none :: atom(),
-              motors = none :: none | {{number(), number()}, atom()}}).
+              motors = none :: none | {{number(), number()}, atom()},
+              %% the faults' state: stuck readings, delayed datagrams
+              stuck = #{} :: map(),
+              delayed = [] :: [{integer(), binary()}],
+              lines = [] :: [iodata()]}).
 
 -record(sim, {bots = [] :: [#bot{}],
               caller :: pid(),
@@ -105,9 +110,15 @@
               next_status = 1000 :: non_neg_integer(),
               time = realtime :: realtime | lockstep,
               trace :: file:io_device() | undefined,
-              published = 0 :: integer()}).
+              published = 0 :: integer(),
+              %% the fault schedule (SPEC §17): the world's faults, the
+              %% robot's events not applied yet, the seed; observations
+              faults = [] :: torobot_faults:concrete(),
+              robot_events = [] :: [{non_neg_integer(), term()}],
+              seed = 0 :: integer(),
+              obs = [] :: [torobot_props:observation()]}).
 
--define(OPTIONS, [svg, wiring, status, speed, nodes, time, trace]).
+-define(OPTIONS, [svg, wiring, status, speed, nodes, time, trace, faults, seed]).
 
 %%====================================================================
 %% API
@@ -139,6 +150,20 @@ run(WorldSpec, Opts) ->
 -spec simulate(world_spec(), opts()) ->
           {ok, torobot_world:world() | [torobot_world:world()]} | {error, term()}.
 simulate(WorldSpec, Opts) when is_map(Opts) ->
+    case observe(WorldSpec, Opts) of
+        {ok, Final, _Obs} -> {ok, Final};
+        {error, _} = Error -> Error
+    end.
+
+%% @doc As {@link simulate/2}, with the observations of each tick (one
+%% robot: `torobot_props:observation()', in time order), which the
+%% properties of the robustness lab judge (SPEC §17). Options `faults' (a
+%% concrete schedule, `torobot_faults:concrete()', lockstep only) and
+%% `seed' (of the faults' noise and losses, default 0).
+-spec observe(world_spec(), opts()) ->
+          {ok, torobot_world:world() | [torobot_world:world()], [torobot_props:observation()]}
+          | {error, term()}.
+observe(WorldSpec, Opts) when is_map(Opts) ->
     WiringFile = maps:get(wiring, Opts,
                           application:get_env(torobot, wiring, "config/torobot.wiring")),
     Speed = maps:get(speed, Opts, 1),
@@ -150,6 +175,8 @@ simulate(WorldSpec, Opts) when is_map(Opts) ->
             {error, {bad_option, hd(Unknown)}};
         _ when Time =/= realtime, Time =/= lockstep ->
             {error, {time, Time}};
+        _ when Time =/= lockstep, is_map_key(faults, Opts) ->
+            {error, {faults, lockstep_only}};
         _ when Trace =/= undefined, Time =/= lockstep; Trace =/= undefined,
                                                      not (is_list(Trace) orelse is_binary(Trace)) ->
             {error, {trace, Trace}};
@@ -167,8 +194,8 @@ simulate(WorldSpec, Opts) when is_map(Opts) ->
                                           end),
             case with_robots(Worlds, Nodes, Opts#{wiring => WiringFile, speed => Speed,
                                                   time => Time}) of
-                {ok, [Final]} when not Named -> {ok, Final};
-                {ok, Finals} -> {ok, Finals};
+                {ok, [Final], Obs} when not Named -> {ok, Final, Obs};
+                {ok, Finals, Obs} -> {ok, Finals, Obs};
                 {error, _} = Error -> Error
             end
     end.
@@ -219,7 +246,9 @@ with_robots(Worlds, Nodes, Opts) ->
     #{wiring := WiringFile, speed := Speed, time := Time} = Opts,
     Trace = maps:get(trace, Opts, undefined),
     {ok, Sim} = gen_server:start(?MODULE, {self(), maps:get(status, Opts, false), Speed,
-                                           torobot_world:tick_ms(hd(Worlds)), Time, Trace}, []),
+                                           torobot_world:tick_ms(hd(Worlds)), Time, Trace,
+                                           maps:get(faults, Opts, []), maps:get(seed, Opts, 0)},
+                                 []),
     MRef = monitor(process, Sim),
     RobotOpts = #{wiring => WiringFile, speed => Speed, time => Time,
                   trace => Trace =/= undefined,
@@ -244,10 +273,10 @@ with_robots(Worlds, Nodes, Opts) ->
                       lockstep -> torobot_world:duration_ms(hd(Worlds))
                   end + ?GRACE_MS,
         receive
-            {?MODULE, Sim, {done, Finals}} ->
+            {?MODULE, Sim, {done, Finals, Obs}} ->
                 demonitor(MRef, [flush]),
                 case svg(Finals, Opts) of
-                    ok -> {ok, Finals};
+                    ok -> {ok, Finals, Obs};
                     {error, SvgFailed} -> {error, {svg, SvgFailed}}
                 end;
             {'DOWN', MRef, process, Sim, Why} ->
@@ -293,10 +322,12 @@ svg(_Worlds, #{}) ->
 %%====================================================================
 
 -spec init({pid(), status(), number(), pos_integer(), realtime | lockstep,
-            file:name_all() | undefined}) -> {ok, #sim{}} | {stop, term()}.
-init({Caller, Status, Speed, Tick, Time, TracePath}) ->
+            file:name_all() | undefined, torobot_faults:concrete(), integer()}) ->
+          {ok, #sim{}} | {stop, term()}.
+init({Caller, Status, Speed, Tick, Time, TracePath, Faults, Seed}) ->
     monitor(process, Caller),
-    S = #sim{caller = Caller, status = Status, speed = Speed, tick = Tick, time = Time},
+    S = #sim{caller = Caller, status = Status, speed = Speed, tick = Tick, time = Time,
+             faults = Faults, seed = Seed, robot_events = robot_events(Faults)},
     case TracePath of
         undefined ->
             {ok, S};
@@ -348,12 +379,17 @@ handle_info({timeout, _Ref, tick}, S = #sim{bots = Bots, tick = Tick}) ->
     next(S1, fun schedule/1);
 handle_info(lockstep, S = #sim{bots = Bots, tick = Tick}) ->
     %% robot after robot: readings, quiescence, wheels; then they all move
-    Stepped = lockstep(Bots, S),
+    {Stepped, S0} = lists:mapfoldl(fun(B, Acc) -> lockstep(B, [O || O <- Bots, O =/= B], Acc) end,
+                                   S, Bots),
     Commands = [case Motors of
                     done -> done;
-                    _ -> Motors
-                end || {_, Motors} <- Stepped],
-    S1 = status(S#sim{bots = move([B || {B, _} <- Stepped], Commands, Tick)}),
+                    {Wheels, Winner} ->
+                        Active = torobot_faults:world_faults(S#sim.faults,
+                                                             torobot_world:time_ms(B#bot.world)),
+                        {torobot_faults:wheels(Wheels, Active, B), Winner}
+                end || {B, Motors} <- Stepped],
+    Moved = move([B || {B, _} <- Stepped], Commands, Tick),
+    S1 = status(observed(Moved, S0#sim{bots = Moved})),
     next(publish_paced(S1), fun(S2) -> self() ! lockstep, S2 end);
 handle_info({'DOWN', _, process, Caller, _}, S = #sim{caller = Caller}) ->
     {stop, normal, S};
@@ -377,11 +413,11 @@ terminate(_Reason, #sim{sock = Sock, status = Status, trace = Trace}) ->
 
 %% After a tick: the caller has the final worlds once every robot is done,
 %% else the next tick is asked for.
-next(S = #sim{bots = Bots, caller = Caller}, Again) ->
+next(S = #sim{bots = Bots, caller = Caller, obs = Obs}, Again) ->
     Worlds = [W || #bot{world = W} <- Bots],
     case lists:all(fun torobot_world:done/1, Worlds) of
         true ->
-            Caller ! {?MODULE, self(), {done, Worlds}},
+            Caller ! {?MODULE, self(), {done, Worlds, lists:reverse(Obs)}},
             {stop, normal, S};
         false ->
             {noreply, Again(S)}
@@ -432,28 +468,115 @@ sense(B = #bot{world = W0, handle = H, ir = Last, port = Port, readings = LastRe
     end.
 
 %% Lockstep: each robot in turn gets its readings of the world as it is
-%% now (the others where they are) and answers once quiescent.
-lockstep(Bots, S) ->
-    [lockstep(B, [O || O <- Bots, O =/= B], S) || B <- Bots].
-
+%% now (the others where they are), as the world's faults leave them, and
+%% the robot's faults due by now, and answers once quiescent.
 lockstep(B = #bot{world = W0, handle = H, ir = Last, readings = LastReadings}, Others,
-         #sim{trace = Trace}) ->
+         S = #sim{trace = Trace, faults = Faults, seed = Seed}) ->
     W = torobot_world:set_others(W0, [torobot_world:body(O#bot.world) || O <- Others]),
     case torobot_world:done(W) of
         true ->
-            {B#bot{world = W}, done};
+            {{B#bot{world = W}, done}, S};
         false ->
             T = torobot_world:time_ms(W),
-            Ir = torobot_world:ir(W),
-            {Readings, Sensors} = torobot_sensors:read(W, B#bot.sensors),
+            Active = torobot_faults:world_faults(Faults, T),
+            {Ir, St1} = torobot_faults:readings(ir, torobot_world:ir(W), Active, B#bot.stuck,
+                                                {Seed, T}),
+            {Readings0, Sensors} = torobot_sensors:read(W, B#bot.sensors),
+            {Readings, St2} = maps:fold(
+                                fun(Dev, R, {Acc, St}) ->
+                                        case torobot_faults:readings(Dev, R, Active, St, {Seed, T}) of
+                                            {R1, St3} when map_size(R1) =:= 0, map_size(R) > 0 ->
+                                                {Acc, St3};
+                                            {R1, St3} ->
+                                                {Acc#{Dev => R1}, St3}
+                                        end
+                                end, {#{}, St1}, Readings0),
+            {Datagrams, Delayed, St4} = torobot_faults:datagrams(torobot_world:camera(W), Active,
+                                                                 B#bot.delayed, St2, {Seed, T}),
+            {FaultLines, S1} = robot_faults(H, T, S),
             {Wheels, Winner, Lines} =
                 torobot_sim_robot:step(H, T, changed(Ir, Last), changed(Readings, LastReadings),
-                                       torobot_world:camera(W)),
+                                       Datagrams),
             Motors = {Wheels, Winner},
-            trace(Trace, torobot_world:name(W), T, Lines, Motors, B#bot.motors),
-            {B#bot{world = W, ir = Ir, sensors = Sensors, readings = Readings, motors = Motors},
-             Motors}
+            AllLines = FaultLines ++ Lines,
+            trace(Trace, torobot_world:name(W), T, AllLines, Motors, B#bot.motors),
+            {{B#bot{world = W, ir = maps:merge(Last, Ir), sensors = Sensors,
+                    readings = maps:merge(LastReadings, Readings), motors = Motors,
+                    stuck = St4, delayed = Delayed, lines = AllLines},
+              Motors}, S1}
     end.
+
+%% The robot's faults (kills, suspends and their resumes) due by `T',
+%% each at its own simulated instant, with a trace line saying what it is.
+robot_faults(H, T, S = #sim{robot_events = Events}) ->
+    {Due, Later} = lists:splitwith(fun({Ms, _}) -> Ms =< T end, Events),
+    Lines = lists:append([torobot_sim_robot:fault(H, Ms, Event) || {Ms, Event} <- Due]),
+    {Lines, S#sim{robot_events = Later}}.
+
+%% The world's faults are written down as they start (the robot's are
+%% the robot's own lines); the robot's are events at their instants.
+robot_events(Faults) ->
+    lists:keysort(1, lists:append(
+                       [case F of
+                            {suspend, Name, D} -> [{Ms, {suspend, Name}},
+                                                   {Ms + round(D), {resume, Name}}];
+                            {kill, _} -> [{Ms, F}];
+                            {kill, router, _} -> [{Ms, F}];
+                            _ -> [{Ms, {note, F}}]
+                        end || {at, Ms, F} <- Faults])).
+
+%% What the properties judge (SPEC §17): each robot's tick, after it moved.
+observed([#bot{world = W, motors = Motors, lines = Lines}], S = #sim{obs = Obs})
+  when Motors =/= none ->
+    {Wheels, Winner} = Motors,
+    #{wall_contacts := Wall, blue_contacts := Blue, red_touched_ms := Red} =
+        torobot_world:summary(W),
+    {Wall0, Blue0} = case Obs of
+                         [#{walls := W0, blues := B0} | _] -> {W0, B0};
+                         [] -> {0, 0}
+                     end,
+    O = #{t => torobot_world:time_ms(W), wall => Wall > Wall0, blue => Blue > Blue0,
+          red => Red =/= none, dist => distance_to_wall(W), winner => Winner,
+          motors => Wheels, events => events(Lines), walls => Wall, blues => Blue},
+    S#sim{obs = [O | Obs]};
+observed(_Bots, S) ->
+    S.
+
+%% The events of a tick's trace lines that conditions name.
+events(Lines) ->
+    lists:filtermap(fun(Line) ->
+                            case string:lexemes(iolist_to_binary(Line), " \n") of
+                                [_, Name, <<"restarted">>] ->
+                                    {true, {restarted, binary_to_atom(Name)}};
+                                [_, <<"layer">>, L, <<"out">>] ->
+                                    {true, {layer_out, binary_to_integer(L)}};
+                                [_, _, <<"emit">>, Src | _] ->
+                                    case binary:split(Src, <<".">>) of
+                                        [E, Out] -> {true, {emitted, {binary_to_atom(E),
+                                                                      binary_to_atom(Out)}}};
+                                        _ -> false
+                                    end;
+                                _ -> false
+                            end
+                    end, Lines).
+
+%% From the robot's rim to the nearest wall or arena edge, in metres.
+distance_to_wall(W) ->
+    {X, Y, _} = torobot_world:pose(W),
+    {Aw, Ah} = torobot_world:arena(W),
+    Edges = [{{0.0, 0.0}, {Aw, 0.0}}, {{Aw, 0.0}, {Aw, Ah}}, {{Aw, Ah}, {0.0, Ah}},
+             {{0.0, Ah}, {0.0, 0.0}}],
+    lists:min([segment_distance({X, Y}, Seg) || Seg <- Edges ++ torobot_world:walls(W)])
+        - torobot_world:robot_radius(W).
+
+segment_distance({Px, Py}, {{Ax, Ay}, {Bx, By}}) ->
+    {Dx, Dy} = {Bx - Ax, By - Ay},
+    L2 = Dx * Dx + Dy * Dy,
+    U = case L2 == 0 of
+            true -> 0.0;
+            false -> max(0.0, min(1.0, ((Px - Ax) * Dx + (Py - Ay) * Dy) / L2))
+        end,
+    math:sqrt(math:pow(Px - (Ax + U * Dx), 2) + math:pow(Py - (Ay + U * Dy), 2)).
 
 %% The readings that changed since the last tick: all a robot is handed,
 %% in either clock.

@@ -51,7 +51,7 @@
 -module(torobot_sim_robot).
 -behaviour(gen_server).
 
--export([start/1, stop/0, go/1, wheels/1, sense/3, step/5]).
+-export([start/1, stop/0, go/1, wheels/1, sense/3, step/5, fault/3]).
 -export([start_peer/1, stop_peer/1]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2, terminate/2]).
 
@@ -156,6 +156,16 @@ sense({peer, Peer}, Ir, Readings) ->
 step(Robot, T, Ir, Readings, Datagrams) ->
     call(Robot, {step, T, Ir, Readings, Datagrams}).
 
+%% @doc Lockstep: moves the robot's clock to `Ms' (timers due on the way
+%% fire) and applies a fault of the robustness lab there (SPEC §17):
+%% `{kill, Name}', `{kill, router, {Receiver, Input}}' (the exit is a step
+%% and settles: restart, handover), `{suspend, Name}', `{resume, Name}',
+%% or `{note, Fault}' (a fault of the world's: nothing to do here).
+%% Answers the trace lines, the fault's own first.
+-spec fault(handle(), non_neg_integer(), term()) -> [iodata()].
+fault(Robot, Ms, Fault) ->
+    call(Robot, {fault, Ms, Fault}).
+
 %% @doc Starts a node for one robot (an OTP `peer' on this machine, over
 %% its standard I/O: not distributed, so robots never form a cluster) with
 %% this node's code path and application environment, and the robot on it.
@@ -243,6 +253,15 @@ handle_call({step, T, Ir, Readings, Datagrams}, _From, S = #robot{wheels = W0}) 
         {error, Reason} ->
             {stop, {lockstep, Reason}, {error, Reason}, S}
     end;
+handle_call({fault, Ms, Fault}, _From, S = #robot{wheels = W0}) ->
+    %% a fault of the world's leaves its mark on the readings alone, so
+    %% one that changes nothing (noise of sigma 0) leaves the trace as is
+    Lines = case Fault of
+                {note, _} -> [];
+                _ -> [io_lib:format("~b fault ~ts~n", [Ms, torobot_faults:describe(Fault)])
+                      | apply_fault(Ms, Fault)]
+            end,
+    {reply, Lines, S#robot{wheels = applied(W0)}};
 handle_call(go, _From, S = #robot{clock = lockstep, wheels = W0}) ->
     %% the press and the release, at time 0, each to quiescence
     Press = [toroco_clock:tick(0, [toroco_gpio_button:stimulus(push, Edge)])
@@ -299,6 +318,25 @@ handle_info(_Info, S) ->
 terminate(_Reason, S) ->
     warn_safety_stops(),
     teardown(S).
+
+%% A robot's fault at simulated `Ms', each part to quiescence.
+apply_fault(Ms, Fault) ->
+    {ok, Before} = toroco_clock:tick(Ms, []),
+    Stimuli = case Fault of
+                  {kill, router, {R, I}} -> exit_of(toroco:whereis({router, R, I}));
+                  {kill, Name} -> exit_of(toroco:whereis(Name));
+                  _ -> []
+              end,
+    _ = case Fault of
+            {suspend, N} -> toroco:suspend_behavior(N);
+            {resume, N} -> toroco:resume_behavior(N);
+            _ -> ok
+        end,
+    {ok, After} = toroco_clock:tick(Ms, Stimuli),
+    Before ++ After.
+
+exit_of(undefined) -> [];
+exit_of(Pid) -> [{exit, Pid, kill}].
 
 %%====================================================================
 %% Setting up and tearing down

@@ -37,6 +37,8 @@
 %% changes nothing. The semantics are those of SPEC §4.
 -module(toroco).
 
+-export([whereis/1]).
+-compile({no_auto_import, [whereis/1]}).
 -export([add_behavior/3, add_device/3, remove_behavior/1, remove_device/1,
          suspend_behavior/1, resume_behavior/1, reset_behavior/1, restart_behavior/1,
          set_inputs/2, set_inhibitors/2, set_reset/2, load_wiring/1,
@@ -136,6 +138,14 @@ remove_device(Name) ->
 suspend_behavior(Name) ->
     on(Name, fun() -> with_behavior(Name, fun toroco_behavior:suspend/1) end,
        fun() -> suspend_behavior(Name) end).
+
+%% @doc The process of behavior or device `Name' on this node, or of the
+%% router of input `{router, Receiver, Input}'; `undefined' if none runs.
+-spec whereis(name() | {router, name(), atom()}) -> pid() | undefined.
+whereis({router, Receiver, Input}) ->
+    erlang:whereis(toroco_names:router(Receiver, Input));
+whereis(Name) when is_atom(Name) ->
+    erlang:whereis(toroco_names:process(Name)).
 
 %% @doc Resumes a suspended behavior; each input's latched winner is
 %% re-delivered to it.

@@ -223,12 +223,12 @@ init(#{kind := Kind, name := Name, module := M, layer := Layer, args := Args}) -
                    user_events = erlang:function_exported(M, handle_event, 4),
                    tap = tap(toroco_tap:current(), Name), idle = toroco_wire:idle_arm()},
             toroco_tap:lifecycle(E#e.tap, Name, toroco_restarts:started(Name)),
+            ok = toroco_lockstep:up(Name, parent(), case Kind of
+                                                        behavior -> Layer;
+                                                        device -> none
+                                                    end),
             announce(E),
-            Up = fun() -> toroco_lockstep:up(Name, parent(), case Kind of
-                                                                 behavior -> Layer;
-                                                                 device -> none
-                                                             end)
-                 end,
+            Up = fun() -> toroco_lockstep:ready(Name) end,
             case start_user(E) of
                 {ok, S, E1} -> Up(), {ok, S, E1#e{batch = toroco_tap:flush(E1#e.batch)}};
                 {ok, S, E1, A} -> Up(), {ok, S, E1#e{batch = toroco_tap:flush(E1#e.batch)}, A};

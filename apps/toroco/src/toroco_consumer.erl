@@ -137,12 +137,13 @@ init({Mod, Key, Caller}) ->
     process_flag(trap_exit, true),
     case toroco_wiring:lookup({Mod:kind(), Key}) of
         {ok, Cfg} ->
+            ok = toroco_lockstep:up(Mod:reg(Key), case get('$ancestors') of
+                                                      [Parent | _] -> Parent;
+                                                      _ -> undefined
+                                                  end, consumer),
             C = #c{mod = Mod, key = Key, data = Mod:init(Key, Cfg), idle = toroco_wire:idle_arm()},
             {St, C1, Actions} = start_sync(Cfg, Caller, none, C),
-            toroco_lockstep:up(Mod:reg(Key), case get('$ancestors') of
-                                                 [Parent | _] -> Parent;
-                                                 _ -> undefined
-                                             end, consumer),
+            toroco_lockstep:ready(Mod:reg(Key)),
             {ok, St, C1, Actions};
         error ->
             %% Unwired while (re)starting: end at once, not to be restarted

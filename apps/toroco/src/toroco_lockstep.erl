@@ -76,17 +76,17 @@
 
 -include("toroco_wire.hrl").
 
--export([start_link/0, send/3, timer/4, cancel/2, done/1, up/3, down/1, synced/1]).
+-export([start_link/0, send/3, timer/4, cancel/2, done/1, up/3, ready/1, down/1, synced/1]).
 -export([start/1, stop/0, tick/3, settle/0, info/0]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 -export_type([stimulus/0]).
 
 %% A stimulus from the world: `Msg' to behavior or device `Name' of this
 %% node (a device, as a rule), delivered as a step like any other; or
-%% `{exit, Name, Reason}', the exit signal `Reason' sent to the process
-%% registered as `Name' (a behavior's, device's, router's or gate's), the
-%% step done once its exit has settled.
--type stimulus() :: {atom(), term()} | {exit, atom(), term()}.
+%% `{exit, Pid, Reason}', the exit signal `Reason' sent to process `Pid'
+%% of the path (a behavior's, device's, router's or gate's, see
+%% `toroco:whereis/1'), the step done once its exit has settled.
+-type stimulus() :: {atom(), term()} | {exit, pid(), term()}.
 
 -define(TAG, '$toroco_lockstep').
 -define(CALL_MS, 60000).
@@ -178,14 +178,29 @@ done(Token) ->
     end.
 
 %% @doc The calling process of the event path (a behavior's, device's,
-%% router's or gate's) is up as `Name' under supervisor `Sup', in `Layer'
+%% router's or gate's) starts as `Name' under supervisor `Sup', in `Layer'
 %% (`none' outside the layers; `consumer' for a router or a gate, which
-%% hand their `DOWN's over): at the end of its `init', in lockstep only.
+%% hand their `DOWN's over): at the start of its `init', in lockstep only;
+%% {@link ready/1} at its end.
 -spec up(atom(), pid() | atom() | undefined, non_neg_integer() | none | consumer) -> ok.
 up(Name, Sup, Layer) ->
     case persistent_term:get(?MODULE, none) of
+        none ->
+            ok;
+        Server ->
+            %% before the process sends anything: a new incarnation's
+            %% messages wait for its predecessor's exit to be settled
+            try gen_server:call(Server, {up, self(), Name, sup_pid(Sup), Layer}, ?CALL_MS)
+            catch exit:_ -> ok
+            end
+    end.
+
+%% @doc The calling process, `up' as `Name', is done with its `init'.
+-spec ready(atom()) -> ok.
+ready(Name) ->
+    case persistent_term:get(?MODULE, none) of
         none -> ok;
-        Server -> Server ! {?TAG, up, self(), Name, sup_pid(Sup), Layer}, ok
+        Server -> Server ! {?TAG, ready, self(), Name}, ok
     end.
 
 %% @doc In lockstep, a consumer hands over a `DOWN' it was given: it comes
@@ -282,8 +297,27 @@ handle_call({tick, T, Stimuli}, From, S = #s{now = Now, waiters = W, stimuli = O
 handle_call(info, _From, S = #s{steps = N, lost = L, timers = Ts, now = Now}) ->
     {reply, #{steps => N, lost => L, timers => gb_trees:size(Ts), now_ms => Now,
               processes => map_size(S#s.procs), unsettled => S#s.unsettled}, S};
+handle_call({up, Pid, Name, Sup, Layer}, _From, S = #s{cell = Cell}) when Cell =/= undefined ->
+    {reply, ok, run(progress(up(Pid, Name, Sup, Layer, predecessor(Name, S))))};
+handle_call({up, _, _, _, _}, _From, S) ->
+    {reply, ok, S};
 handle_call(_Req, _From, S) ->
     {reply, {error, unknown_call}, S}.
+
+%% A new incarnation of `Name' starts: its predecessor is dead (its
+%% supervisor saw it go), and its exit is settled first, so that nothing
+%% the new one sends comes before that exit's consequences.
+predecessor(Name, S = #s{procs = Procs}) ->
+    case [{P, M} || {P, #{name := N, mon := M}} <- maps:to_list(Procs), N =:= Name] of
+        [{Old, Mon} | _] ->
+            receive
+                {'DOWN', Mon, process, Old, Reason} -> exited(Old, Reason, S)
+            after ?SETTLE_GUARD_MS ->
+                    exited(Old, unknown, S)
+            end;
+        [] ->
+            S
+    end.
 
 -spec handle_cast(term(), #s{}) -> {noreply, #s{}}.
 handle_cast(_Msg, S) ->
@@ -313,8 +347,16 @@ handle_info({?TAG, done, Token}, S = #s{inflight = {Token, Mon, _}}) ->
     {noreply, run(S#s{inflight = none})};
 handle_info({?TAG, done, _Stale}, S) ->
     {noreply, S};
-handle_info({?TAG, up, Pid, Name, Sup, Layer}, S = #s{cell = Cell}) when Cell =/= undefined ->
-    {noreply, run(progress(up(Pid, Name, Sup, Layer, S)))};
+handle_info({?TAG, ready, _Pid, Name}, S = #s{settle = St = #settle{awaiting = Awaiting}})
+  when is_map_key(Name, Awaiting) ->
+    Sup = maps:get(Name, Awaiting),
+    S1 = note(io_lib:format("~s restarted", [Name]),
+              S#s{settle = St#settle{awaiting = maps:remove(Name, Awaiting)}}),
+    Layer = case [L || #{name := N, layer := L} <- maps:values(S1#s.procs), N =:= Name] of
+                [L | _] -> L;
+                [] -> none
+            end,
+    {noreply, run(progress(intensity(Sup, Layer, S1)))};
 handle_info({?TAG, down, Pid, Down}, S = #s{cell = Cell, downs = Downs, arrival = A})
   when Cell =/= undefined ->
     S1 = settling(S#s{downs = [{A, Pid, Down} | Downs], arrival = A + 1}),
@@ -358,26 +400,18 @@ set_timer(Pid, Kind, Deadline, Msg, S) ->
 %% Exits
 %%====================================================================
 
-%% A process of the path is up: monitored, with its supervisor; if its
-%% restart was awaited, the restart is done and counted against its
-%% layer's intensity in simulated time.
+%% A process of the path starts: monitored, with its supervisor. Its
+%% restart, if awaited, is done when it is ready (counted against its
+%% layer's intensity in simulated time then).
 up(Pid, Name, Sup, Layer, S = #s{procs = Procs, sups = Sups}) ->
     Sups1 = case Sup of
                 undefined -> Sups;
                 _ when is_map_key(Sup, Sups) -> Sups;
                 _ -> Sups#{Sup => {erlang:monitor(process, Sup), Layer}}
             end,
-    S1 = S#s{procs = Procs#{Pid => #{name => Name, sup => Sup, layer => Layer,
-                                     mon => erlang:monitor(process, Pid)}},
-             sups = Sups1},
-    case S1#s.settle of
-        St = #settle{awaiting = #{Name := _} = Awaiting} ->
-            S2 = note(io_lib:format("~s restarted", [Name]),
-                      S1#s{settle = St#settle{awaiting = maps:remove(Name, Awaiting)}}),
-            intensity(Sup, Layer, S2);
-        _ ->
-            S1
-    end.
+    S#s{procs = Procs#{Pid => #{name => Name, sup => Sup, layer => Layer,
+                                mon => erlang:monitor(process, Pid)}},
+        sups = Sups1}.
 
 %% A restart in a layer: more than the intensity allows within its period
 %% of simulated time takes the layer out, as its supervisor would.
@@ -412,16 +446,9 @@ exited(Pid, Reason, S = #s{procs = Procs, inflight = Inflight}) ->
     S2 = settling(note(io_lib:format("~s exit ~ts", [Name, reason(Reason)]),
                        S1#s{procs = maps:remove(Pid, Procs)})),
     #settle{awaiting = Awaiting, takeout = Out, barrier = Barrier} = S2#s.settle,
-    %% the new incarnation may have said up before this death was seen
-    Again = [P || {P, #{name := N}} <- maps:to_list(S2#s.procs), N =:= Name],
     Restarts = not final(Reason) andalso is_pid(Sup) andalso is_map_key(Sup, S2#s.sups)
-        andalso not is_map_key(Sup, Out) andalso Again =:= [],
-    S3 = case Again of
-             [_ | _] when not (is_pid(Sup) andalso is_map_key(Sup, Out)) ->
-                 intensity(Sup, maps:get(layer, maps:get(hd(Again), S2#s.procs)),
-                           note(io_lib:format("~s restarted", [Name]), S2));
-             _ -> S2
-         end,
+        andalso not is_map_key(Sup, Out),
+    S3 = S2,
     Barrier1 = case Barrier of
                    {Ref, Waiting} -> {Ref, maps:remove(Pid, Waiting)};
                    none -> none
@@ -575,8 +602,8 @@ due(S = #s{timers = Ts, target = Target}) ->
 stimuli(S = #s{stimuli = []}) ->
     quiescent(S);
 stimuli(S = #s{stimuli = Stimuli, queue = Q}) ->
-    Q1 = lists:foldl(fun({exit, Name, Reason}, Acc) ->
-                             queue:in({{Name, node()}, whereis(Name), {exit, Reason}}, Acc);
+    Q1 = lists:foldl(fun({exit, Pid, Reason}, Acc) ->
+                             queue:in({Pid, Pid, {exit, Reason}}, Acc);
                         ({Name, Msg}, Acc) ->
                              To = {toroco_names:process(Name), node()},
                              queue:in({To, whereis_local(To), {stimulus, Msg}}, Acc)
