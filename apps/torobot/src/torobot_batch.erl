@@ -390,6 +390,10 @@ start_worker_peer() ->
         {ok, Peer, _Node} ->
             try
                 ok = peer:call(Peer, logger, set_primary_config, [level, Level], ?ASK_MS),
+                %% loaded first: an application's .app file would override
+                %% what is set before it is loaded
+                _ = [peer:call(Peer, application, load, [App], ?ASK_MS)
+                     || App <- [toroco, toroco_hw, torobot]],
                 _ = [peer:call(Peer, application, set_env, [App, K, V], ?ASK_MS)
                      || {App, K, V} <- Env],
                 {ok, Peer}

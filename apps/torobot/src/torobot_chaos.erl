@@ -40,6 +40,8 @@
 
 -define(WIRING, "config/torobot.wiring").
 -define(LOG, #{domain => [torobot, chaos]}).
+%% at most this many candidate runs for one shrink
+-define(SHRINK_TRIES, 400).
 %% the simulated devices every run has, besides the wiring's
 -define(SIM_DEVICES, [ir, motors, camera, push, wheels, range, bumper, odometry, light, beacon]).
 
@@ -62,7 +64,7 @@ run(Opts) when is_map(Opts) ->
 
 %% Everything checked, files read: a job any node of this code can run.
 prepare(Opts) ->
-    Wiring = maps:get(wiring, Opts, ?WIRING),
+    Wiring = maps:get(wiring, Opts, application:get_env(torobot, wiring, ?WIRING)),
     Seed = maps:get(seed, Opts, 0),
     case names(Wiring) of
         {ok, Names} ->
@@ -191,7 +193,8 @@ check_explore(Opts, Runs, Seed) ->
             case worlds(maps:get(worlds, Opts, undefined)) of
                 {ok, Worlds} ->
                     case prepare(#{world => element(2, hd(Worlds)),
-                                   wiring => maps:get(wiring, Opts, ?WIRING),
+                                   wiring => maps:get(wiring, Opts,
+                                                      application:get_env(torobot, wiring, ?WIRING)),
                                    faults => maps:get(faults, Opts, []),
                                    property => maps:get(property, Opts, undefined)}) of
                         {ok, Job} -> {ok, Worlds, maps:remove(trace, Job)};
@@ -282,21 +285,33 @@ shrink_loop(Job, Faults, _V, Clause, Tried) ->
 
 first_failing(_Job, [], _Clause, Tried) ->
     {none, Tried};
+first_failing(_Job, _Candidates, _Clause, Tried) when Tried >= ?SHRINK_TRIES ->
+    {none, Tried};
 first_failing(Job, [C | Cs], Clause, Tried) ->
     case run_job(Job#{schedule => C}) of
         {ok, #{violation := {Clause, _} = V}} -> {found, C, V, Tried + 1};
         _ -> first_failing(Job, Cs, Clause, Tried + 1)
     end.
 
-%% The single reductions of a fault list, the biggest first: drop one,
-%% halve a duration or a magnitude, move one earlier.
+%% The reductions of a fault list, the biggest first: drop a half, a
+%% quarter, ... then one fault (so a single culprit among many is found
+%% in a few runs); halve a duration or a magnitude; move one back to the
+%% 100 ms before it.
 candidates(Faults) ->
+    Drops = lists:append([drops(Faults, Size) || Size <- sizes(length(Faults))]),
     Indexed = lists:enumerate(Faults),
-    Drops = [[F || {J, F} <- Indexed, J =/= I] || {I, _} <- Indexed],
     Halves = [replace(Faults, I, H) || {I, F} <- Indexed, H <- halves(F)],
-    Moves = [lists:keysort(2, replace(Faults, I, {at, Ms - Step, Fault}))
-             || {I, {at, Ms, Fault}} <- Indexed, Step <- [1000, 100, 10], Ms - Step >= 0],
+    Moves = [lists:keysort(2, replace(Faults, I, {at, (Ms - 1) div 100 * 100, Fault}))
+             || {I, {at, Ms, Fault}} <- Indexed, Ms > 0, Ms rem 100 =/= 0],
     Drops ++ Halves ++ Moves.
+
+sizes(0) -> [];
+sizes(N) -> lists:usort(fun(A, B) -> A >= B end, [max(1, N div D) || D <- [2, 4, 8, 16, N]]).
+
+drops(Faults, Size) ->
+    N = length(Faults),
+    [lists:sublist(Faults, Start - 1) ++ lists:nthtail(min(N, Start - 1 + Size), Faults)
+     || Start <- lists:seq(1, N, Size)].
 
 replace(L, I, New) ->
     {A, [_ | B]} = lists:split(I - 1, L),
@@ -380,12 +395,20 @@ terms(File) ->
     end.
 
 read_terms(Fd, File, Line, Acc) ->
-    case io:read(Fd, '', Line) of
-        {ok, Term, End} -> read_terms(Fd, File, End, [{loc(File, Line), Term} | Acc]);
-        {eof, _} -> {ok, lists:reverse(Acc)};
+    case io:request(Fd, {get_until, unicode, '', erl_scan, tokens, [Line]}) of
+        {ok, Tokens = [First | _], End} ->
+            case erl_parse:parse_term(Tokens) of
+                {ok, Term} ->
+                    read_terms(Fd, File, End, [{loc(File, erl_scan:line(First)), Term} | Acc]);
+                {error, {L, Mod, Why}} ->
+                    {error, {malformed, {loc(File, L), lists:flatten(Mod:format_error(Why))}}}
+            end;
+        {eof, _} ->
+            {ok, lists:reverse(Acc)};
         {error, {L, Mod, Why}, _} ->
             {error, {malformed, {loc(File, L), lists:flatten(Mod:format_error(Why))}}};
-        {error, Why, _} -> {error, {malformed, {loc(File, Line), Why}}}
+        {error, Why} ->
+            {error, {malformed, {loc(File, Line), Why}}}
     end.
 
 loc(File, {L, _}) -> loc(File, L);

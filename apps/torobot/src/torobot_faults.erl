@@ -321,8 +321,8 @@ datagrams(Datagrams, Active, Delayed, Stuck, {Seed, T}) ->
                           {[], St};
                      ({at, _, {stuck, camera, _}} = F, {Ds, St}) ->
                           case St of
-                              #{F := Was} -> {Was, St};
-                              #{} -> {Ds, St#{F => Ds}}
+                              #{{camera, F} := Was} -> {Was, St};
+                              #{} -> {Ds, St#{{camera, F} => Ds}}
                           end;
                      ({at, Ms, {camera, loss, P, _}}, {Ds, St}) ->
                           R0 = rand:seed_s(exsss, {Seed, T, erlang:phash2({loss, Ms})}),

@@ -32,6 +32,8 @@
 %% died; the next word from it (an event, or the keep-alive with its latch)
 %% takes it back.
 -module(toroco_consumer).
+
+-define(DOWN_WAIT_MS, 1000).
 -behaviour(gen_statem).
 
 -include("toroco_wire.hrl").
@@ -176,6 +178,10 @@ event(info, ?WIRE_STEP(Token, ?WIRE_TIMER(Kind, Msg)), St, C) ->
 event(info, ?WIRE_STEP(Token, Msg), St, C) ->
     toroco_wire:step_done(Token, event(info, Msg, St, C));
 event(internal, ?WIRE_STEP_DONE(Token), _, _) ->
+    %% a monitor the step set on a process already gone has its DOWN here
+    %% now: it is handed over before the step is done, not at a moment
+    %% that depends on the schedulers
+    hand_over_downs(),
     toroco_lockstep:done(Token),
     keep_state_and_data;
 %% The idle tick (toroco_wire:idle_arm/0); the first event after
@@ -268,6 +274,34 @@ event({timeout, '$toroco_tap'}, flush, _, C = #c{mod = Mod, data = D}) ->
 %% The observer tap, and whatever is the kind's own.
 event(Type, Content, _, C) ->
     kind(Type, Content, C).
+
+hand_over_downs() ->
+    {monitors, Mons} = erlang:process_info(self(), monitors),
+    await_downs([P || {process, P} <- Mons, is_pid(P), node(P) =:= node(),
+                      not is_process_alive(P)]),
+    flush_downs().
+
+%% A monitor on a process that is exiting gets its DOWN once the exit is
+%% done: waited for (it comes), so that it is handed over now.
+await_downs([]) ->
+    ok;
+await_downs([Pid | Pids]) ->
+    receive
+        {'DOWN', _, process, Pid, _} = Down ->
+            true = toroco_lockstep:down(Down),
+            await_downs(Pids)
+    after ?DOWN_WAIT_MS ->
+            await_downs(Pids)
+    end.
+
+flush_downs() ->
+    receive
+        {'DOWN', _, process, _, _} = Down ->
+            true = toroco_lockstep:down(Down),
+            flush_downs()
+    after 0 ->
+            ok
+    end.
 
 -spec terminate(term(), ready | syncing | gone, #c{} | none) -> ok.
 terminate(_Reason, gone, none) ->
