@@ -3,7 +3,7 @@
 #                make run LOCKSTEP=1 runs it in lockstep (as fast as the CPU allows);
 #                make run ROBOT=wall_follower runs a library robot of config/robots/
 #   make test  - every test suite: C port, detector, Common Test, PropEr, Dialyzer
-.PHONY: run test deps compile port port-test lua-port lua-port-test detector detector-test ct dialyzer bench release board-check board-bench clean eval
+.PHONY: run test deps compile port port-test lua-port lua-port-test detector detector-test ct dialyzer bench release board-check board-bench clean eval chaos
 
 WORLD ?= config/worlds/default.world
 SPEED ?= 1
@@ -48,7 +48,7 @@ test:
 	scripts/test
 
 run: compile
-	SPEED=$(SPEED) SPLIT=$(SPLIT) LOCKSTEP=$(LOCKSTEP) TRACE=$(TRACE) scripts/run $(if $(ROBOT),config/worlds/$(ROBOT).world _build/$(ROBOT).svg config/robots/$(ROBOT).wiring,$(WORLD))
+	SPEED=$(SPEED) SPLIT=$(SPLIT) LOCKSTEP=$(LOCKSTEP) TRACE=$(TRACE) REPLAY=$(REPLAY) scripts/run $(if $(ROBOT),config/worlds/$(ROBOT).world _build/$(ROBOT).svg config/robots/$(ROBOT).wiring,$(WORLD))
 
 # The simulated lab: the wiring on N generated worlds, scored (SPEC §14).
 # Lockstep by default; TIME=realtime [SPEED=10] for real time, and
@@ -56,6 +56,13 @@ run: compile
 eval: compile
 	TIME=$(TIME) NODES=$(NODES) scripts/eval $(N) $(SEED) $(WIRING) \
 	  $(if $(filter command line environment,$(origin SPEED)),$(SPEED),10)
+
+# The robustness lab: seeded fault schedules in lockstep, a property on
+# each run, failures shrunk and replayable (SPEC §17, doc/lab.md):
+#   make chaos [ROBOT=name] [N=1000] [FAULTS=file] [PROP=file] [RATES=0,0.1,0.5,1] [NODES=...]
+chaos: compile
+	ROBOT=$(ROBOT) N=$(if $(filter command line environment,$(origin N)),$(N),1000) \
+	  FAULTS=$(FAULTS) PROP=$(PROP) RATES=$(RATES) NODES=$(NODES) scripts/chaos
 
 bench: compile
 	scripts/bench

@@ -466,17 +466,21 @@ property(Prop) ->
 %%====================================================================
 
 %% @doc `make chaos': `[Wiring, World, Faults, Props, N, Rates, Nodes,
-%% Seed, Dir]' (Rates `-' or `0,0.1,...', Nodes `-' or `a@h,b@h').
+%% Seed, Dir, Shrink]' (Rates `none' or `0,0.1,...', Nodes `none' or
+%% `a@h,b@h', Shrink how many failures to shrink per rate).
 %% Prints the table, writes `Dir'; halts 0, or 2 on bad input.
 -spec main([string()]) -> no_return().
 main([Wiring, World, Faults, Props, N, Rates, Nodes, Seed, Dir]) ->
-    logger:set_primary_config(level, error),
+    main([Wiring, World, Faults, Props, N, Rates, Nodes, Seed, Dir, "3"]);
+main([Wiring, World, Faults, Props, N, Rates, Nodes, Seed, Dir, Shrink]) ->
+    %% the crashes are the point: their supervisors' reports would drown the table
+    logger:set_primary_config(level, critical),
     NodeList = case Nodes of
-                   "-" -> [node()];
+                   "none" -> [node()];
                    _ -> [list_to_atom(X) || X <- string:lexemes(Nodes, ",")]
                end,
     RateList = case Rates of
-                   "-" -> [none];
+                   "none" -> [none];
                    _ -> [to_number(R) || R <- string:lexemes(Rates, ",")]
                end,
     Names = names(Wiring),
@@ -493,7 +497,8 @@ main([Wiring, World, Faults, Props, N, Rates, Nodes, Seed, Dir]) ->
                                         faults => at_rate(Schedule, Rate), property => Props,
                                         runs => list_to_integer(N),
                                         seed => list_to_integer(Seed), nodes => NodeList,
-                                        dir => Dir, progress => true})}
+                                        dir => Dir, progress => true,
+                                        shrink => list_to_integer(Shrink)})}
                        || Rate <- RateList],
             case [E || {_, {error, _} = E} <- Reports] of
                 [Error | _] ->

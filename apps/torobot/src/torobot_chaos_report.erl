@@ -110,7 +110,7 @@ svg(Reports) ->
     Pts = [{Rate, 100 * pass_rate(R)} || {Rate, R} <- Reports, is_number(Rate)],
     MaxR = lists:max([1 | [R || {R, _} <- Pts]]),
     X = fun(R) -> 60 + 400 * R / MaxR end,
-    Y = fun(P) -> 260 - 2 * P end,
+    Y = fun(P) -> 260.0 - 2 * P end,
     ["<svg xmlns='http://www.w3.org/2000/svg' width='500' height='300' font-family='sans-serif' font-size='12'>\n",
      "<rect width='500' height='300' fill='white'/>\n",
      "<line x1='60' y1='260' x2='470' y2='260' stroke='black'/><line x1='60' y1='60' x2='60' y2='260' stroke='black'/>\n",
