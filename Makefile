@@ -59,9 +59,10 @@ eval: compile
 
 # The robustness lab: seeded fault schedules in lockstep, a property on
 # each run, failures shrunk and replayable (SPEC §17, doc/lab.md):
-#   make chaos [ROBOT=name] [N=1000] [FAULTS=file] [PROP=file] [RATES=0,0.1,0.5,1] [NODES=...]
+#   make chaos [ROBOT=name] [WIRING=file] [N=1000] [FAULTS=file] [PROP=file] [RATES=0,0.1,0.5,1] [NODES=...]
 chaos: compile
-	ROBOT=$(ROBOT) N=$(if $(filter command line environment,$(origin N)),$(N),1000) \
+	ROBOT=$(ROBOT) WIRING_FILE=$(if $(filter command line,$(origin WIRING)),$(WIRING),) \
+	  N=$(if $(filter command line environment,$(origin N)),$(N),1000) \
 	  FAULTS=$(FAULTS) PROP=$(PROP) RATES=$(RATES) NODES=$(NODES) scripts/chaos
 
 bench: compile

@@ -94,8 +94,12 @@ run_job(Job = #{world := World, wiring := Wiring, schedule := Schedule, property
                 undefined -> tmp_trace();
                 T -> T
             end,
-    try torobot_sim:observe(World, #{time => lockstep, wiring => Wiring, trace => Trace,
-                                     faults => Faults, seed => Seed}) of
+    Stop = case maps:get(early, Job, false) of
+               true -> #{stop => fun(Obs) -> torobot_props:settled(Prop, Obs) end};
+               false -> #{}
+           end,
+    try torobot_sim:observe(World, Stop#{time => lockstep, wiring => Wiring, trace => Trace,
+                                         faults => Faults, seed => Seed}) of
         {ok, Final, Obs} ->
             {ok, Bin} = file:read_file(Trace),
             Context = #{faults => Faults, reference => reference(Prop, Job)},
@@ -288,7 +292,8 @@ first_failing(_Job, [], _Clause, Tried) ->
 first_failing(_Job, _Candidates, _Clause, Tried) when Tried >= ?SHRINK_TRIES ->
     {none, Tried};
 first_failing(Job, [C | Cs], Clause, Tried) ->
-    case run_job(Job#{schedule => C}) of
+    %% a candidate ends as soon as its property is violated for sure
+    case run_job(Job#{schedule => C, early => true}) of
         {ok, #{violation := {Clause, _} = V}} -> {found, C, V, Tried + 1};
         _ -> first_failing(Job, Cs, Clause, Tried + 1)
     end.

@@ -25,7 +25,9 @@ table(Reports) ->
       || {Rate, R = #{runs := N, passed := P, failed := F, wall_ms := W}} <- Reports],
      [shrunk_lines(R) || {_, R} <- Reports],
      [io_lib:format("NONDETERMINISTIC seeds: ~w~n", [ND])
-      || {_, #{nondeterministic := ND}} <- Reports, ND =/= []]].
+      || {_, #{nondeterministic := ND}} <- Reports, ND =/= []],
+     [io_lib:format("~b run(s) could not run, the first (seed ~b): ~0tp~n", [length(E), S, Why])
+      || {_, #{errors := E = [#{seed := S, error := Why} | _]}} <- Reports]].
 
 rate(none) -> "-";
 rate(R) -> io_lib:format("~p", [R]).
@@ -76,7 +78,9 @@ section(Rate, R = #{rows := Rows, failed := Failed}) ->
      case maps:get(nondeterministic, R) of
          [] -> "";
          ND -> io_lib:format("~n**Nondeterministic seeds: ~w**~n", [ND])
-     end].
+     end,
+     [io_lib:format("~n**Runs that could not run:** seed ~b: `~0tp`~n", [S, Why])
+      || #{seed := S, error := Why} <- maps:get(errors, R, [])]].
 
 kinds(#{faults := Fs}) ->
     lists:usort([atom_to_list(element(1, F)) ++ case F of

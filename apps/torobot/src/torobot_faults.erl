@@ -23,7 +23,8 @@
 %% Sensors: `{ir, left}', `{ir, right}', `ir' (both), `camera', and the
 %% simulated sensors `range', `bumper', `light', `odometry', `beacon'. A
 %% `FaultSpec' may say `any' for a name (`any' behavior of the wiring,
-%% `any' sensor: `{ir, left}', `{ir, right}', `camera', `range') and
+%% `any' sensor: `{ir, left}', `{ir, right}', `camera', `range'), `{one_of,
+%% [Name]}' for a behavior drawn from those, and
 %% `{Min, Max}' for a duration, a sigma, a probability or a factor.
 %% `{kill, port, pru_port | lua_port}' and `{disconnect, Node, Ms}' are
 %% refused as `unsupported_fault' for now (see doc/lab.md).
@@ -132,6 +133,11 @@ all(Results) ->
 
 name(any, _Names, true, _E, _Kinds) ->
     ok;
+name({one_of, [_ | _] = L}, Names, true, E, Kinds) ->
+    case [N || N <- L, name(N, Names, false, E, Kinds) =/= ok] of
+        [] -> ok;
+        [Bad | _] -> {error, {unknown_name, {Bad, E}}}
+    end;
 name(Name, Names, _Spec, E, Kinds) when is_atom(Name) ->
     case lists:any(fun(K) -> lists:member(Name, maps:get(K, Names)) end, Kinds) of
         true -> ok;
@@ -215,6 +221,9 @@ pick(any, Spec, Names, R) ->
            end,
     {I, R1} = rand:uniform_s(length(Pool), R),
     {lists:nth(I, Pool), R1};
+pick({one_of, L}, _Spec, _Names, R) ->
+    {I, R1} = rand:uniform_s(length(L), R),
+    {lists:nth(I, L), R1};
 pick({Min, Max}, _Spec, _Names, R) when is_integer(Min), is_integer(Max) ->
     {I, R1} = rand:uniform_s(Max - Min + 1, R),
     {Min + I - 1, R1};

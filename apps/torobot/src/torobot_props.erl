@@ -26,7 +26,7 @@
 %% `{layer_out, L}' of that tick.
 -module(torobot_props).
 
--export([check/1, read/1, violation/3]).
+-export([check/1, read/1, violation/3, settled/2]).
 -export_type([property/0, condition/0, observation/0, violation/0]).
 
 -type condition() :: atom() | tuple() | fun((observation()) -> boolean()).
@@ -100,6 +100,22 @@ read(File) ->
 %%====================================================================
 %% Judging a run
 %%====================================================================
+
+%% @doc Whether the observations so far (of a run not over yet) already
+%% violate `Prop' whatever comes next: a `never' whose condition held, a
+%% `within' past its time, an `always_after' window closed without its
+%% condition. A fun or `recovers' is never settled early.
+-spec settled(property(), [observation()]) -> boolean().
+settled({'and', Ps}, Obs) ->
+    lists:any(fun(P) -> settled(P, Obs) end, Ps);
+settled({never, _} = P, Obs) ->
+    violation(P, Obs, #{}) =/= none;
+settled({within, Ms, _} = P, Obs) ->
+    last_t(Obs) > Ms andalso violation(P, Obs, #{}) =/= none;
+settled({always_after, _, _, _} = P, Obs) ->
+    violation(P, Obs, #{}) =/= none;
+settled(_P, _Obs) ->
+    false.
 
 %% @doc The first violation of `Prop' in a run's observations (in time
 %% order), `none' if it holds. `Context': `faults' (the concrete faults,

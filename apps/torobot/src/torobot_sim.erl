@@ -76,7 +76,7 @@
 -type opts() :: #{svg => file:name_all(), wiring => file:name_all(), status => status(),
                   speed => number(), nodes => local | peer, time => realtime | lockstep,
                   trace => file:name_all(), faults => torobot_faults:concrete(),
-                  seed => integer()}.
+                  seed => integer(), stop => fun(([map()]) -> boolean())}.
 %% A world file, or the terms of one (as `torobot_worlds:generate/2' makes).
 -type world_spec() :: file:name_all() | [tuple()].
 %% One robot's summary, or one per robot for a world of named robots.
@@ -114,11 +114,12 @@
               %% the fault schedule (SPEC §17): the world's faults, the
               %% robot's events not applied yet, the seed; observations
               faults = [] :: torobot_faults:concrete(),
+              stop = none :: none | fun(([torobot_props:observation()]) -> boolean()),
               robot_events = [] :: [{non_neg_integer(), term()}],
               seed = 0 :: integer(),
               obs = [] :: [torobot_props:observation()]}).
 
--define(OPTIONS, [svg, wiring, status, speed, nodes, time, trace, faults, seed]).
+-define(OPTIONS, [svg, wiring, status, speed, nodes, time, trace, faults, seed, stop]).
 
 %%====================================================================
 %% API
@@ -158,8 +159,10 @@ simulate(WorldSpec, Opts) when is_map(Opts) ->
 %% @doc As {@link simulate/2}, with the observations of each tick (one
 %% robot: `torobot_props:observation()', in time order), which the
 %% properties of the robustness lab judge (SPEC §17). Options `faults' (a
-%% concrete schedule, `torobot_faults:concrete()', lockstep only) and
-%% `seed' (of the faults' noise and losses, default 0).
+%% concrete schedule, `torobot_faults:concrete()', lockstep only), `seed'
+%% (of the faults' noise and losses, default 0) and `stop' (a fun of the
+%% observations so far, asked each simulated second: `true' ends the run
+%% there).
 -spec observe(world_spec(), opts()) ->
           {ok, torobot_world:world() | [torobot_world:world()], [torobot_props:observation()]}
           | {error, term()}.
@@ -247,7 +250,8 @@ with_robots(Worlds, Nodes, Opts) ->
     Trace = maps:get(trace, Opts, undefined),
     {ok, Sim} = gen_server:start(?MODULE, {self(), maps:get(status, Opts, false), Speed,
                                            torobot_world:tick_ms(hd(Worlds)), Time, Trace,
-                                           maps:get(faults, Opts, []), maps:get(seed, Opts, 0)},
+                                           maps:get(faults, Opts, []), maps:get(seed, Opts, 0),
+                                           maps:get(stop, Opts, none)},
                                  []),
     MRef = monitor(process, Sim),
     RobotOpts = #{wiring => WiringFile, speed => Speed, time => Time,
@@ -322,12 +326,13 @@ svg(_Worlds, #{}) ->
 %%====================================================================
 
 -spec init({pid(), status(), number(), pos_integer(), realtime | lockstep,
-            file:name_all() | undefined, torobot_faults:concrete(), integer()}) ->
+            file:name_all() | undefined, torobot_faults:concrete(), integer(),
+            none | fun()}) ->
           {ok, #sim{}} | {stop, term()}.
-init({Caller, Status, Speed, Tick, Time, TracePath, Faults, Seed}) ->
+init({Caller, Status, Speed, Tick, Time, TracePath, Faults, Seed, Stop}) ->
     monitor(process, Caller),
     S = #sim{caller = Caller, status = Status, speed = Speed, tick = Tick, time = Time,
-             faults = Faults, seed = Seed, robot_events = robot_events(Faults)},
+             faults = Faults, seed = Seed, robot_events = robot_events(Faults), stop = Stop},
     case TracePath of
         undefined ->
             {ok, S};
@@ -413,15 +418,22 @@ terminate(_Reason, #sim{sock = Sock, status = Status, trace = Trace}) ->
 
 %% After a tick: the caller has the final worlds once every robot is done,
 %% else the next tick is asked for.
-next(S = #sim{bots = Bots, caller = Caller, obs = Obs}, Again) ->
+next(S = #sim{bots = Bots, caller = Caller, obs = Obs, stop = Stop}, Again) ->
     Worlds = [W || #bot{world = W} <- Bots],
-    case lists:all(fun torobot_world:done/1, Worlds) of
+    case lists:all(fun torobot_world:done/1, Worlds) orelse stop(Stop, Obs) of
         true ->
             Caller ! {?MODULE, self(), {done, Worlds, lists:reverse(Obs)}},
             {stop, normal, S};
         false ->
             {noreply, Again(S)}
     end.
+
+%% A run may end as soon as its observations say so (the robustness lab's
+%% shrinking stops a candidate once its property is violated for sure);
+%% asked each simulated second.
+stop(none, _Obs) -> false;
+stop(Stop, [#{t := T} | _] = Obs) when T rem 1000 =:= 0 -> Stop(lists:reverse(Obs));
+stop(_Stop, _Obs) -> false.
 
 %% Ticks are scheduled on the absolute clock from the start, so a late tick
 %% does not delay the ones after it.

@@ -46,7 +46,9 @@ end_per_suite(Config) ->
 init_per_group(explore, Config) ->
     %% the avoids crash often: their layer must not be taken out for it,
     %% so the weakness is the only thing the property can see (the worker
-    %% peers take this node's environment)
+    %% peers take this node's environment); loaded first, or loading it
+    %% would put the .app file's value back
+    _ = application:load(toroco),
     {ok, Old} = application:get_env(toroco, layer_restart_intensity),
     ok = application:set_env(toroco, layer_restart_intensity, {1000, 1}),
     [{intensity, Old} | Config];
