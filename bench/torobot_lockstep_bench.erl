@@ -13,6 +13,22 @@
 main([Dir, Root, Label, Runs]) ->
     Wiring = filename:join([Root, "config", "torobot.wiring"]),
     World = filename:join([Root, "config", "worlds", "default.world"]),
+    runs(Dir, World, Wiring, Label, Runs),
+    %% the red follower crashing every 2 s (its exits and restarts are steps)
+    {ok, Terms} = file:consult(Wiring),
+    Crashing = filename:join(Dir, "crashing.wiring"),
+    ok = file:write_file(Crashing, [io_lib:format("~tp.~n", [case T of
+                                                              {behavior, red_follower, _, O} ->
+                                                                  {behavior, red_follower,
+                                                                   torobot_crashing_follower, O};
+                                                              _ -> T
+                                                          end]) || T <- Terms]),
+    logger:set_primary_config(level, critical),
+    runs(Dir, filename:join([Root, "test", "worlds", "red_crashing.world"]), Crashing,
+         Label ++ ", red follower crashing", Runs),
+    halt(0).
+
+runs(Dir, World, Wiring, Label, Runs) ->
     Trace = filename:join(Dir, "lockstep.trace"),
     [begin
          T0 = erlang:monotonic_time(microsecond),
@@ -23,5 +39,4 @@ main([Dir, Root, Label, Runs]) ->
          Sha = binary:encode_hex(crypto:hash(sha256, Bin)),
          io:format("| ~s | ~b | ~s | ~s | ~b |~n",
                    [Label, I, Sha, torobot_sim:summary_json(Summary), round(Wall)])
-     end || I <- lists:seq(1, list_to_integer(Runs))],
-    halt(0).
+     end || I <- lists:seq(1, list_to_integer(Runs))].
