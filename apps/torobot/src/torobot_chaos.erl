@@ -479,7 +479,7 @@ main([Wiring, World, Faults, Props, N, Rates, Nodes, Seed, Dir]) ->
     main([Wiring, World, Faults, Props, N, Rates, Nodes, Seed, Dir, "3"]);
 main([Wiring, World, Faults, Props, N, Rates, Nodes, Seed, Dir, Shrink]) ->
     %% the crashes are the point: their supervisors' reports would drown the table
-    logger:set_primary_config(level, critical),
+    ok = logger:set_primary_config(level, critical),
     NodeList = case Nodes of
                    "none" -> [node()];
                    _ -> [list_to_atom(X) || X <- string:lexemes(Nodes, ",")]
@@ -532,7 +532,7 @@ to_number(S) ->
 %% bad file.
 -spec replay_main([string()]) -> no_return().
 replay_main([File]) ->
-    logger:set_primary_config(level, error),
+    ok = logger:set_primary_config(level, critical),
     case replay(File) of
         {ok, #{sha256 := Sha, violation := V, summary := Sum, expected := Exp, faults := Fs}} ->
             [io:format("~ts~n", [line(F)]) || F <- Fs],

@@ -36,7 +36,8 @@
                   | fun(([observation()]) -> boolean() | {violated, number()}).
 -type observation() :: #{t := non_neg_integer(), wall := boolean(), blue := boolean(),
                          red := boolean(), dist := float(), winner := atom(),
-                         motors := {number(), number()}, events := [tuple()]}.
+                         motors := {number(), number()}, events := [tuple()],
+                         atom() => term()}.
 -type violation() :: none | {term(), non_neg_integer()}.
 
 %%====================================================================

@@ -542,13 +542,11 @@ apply_held({cancel, Pid, Kind}, S) ->
 hold(From, H, S = #s{held = Held, arrival = A}) ->
     S#s{held = [{A, From, H} | Held], arrival = A + 1}.
 
-pname(Pid) when is_pid(Pid) ->
+pname(Pid) ->
     case erlang:process_info(Pid, registered_name) of
         {registered_name, Reg} -> atom_to_list(Reg);
         _ -> "~"
-    end;
-pname(_) ->
-    "~".
+    end.
 
 %% An exit's reason as the trace shows it: no pids, no stack.
 reason({Reason, Stack}) when is_list(Stack), Stack =/= [], is_tuple(hd(Stack)),
