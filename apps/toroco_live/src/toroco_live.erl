@@ -184,15 +184,19 @@ replay(Path, Opts) ->
 %% Client mode
 %%====================================================================
 
-%% @doc Dials the rosbridge v2 server at `Url' (`ws://host:port/path',
-%% `?token=T' for a server that asks for one), advertises the robot's
+%% @doc Dials the rosbridge v2 server at `Url' (`ws://host:port/path' or
+%% `wss://...' with `cacertfile' or a pinned `fingerprint' to check the
+%% server's certificate; `?token=T' for a server that asks for one, never
+%% shown), advertises the robot's
 %% topics there, publishes its messages, subscribes to its inbound topics
 %% (`/cmd_vel') and reconnects with backoff when the connection goes.
 %% `{ok, Pid}' at once, connected or not (see {@link rosbridge_clients/0});
-%% `{error, {bad_url, Url}}', `{error, {unsupported_scheme, S}}' or
-%% `{error, {bad_option, {Key, Value}}}' (options: `max_queue',
-%% `backoff_min', `backoff_max', `connect_timeout', `max_message', see
-%% `toroco_live_rosclient').
+%% `{error, {bad_url, Url}}', `{error, {unsupported_scheme, S}}',
+%% `{error, {unverified_wss, Why}}' or `{error, {bad_option, {Key,
+%% Value}}}' (options: `max_queue', `backoff_min', `backoff_max',
+%% `connect_timeout', `max_message', `cacertfile', `fingerprint', see
+%% `toroco_live_rosclient'). A server whose certificate does not match is
+%% never sent a byte: `last_error' says `{tls, Why}'.
 -spec rosbridge_connect(binary() | string(), toroco_live_rosclient:opts()) ->
           {ok, pid()} | {error, term()}.
 rosbridge_connect(Url, Opts) ->
