@@ -141,16 +141,21 @@ connection(Socket, Opts, Guard, {Loop, Tls}) ->
                        end;
                    {error, Why} -> {error, Why}
                end,
-    case {Admitted, secure(Socket, Tls)} of
-        {ok, {ok, Secured}} ->
-            Self = self(),
-            mochiweb_http:loop(Secured, Opts, fun(Req) -> request(Guard, Self, Loop, Req) end);
-        {ok, {error, _}} ->
-            %% a client that cannot complete a handshake: closed, counted
-            gen_statem:cast(Guard, {tls_failed, self()}),
-            _ = mochiweb_socket:close(Socket),
-            ok;
-        {{error, _}, _} ->
+    case Admitted of
+        ok ->
+            case secure(Socket, Tls) of
+                {ok, Secured} ->
+                    Self = self(),
+                    mochiweb_http:loop(Secured, Opts,
+                                       fun(Req) -> request(Guard, Self, Loop, Req) end);
+                {error, _} ->
+                    %% a client that cannot complete a handshake: closed, counted
+                    gen_statem:cast(Guard, {tls_failed, self()}),
+                    _ = mochiweb_socket:close(Socket),
+                    ok
+            end;
+        {error, _} ->
+            %% refused before any handshake: a refusal costs no TLS
             _ = mochiweb_socket:close(Socket),
             ok
     end.
@@ -292,9 +297,11 @@ deadline(#{slots := Slots}) ->
 now_ms() ->
     erlang:monotonic_time(millisecond).
 
-%% The port's `ssl' options: the map's, and TLS 1.2 at least.
+%% The port's `ssl' options: the map's, TLS 1.2 at least, and ssl's own
+%% log kept to errors: every stranger's failed handshake is counted
+%% (`tls_handshake'), and a log line each would let strangers fill the log.
 ssl_options(Tls) ->
-    maps:to_list(maps:merge(#{versions => ['tlsv1.3', 'tlsv1.2']}, Tls)).
+    maps:to_list(maps:merge(#{versions => ['tlsv1.3', 'tlsv1.2'], log_level => error}, Tls)).
 
 -spec terminate(term(), listening, map()) -> ok.
 terminate(_, _, #{server := Server}) ->
