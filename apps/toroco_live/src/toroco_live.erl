@@ -232,11 +232,13 @@ rosbridge_clients() ->
 %%====================================================================
 
 start_dashboard(Config0) ->
-    Config = Config0#{token := token(maps:get(token, Config0))},
-    %% The token is not in the children's start arguments, so that no
-    %% supervisor report carries it: handlers read it from
+    Config = Config0#{token := token(maps:get(token, Config0)),
+                      %% the key of the pages' session cookies (toroco_live_auth)
+                      session_key => crypto:strong_rand_bytes(32)},
+    %% The secrets are not in the children's start arguments, so that no
+    %% supervisor report carries them: handlers read them from
     %% toroco_live_config.
-    Children = maps:remove(token, Config),
+    Children = maps:without([token, session_key], Config),
     Spec = #{id => ?DASHBOARD, start => {?DASHBOARD, start_link, [Children]},
              type => supervisor, restart => permanent},
     case supervisor:start_child(toroco_live_sup, Spec) of

@@ -9,9 +9,14 @@
 %% A credential is the token itself (`{token, T}': `Authorization: Bearer
 %% T', the first visit's `?token=T', rosbridge's `?token=T' and `auth' op)
 %% or the page's session (`{session, S}': the cookie the first visit set,
-%% {@link session/1} of the token, so the cookie is not the token and ends
-%% with it). Both are compared in constant time (`crypto:hash_equals/2').
-%% A request with no credential is not a failure: it is read-only.
+%% {@link session/1}: an HMAC of the token under a key drawn at each start,
+%% so the cookie is not the token, cannot be computed from a guess of it,
+%% and ends with the dashboard). Both are compared in constant time
+%% (`crypto:hash_equals/2'). Only tokens are counted and limited: a session
+%% cannot be guessed any faster than its 256-bit key, and a page left open
+%% across a restart presents a stale one at each reconnect, which must not
+%% lock its person out. A request with no credential is not a failure: it
+%% is read-only.
 %%
 %% The decisions are a pure core over `(Core, Ip, Now)' ({@link new/0},
 %% {@link check/4}); the process owns the core, the clock and the counters
@@ -21,7 +26,7 @@
 %% Messages, built and matched only here:
 %% | from    | to   | message                       | answer |
 %% |---------|------|-------------------------------|--------|
-%% | handler | auth | `{check, Ip, Credential}' (call) | `true', `false' or `{limited, Ms}' |
+%% | handler | auth | `{check, Ip, Credential}' (call) | `true', `false' or `{limited, Ms}' (tokens only) |
 %% | anyone  | auth | `stats' (call)                | `stats()' |
 -module(toroco_live_auth).
 -behaviour(gen_server).
@@ -36,7 +41,6 @@
 -define(WINDOW_MS, 60000).
 -define(BAN_MS, 60000).
 -define(MAX_ADDRESSES, 4096).
--define(SESSION_SALT, <<"toroco_live session">>).
 -define(LOG, #{domain => [toroco, live, auth]}).
 
 -type credential() :: {token, binary()} | {session, binary()} | none.
@@ -66,10 +70,16 @@ authorize(Ip, Credential) ->
     catch exit:_ -> false
     end.
 
-%% @doc The page's session for `Token': what its cookie holds.
+%% @doc The page's session for `Token' while the dashboard runs: what its
+%% cookie holds (the running dashboard's `session_key', drawn at start).
 -spec session(binary()) -> binary().
 session(Token) ->
-    base64url(crypto:mac(hmac, sha256, Token, ?SESSION_SALT)).
+    Key = case toroco_live_config:get(session_key, undefined) of
+              K when is_binary(K) -> K;
+              %% not running: a session no one can present
+              undefined -> crypto:strong_rand_bytes(32)
+          end,
+    base64url(crypto:mac(hmac, sha256, Key, Token)).
 
 %% @doc `failures' (wrong credentials), `limited' (checks refused because
 %% the address was banned), `banned_now' (addresses banned now); empty when
@@ -139,6 +149,8 @@ init([]) ->
     {ok, #{core => new(), failures => 0, limited => 0}}.
 
 -spec handle_call(term(), gen_server:from(), map()) -> {reply, term(), map()}.
+handle_call({check, _Ip, {session, _} = Session}, _From, S) ->
+    {reply, good(Session), S};
 handle_call({check, Ip, Credential}, _From, S = #{core := Core}) ->
     Now = erlang:monotonic_time(millisecond),
     {Verdict, Core1} = check(Ip, good(Credential), Now, Core),

@@ -18,12 +18,13 @@
 %% <b>Who may drive the robot.</b> Tools send `Authorization: Bearer T'. A
 %% person opens the page once with `?token=T': that first visit is answered
 %% with a session cookie (`HttpOnly', `SameSite=Strict', `Secure' under
-%% TLS; `toroco_live_auth:session/1' of the token, not the token) and a 303
+%% TLS; `toroco_live_auth:session/1', not the token) and a 303
 %% to the same address without the token, so the token leaves the address
 %% bar, the history and whatever logs the address; the page's controls and
 %% its WebSocket then carry the cookie. Every check goes through
-%% `toroco_live_auth' (constant time, failures per address limited: 429
-%% `too_many_failures' for a minute after ten). A browser's request from
+%% `toroco_live_auth' (constant time, wrong tokens per address limited: 429
+%% `too_many_failures' for a minute after ten; the WebSocket of a limited
+%% address is read-only). A browser's request from
 %% another page (its `Origin' not this server's own) may not drive the
 %% robot nor open the WebSocket: 403 `cross_origin'. The token is never
 %% logged (a handler that fails is logged by the listener by its path,
@@ -82,7 +83,8 @@ route('GET', "/metrics", Req) ->
 route('GET', "/ws", Req) ->
     case {same_origin(Req), authorize(Req)} of
         {false, _} -> cross_origin(Req);
-        {true, {limited, Ms}} -> too_many_failures(Req, Ms);
+        %% watching needs no token: a limited address watches read-only
+        {true, {limited, _}} -> toroco_live_ws:upgrade(Req, false);
         {true, Authorized} -> toroco_live_ws:upgrade(Req, Authorized)
     end;
 route('POST', "/api/control", Req) ->
