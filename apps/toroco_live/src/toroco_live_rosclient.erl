@@ -392,7 +392,7 @@ dial(Owner, Host, Port, Timeout, Verify) ->
                          {ok, Ssl} ->
                              case ssl:controlling_process(Ssl, Owner) of
                                  ok -> {ok, Ssl};
-                                 {error, _} = E -> ssl:close(Ssl), E
+                                 {error, _} = E -> _ = ssl:close(Ssl), E
                              end;
                          {error, Why} ->
                              gen_tcp:close(S),
@@ -431,10 +431,12 @@ secure(S, Host, Verify, Timeout) ->
                 {{fingerprint, Pin}, {ok, Der}} ->
                     case crypto:hash(sha256, Der) of
                         Pin -> {ok, Ssl};
-                        Other -> ssl:close(Ssl), {error, {fingerprint_mismatch, hex(Other)}}
+                        Other ->
+                            _ = ssl:close(Ssl),
+                            {error, {fingerprint_mismatch, hex(Other)}}
                     end;
                 {_, {error, Why}} ->
-                    ssl:close(Ssl),
+                    _ = ssl:close(Ssl),
                     {error, {no_peer_certificate, Why}}
             end;
         {error, _} = E -> E
