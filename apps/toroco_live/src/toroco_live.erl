@@ -354,7 +354,9 @@ exposure(#{tls := Tls}) ->
     case {pem(maps:get(certfile, Tls), cert), pem(maps:get(keyfile, Tls), key)} of
         {ok, ok} ->
             case application:ensure_all_started(ssl) of
-                {ok, _} -> ok;
+                %% ssl keeps PEM files by name: a certificate renewed in
+                %% place is read again at this start, not served stale
+                {ok, _} -> ssl:clear_pem_cache();
                 {error, Why} -> {error, {tls, {ssl_not_started, Why}}}
             end;
         {{error, _} = E, _} -> E;

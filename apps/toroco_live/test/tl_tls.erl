@@ -10,7 +10,9 @@
 %% #{ca, cert, key, stranger_cert, stranger_key, fingerprint,
 %%   stranger_fingerprint, ca_spki} under Dir.
 make(Dir0) ->
-    Dir = filename:join(Dir0, "tls"),
+    %% A directory of its own each time: suites run from one directory share
+    %% their priv_dir, and ssl caches a PEM file by its name.
+    Dir = filename:join(Dir0, "tls_" ++ integer_to_list(erlang:unique_integer([positive]))),
     ok = filelib:ensure_dir(filename:join(Dir, "x")),
     F = fun(N) -> filename:join(Dir, N) end,
     run(["openssl req -x509 -newkey rsa:2048 -nodes -keyout ", F("ca.key"), " -out ", F("ca.pem"),

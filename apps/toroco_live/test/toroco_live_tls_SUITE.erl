@@ -13,7 +13,8 @@
 
 all() ->
     [plain_http_beyond_loopback_refused, page_and_api_over_https, foxglove_client_over_wss,
-     roslib_over_wss, wrong_tokens_limited_per_address, token_nowhere_after_a_session].
+     roslib_over_wss, wrong_tokens_limited_per_address, token_nowhere_after_a_session,
+     certificate_renewed_in_place].
 
 suite() -> [{timetrap, {seconds, 120}}].
 
@@ -245,6 +246,31 @@ token_nowhere_after_a_session(Config) ->
                          {api_state, State}, {rosbridge_clients, Info}, {recording, Mcap}]],
     ?assert(byte_size(Mcap) > 0),
     ok.
+
+certificate_renewed_in_place() ->
+    [{doc, "A certificate and key replaced in place (a renewal) are served from the next "
+      "start, not the first ones from ssl's cache"}].
+certificate_renewed_in_place(Config) ->
+    Dir = filename:join(?config(priv_dir, Config), "renewed"),
+    ok = filelib:ensure_dir(filename:join(Dir, "x")),
+    Tls = #{certfile => filename:join(Dir, "cert.pem"), keyfile => filename:join(Dir, "key.pem")},
+    Served = fun(#{cert := C, key := K}) ->
+                     {ok, _} = file:copy(C, maps:get(certfile, Tls)),
+                     {ok, _} = file:copy(K, maps:get(keyfile, Tls)),
+                     {ok, #{http := Port}} = toroco_live:start(#{http => 0, foxglove => off, tls => Tls}),
+                     {ok, S} = ssl:connect("localhost", Port, [{verify, verify_none}], 5000),
+                     {ok, Der} = ssl:peercert(S),
+                     ssl:close(S),
+                     ok = toroco_live:stop(),
+                     Der
+             end,
+    First = ?config(tls, Config),
+    Second = tl_tls:make(?config(priv_dir, Config)),
+    Pem = fun(#{cert := C}) -> {ok, B} = file:read_file(C),
+                               [{'Certificate', Der, _} | _] = public_key:pem_decode(B),
+                               Der end,
+    ?assertEqual(Pem(First), Served(First)),
+    ?assertEqual(Pem(Second), Served(Second)).
 
 %%====================================================================
 %% Helpers
