@@ -34,7 +34,7 @@
 %% a 4xx status; nothing is read or changed past the refusal.
 -module(toroco_live_http).
 
--export([start_link/1, port/0, loop/1, token/1, peer/1, secure/1]).
+-export([start_link/1, port/0, loop/1, token/1, peer/1]).
 
 -define(NAME, ?MODULE).
 -define(COOKIE, "toroco_session").
@@ -176,8 +176,7 @@ peer(Req) ->
         {error, _} -> unknown
     end.
 
-%% @doc Whether the request came over TLS.
--spec secure(term()) -> boolean().
+%% Whether the request came over TLS.
 secure(Req) ->
     case mochiweb_request:get(socket, Req) of
         {ssl, _} -> true;
