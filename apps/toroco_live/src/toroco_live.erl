@@ -34,6 +34,13 @@
 %% between requests), `max_connections' (default 128), `max_per_peer'
 %% (default 32 per client address) and `min_age' (default 2000 ms: the
 %% youngest a longest-idle connection may be to be shed for a newcomer).
+%%
+%% <b>On a network</b>: `tls' (`#{certfile => F, keyfile => K}', PEM files,
+%% `scripts/tls-cert' makes a pair) puts every port, the dashboard's, the
+%% Foxglove bridge's and the rosbridge server's, behind TLS (OTP's `ssl':
+%% `https://', `wss://'). An `ip' that is not a loopback address without
+%% `tls' is refused (`{error, {tls_required, Detail}}') unless `insecure =>
+%% true', which logs a warning at every start.
 -module(toroco_live).
 
 -export([start/1, stop/0, info/0, url/0]).
@@ -53,9 +60,11 @@
                   idle_timeout => pos_integer(),
                   max_connections => pos_integer(),
                   max_per_peer => pos_integer(),
-                  min_age => non_neg_integer()}.
+                  min_age => non_neg_integer(),
+                  tls => toroco_live_listener:tls(),
+                  insecure => boolean()}.
 -type info() :: #{http := inet:port_number(), foxglove := inet:port_number() | off,
-                  rosbridge := inet:port_number() | off, token := binary()}.
+                  rosbridge := inet:port_number() | off, token := binary(), tls => boolean()}.
 
 -define(DEFAULTS, #{ip => {127, 0, 0, 1}, http => 8080, foxglove => 8765, rosbridge => off,
                     token => auto,
@@ -67,14 +76,21 @@
 %% @doc Starts the dashboard (and the Foxglove bridge, if present and not
 %% `off') and returns the ports it listens on and the token controls need.
 %% `{error, already_started}' when it runs already; `{error, {bad_option,
-%% {Key, Value}}}' for an option it cannot use; `{error, {http, Reason}}'
-%% when the port cannot be opened; `{error, not_started}' before the
-%% application `toroco_live' runs (`application:ensure_all_started/1').
+%% {Key, Value}}}' for an option it cannot use; `{error, {tls, {File,
+%% Why}}}' for a certificate or key it cannot read; `{error,
+%% {tls_required, Detail}}' for an address beyond loopback without `tls'
+%% (nor `insecure => true'); `{error, {http, Reason}}' when the port cannot
+%% be opened; `{error, not_started}' before the application `toroco_live'
+%% runs (`application:ensure_all_started/1').
 -spec start(opts()) -> {ok, info()} | {error, term()}.
 start(Opts) when is_map(Opts) ->
     case {whereis(toroco_live_sup), options(maps:merge(?DEFAULTS, Opts))} of
         {undefined, _} -> {error, not_started};
-        {_, {ok, Config}} -> start_dashboard(Config);
+        {_, {ok, Config}} ->
+            case exposure(Config) of
+                ok -> start_dashboard(Config);
+                {error, _} = Error -> Error
+            end;
         {_, {error, _} = Error} -> Error
     end;
 start(Other) ->
@@ -97,21 +113,33 @@ info() ->
         undefined -> not_running;
         #{http := Http, foxglove := Fox, token := Token} = Config ->
             #{http => Http, foxglove => Fox, rosbridge => maps:get(rosbridge, Config, off),
-              token => Token}
+              token => Token, tls => maps:is_key(tls, Config)}
     end.
 
-%% @doc The page's address with the token, for a person to open.
+%% @doc The page's address with the token, for a person to open once:
+%% the first visit trades the token for a session cookie and drops it from
+%% the address (`toroco_live_http'). Printed, never logged.
 -spec url() -> binary() | not_running.
 url() ->
     case toroco_live_config:current() of
         undefined -> not_running;
-        #{ip := Ip, http := Port, token := Token} ->
-            Host = case Ip of
-                       {0, 0, 0, 0} -> "127.0.0.1";
-                       _ -> inet:ntoa(Ip)
-                   end,
-            iolist_to_binary(io_lib:format("http://~s:~b/?token=~s", [Host, Port, Token]))
+        #{token := Token} = Config ->
+            <<(base_url(Config))/binary, "?token=", Token/binary>>
     end.
+
+%% The page's address without the token (`https' under TLS).
+base_url(#{ip := Ip, http := Port} = Config) ->
+    Host = case Ip of
+               {0, 0, 0, 0} -> "127.0.0.1";
+               {0, 0, 0, 0, 0, 0, 0, 0} -> "[::1]";
+               {_, _, _, _} -> inet:ntoa(Ip);
+               _ -> ["[", inet:ntoa(Ip), "]"]
+           end,
+    Scheme = case Config of
+                 #{tls := _} -> "https";
+                 #{} -> "http"
+             end,
+    iolist_to_binary(io_lib:format("~s://~s:~b/", [Scheme, Host, Port])).
 
 %%====================================================================
 %% Recordings
@@ -156,15 +184,19 @@ replay(Path, Opts) ->
 %% Client mode
 %%====================================================================
 
-%% @doc Dials the rosbridge v2 server at `Url' (`ws://host:port/path',
-%% `?token=T' for a server that asks for one), advertises the robot's
+%% @doc Dials the rosbridge v2 server at `Url' (`ws://host:port/path' or
+%% `wss://...' with `cacertfile' or a pinned `fingerprint' to check the
+%% server's certificate; `?token=T' for a server that asks for one, never
+%% shown), advertises the robot's
 %% topics there, publishes its messages, subscribes to its inbound topics
 %% (`/cmd_vel') and reconnects with backoff when the connection goes.
 %% `{ok, Pid}' at once, connected or not (see {@link rosbridge_clients/0});
-%% `{error, {bad_url, Url}}', `{error, {unsupported_scheme, S}}' or
-%% `{error, {bad_option, {Key, Value}}}' (options: `max_queue',
-%% `backoff_min', `backoff_max', `connect_timeout', `max_message', see
-%% `toroco_live_rosclient').
+%% `{error, {bad_url, Url}}', `{error, {unsupported_scheme, S}}',
+%% `{error, {unverified_wss, Why}}' or `{error, {bad_option, {Key,
+%% Value}}}' (options: `max_queue', `backoff_min', `backoff_max',
+%% `connect_timeout', `max_message', `cacertfile', `fingerprint', see
+%% `toroco_live_rosclient'). A server whose certificate does not match is
+%% never sent a byte: `last_error' says `{tls, Why}'.
 -spec rosbridge_connect(binary() | string(), toroco_live_rosclient:opts()) ->
           {ok, pid()} | {error, term()}.
 rosbridge_connect(Url, Opts) ->
@@ -200,14 +232,20 @@ rosbridge_clients() ->
 %%====================================================================
 
 start_dashboard(Config0) ->
-    Config = Config0#{token := token(maps:get(token, Config0))},
-    Spec = #{id => ?DASHBOARD, start => {?DASHBOARD, start_link, [Config]},
+    Config = Config0#{token := token(maps:get(token, Config0)),
+                      %% the key of the pages' session cookies (toroco_live_auth)
+                      session_key => crypto:strong_rand_bytes(32)},
+    %% The secrets are not in the children's start arguments, so that no
+    %% supervisor report carries them: handlers read them from
+    %% toroco_live_config.
+    Children = maps:without([token, session_key], Config),
+    Spec = #{id => ?DASHBOARD, start => {?DASHBOARD, start_link, [Children]},
              type => supervisor, restart => permanent},
     case supervisor:start_child(toroco_live_sup, Spec) of
         {ok, _} ->
             Http = toroco_live_http:port(),
-            case {foxglove(maps:get(foxglove, Config), Config),
-                  rosbridge(maps:get(rosbridge, Config), Config)} of
+            case {foxglove(maps:get(foxglove, Config), Children),
+                  rosbridge(maps:get(rosbridge, Config), Children)} of
                 {{ok, Fox}, {ok, Ros}} ->
                     Info = #{http => Http, foxglove => Fox, rosbridge => Ros,
                              token => maps:get(token, Config)},
@@ -301,10 +339,72 @@ option(K, N) when K =:= request_timeout; K =:= idle_timeout; K =:= max_connectio
                   K =:= max_per_peer -> is_integer(N) andalso N > 0;
 option(min_age, N) -> is_integer(N) andalso N >= 0;
 option(enabled, B) -> is_boolean(B);
+option(tls, #{certfile := C, keyfile := K}) -> is_filename(C) andalso is_filename(K);
+option(insecure, B) -> is_boolean(B);
 option(flight_seconds, _) -> true;
 option(_, _) -> false.
 
 is_port_number(P) -> is_integer(P) andalso P >= 0 andalso P =< 65535.
+
+is_filename(F) -> (is_list(F) orelse is_binary(F)) andalso F =/= [] andalso F =/= <<>>.
+
+%% Who can reach the ports: TLS when asked for (its files readable, `ssl'
+%% running); beyond loopback, TLS or a warning the operator asked for.
+exposure(#{tls := Tls}) ->
+    case {pem(maps:get(certfile, Tls), cert), pem(maps:get(keyfile, Tls), key)} of
+        {ok, ok} ->
+            case application:ensure_all_started(ssl) of
+                %% ssl keeps PEM files by name: a certificate renewed in
+                %% place is read again at this start, not served stale
+                {ok, _} -> ssl:clear_pem_cache();
+                {error, Why} -> {error, {tls, {ssl_not_started, Why}}}
+            end;
+        {{error, _} = E, _} -> E;
+        {_, {error, _} = E} -> E
+    end;
+exposure(#{ip := Ip} = Config) ->
+    case {loopback(Ip), maps:get(insecure, Config, false)} of
+        {true, _} ->
+            ok;
+        {false, true} ->
+            logger:warning("toroco_live: listening on ~s without TLS (insecure => true): anyone on "
+                           "that network can read the robot's state and see its token in transit",
+                           [inet:ntoa(Ip)], #{domain => [toroco, live]}),
+            ok;
+        {false, false} ->
+            {error, {tls_required,
+                     #{ip => Ip,
+                       message => iolist_to_binary(
+                                    ["listening on ", inet:ntoa(Ip), " is beyond loopback: give "
+                                     "tls => #{certfile => F, keyfile => K} (scripts/tls-cert makes "
+                                     "them), or insecure => true to serve plain HTTP anyway"])}}}
+    end.
+
+loopback({127, _, _, _}) -> true;
+loopback({0, 0, 0, 0, 0, 0, 0, 1}) -> true;
+loopback(_) -> false.
+
+%% A PEM file holding a certificate (`cert') or a private key (`key').
+pem(File, What) ->
+    Key = case What of cert -> certfile; key -> keyfile end,
+    case file:read_file(File) of
+        {ok, Bin} ->
+            Types = [T || {T, _, _} <- try public_key:pem_decode(Bin) catch _:_ -> [] end],
+            Wanted = case What of
+                         cert -> ['Certificate'];
+                         key -> ['RSAPrivateKey', 'ECPrivateKey', 'PrivateKeyInfo',
+                                 'DSAPrivateKey']
+                     end,
+            case [T || T <- Types, lists:member(T, Wanted)] of
+                [_ | _] -> ok;
+                [] -> {error, {tls, {Key, File, case What of
+                                                     cert -> no_certificate_in_file;
+                                                     key -> no_private_key_in_file
+                                                 end}}}
+            end;
+        {error, Why} ->
+            {error, {tls, {Key, File, Why}}}
+    end.
 
 %% A token rides in a URL and a header unescaped: letters, digits, - _ . ~
 url_safe(T) ->

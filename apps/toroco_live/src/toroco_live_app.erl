@@ -13,7 +13,8 @@ start(_Type, _Args) ->
             case maps:get(enabled, Env, true) of
                 true -> start_dashboard(maps:with([ip, http, foxglove, rosbridge, token, max_clients,
                                                    max_body, request_timeout, idle_timeout,
-                                                   max_connections, max_per_peer, min_age],
+                                                   max_connections, max_per_peer, min_age,
+                                                   tls, insecure],
                                                   Env));
                 false -> ok
             end,
@@ -25,11 +26,15 @@ start(_Type, _Args) ->
 
 %% The robot runs without its dashboard: a port already taken is logged,
 %% and the application stays up (toroco_live:start/1 may be called again).
+%% The log says where, never the token (toroco_live:url/0 is for a person).
 start_dashboard(Opts) ->
     case toroco_live:start(Opts) of
         {ok, #{http := Port}} ->
-            logger:notice("toroco_live: dashboard at ~ts (port ~b)",
-                          [toroco_live:url(), Port], #{domain => [toroco, live]});
+            logger:notice("toroco_live: dashboard on port ~b~ts", [Port, case Opts of
+                                                                     #{tls := _} -> " (TLS)";
+                                                                     #{} -> ""
+                                                                 end],
+                          #{domain => [toroco, live]});
         {error, Reason} ->
             logger:error("toroco_live: the dashboard did not start: ~0p", [Reason],
                          #{domain => [toroco, live]})

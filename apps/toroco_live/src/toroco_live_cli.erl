@@ -21,7 +21,7 @@ print() ->
         not_running ->
             %% The app env's port is taken: any free one will do for a run.
             Env = maps:from_list(application:get_all_env(toroco_live)),
-            Opts = (maps:with([ip, token, foxglove, rosbridge], Env))#{http => 0},
+            Opts = (maps:with([ip, token, foxglove, rosbridge, tls, insecure], Env))#{http => 0},
             case toroco_live:start(Opts#{foxglove => free(maps:get(foxglove, Opts, off)),
                                          rosbridge => free(maps:get(rosbridge, Opts, off))}) of
                 {ok, _} -> print();
@@ -29,14 +29,19 @@ print() ->
             end;
         Url ->
             io:format("dashboard: ~ts~n", [Url]),
-            case toroco_live:info() of
+            Info = toroco_live:info(),
+            Ws = case Info of
+                     #{tls := true} -> "wss";
+                     _ -> "ws"
+                 end,
+            case Info of
                 #{foxglove := Port} when is_integer(Port) ->
-                    io:format("foxglove: ws://localhost:~b~n", [Port]);
+                    io:format("foxglove: ~s://localhost:~b~n", [Ws, Port]);
                 _ -> ok
             end,
-            case toroco_live:info() of
+            case Info of
                 #{rosbridge := Ros} when is_integer(Ros) ->
-                    io:format("rosbridge: ws://127.0.0.1:~b~n", [Ros]);
+                    io:format("rosbridge: ~s://127.0.0.1:~b~n", [Ws, Ros]);
                 _ -> ok
             end
     end.

@@ -53,7 +53,7 @@ too_large(Size, Max) ->
 -spec run(boolean(), binary() | map(), pos_integer()) -> result().
 run(false, _Request, _Max) ->
     error(401, unauthorized, "controls need the dashboard's token "
-          "(Authorization: Bearer T, or ?token=T on the page's URL); "
+          "(Authorization: Bearer T, or open the page once with ?token=T); "
           "without it the dashboard is read-only", []);
 run(true, Body, Max) when is_binary(Body) ->
     case decode(Body, Max) of

@@ -15,14 +15,29 @@
 %% <tr><td>`POST /api/control'</td><td>a control (`toroco_live_control'); needs the token</td></tr>
 %% </table>
 %%
-%% The token is `Authorization: Bearer T' or `?token=T'. Every refusal is a
-%% JSON object `{"error": Reason, "message": Why}' with a 4xx status;
-%% nothing is read or changed past the refusal.
+%% <b>Who may drive the robot.</b> Tools send `Authorization: Bearer T'. A
+%% person opens the page once with `?token=T': that first visit is answered
+%% with a session cookie (`HttpOnly', `SameSite=Strict', `Secure' under
+%% TLS; `toroco_live_auth:session/1', not the token) and a 303
+%% to the same address without the token, so the token leaves the address
+%% bar, the history and whatever logs the address; the page's controls and
+%% its WebSocket then carry the cookie. Every check goes through
+%% `toroco_live_auth' (constant time, wrong tokens per address limited: 429
+%% `too_many_failures' for a minute after ten; the WebSocket of a limited
+%% address is read-only). A browser's request from
+%% another page (its `Origin' not this server's own) may not drive the
+%% robot nor open the WebSocket: 403 `cross_origin'. The token is never
+%% logged (a handler that fails is logged by the listener by its path,
+%% without the query).
+%%
+%% Every refusal is a JSON object `{"error": Reason, "message": Why}' with
+%% a 4xx status; nothing is read or changed past the refusal.
 -module(toroco_live_http).
 
--export([start_link/1, port/0, loop/1, token/1]).
+-export([start_link/1, port/0, loop/1, token/1, peer/1]).
 
 -define(NAME, ?MODULE).
+-define(COOKIE, "toroco_session").
 
 %% @doc Starts the bounded listener on the configured address and port,
 %% with the bounds of `Config' (`toroco_live_listener''s options).
@@ -49,7 +64,10 @@ loop(Req) ->
     end.
 
 route('GET', "/", Req) ->
-    file(Req, "index.html");
+    case proplists:is_defined("token", mochiweb_request:parse_qs(Req)) of
+        true -> first_visit(Req);
+        false -> file(Req, "index.html")
+    end;
 route('GET', "/assets/" ++ File, Req) ->
     file(Req, filename:join("assets", File));
 route('GET', "/api/state", Req) ->
@@ -63,22 +81,16 @@ route('GET', "/metrics", Req) ->
     mochiweb_request:respond({200, [{"Content-Type", "text/plain; version=0.0.4"}],
                               toroco_live_metrics:text()}, Req);
 route('GET', "/ws", Req) ->
-    toroco_live_ws:upgrade(Req, toroco_live_config:authorized(token(Req)));
+    case {same_origin(Req), authorize(Req)} of
+        {false, _} -> cross_origin(Req);
+        %% watching needs no token: a limited address watches read-only
+        {true, {limited, _}} -> toroco_live_ws:upgrade(Req, false);
+        {true, Authorized} -> toroco_live_ws:upgrade(Req, Authorized)
+    end;
 route('POST', "/api/control", Req) ->
-    Max = toroco_live_config:get(max_body, 16384),
-    Authorized = toroco_live_config:authorized(token(Req)),
-    Result = case content_length(Req) of
-                 _ when not Authorized -> toroco_live_control:run(false, <<>>, Max);
-                 N when is_integer(N), N > Max ->
-                     toroco_live_control:too_large(N, Max);
-                 undefined ->
-                     {error, 411, length_required, <<"send Content-Length">>};
-                 _ ->
-                     toroco_live_control:run(true, body(Req, Max), Max)
-             end,
-    case Result of
-        {ok, Json} -> json(Req, 200, Json);
-        {error, Status, Reason, Message} -> json(Req, Status, error_json(Reason, Message))
+    case same_origin(Req) of
+        true -> control(Req);
+        false -> cross_origin(Req)
     end;
 route(Method, Path, Req) when Path =:= "/"; Path =:= "/api/state"; Path =:= "/api/world";
                               Path =:= "/metrics"; Path =:= "/ws"; Path =:= "/api/control" ->
@@ -91,7 +103,117 @@ route(_Method, Path, Req) ->
                                                 "; routes: / /api/state /api/world /metrics "
                                                 "/ws /api/control"]))).
 
-%% @doc The token a request carried: the bearer token, else `?token='.
+control(Req) ->
+    Max = toroco_live_config:get(max_body, 16384),
+    Result = case {authorize(Req), content_length(Req)} of
+                 {{limited, Ms}, _} -> {limited, Ms};
+                 {false, _} -> toroco_live_control:run(false, <<>>, Max);
+                 {true, N} when is_integer(N), N > Max ->
+                     toroco_live_control:too_large(N, Max);
+                 {true, undefined} ->
+                     {error, 411, length_required, <<"send Content-Length">>};
+                 {true, _} ->
+                     toroco_live_control:run(true, body(Req, Max), Max)
+             end,
+    case Result of
+        {limited, Wait} -> too_many_failures(Req, Wait);
+        {ok, Json} -> json(Req, 200, Json);
+        {error, Status, Reason, Message} -> json(Req, Status, error_json(Reason, Message))
+    end.
+
+%% The first visit, `GET /?token=T': the session cookie for the right
+%% token, and either way a 303 to the address without the token (a wrong
+%% one gets the read-only page, and counts as a failure).
+first_visit(Req) ->
+    Token = unicode:characters_to_binary(
+              proplists:get_value("token", mochiweb_request:parse_qs(Req))),
+    Rest = [{K, V} || {K, V} <- mochiweb_request:parse_qs(Req), K =/= "token"],
+    Location = case Rest of
+                   [] -> "/";
+                   _ -> "/?" ++ mochiweb_util:urlencode(Rest)
+               end,
+    case toroco_live_auth:authorize(peer(Req), {token, Token}) of
+        {limited, Ms} ->
+            too_many_failures(Req, Ms);
+        Good ->
+            Cookie = case Good of
+                         true -> [{"Set-Cookie", session_cookie(Req)}];
+                         false -> []
+                     end,
+            mochiweb_request:respond({303, [{"Location", Location}, {"Cache-Control", "no-store"},
+                                            {"Referrer-Policy", "no-referrer"} | Cookie], <<>>},
+                                     Req)
+    end.
+
+session_cookie(Req) ->
+    Session = toroco_live_auth:session(toroco_live_config:get(token, <<>>)),
+    Secure = case secure(Req) of
+                 true -> "; Secure";
+                 false -> ""
+             end,
+    ?COOKIE "=" ++ binary_to_list(Session) ++ "; Path=/; HttpOnly; SameSite=Strict" ++ Secure.
+
+%% The request's credential: the bearer token, else the page's session.
+credential(Req) ->
+    case mochiweb_request:get_header_value("authorization", Req) of
+        "Bearer " ++ T -> {token, list_to_binary(string:trim(T))};
+        _ ->
+            case mochiweb_request:get_cookie_value(?COOKIE, Req) of
+                undefined -> none;
+                S -> {session, list_to_binary(S)}
+            end
+    end.
+
+authorize(Req) ->
+    toroco_live_auth:authorize(peer(Req), credential(Req)).
+
+%% @doc The client's address: the socket's peer, never a header a client
+%% could write (mochiweb's `peer' believes `X-Forwarded-For').
+-spec peer(term()) -> inet:ip_address() | unknown.
+peer(Req) ->
+    case mochiweb_socket:peername(mochiweb_request:get(socket, Req)) of
+        {ok, {Ip, _}} -> Ip;
+        {error, _} -> unknown
+    end.
+
+%% Whether the request came over TLS.
+secure(Req) ->
+    case mochiweb_request:get(socket, Req) of
+        {ssl, _} -> true;
+        _ -> false
+    end.
+
+%% A browser names the page a request comes from (`Origin'); a request
+%% without one is not a browser's cross-site request (tools, or a page's
+%% own navigation). With one, it must be this server as the client
+%% reached it: scheme and `Host'.
+same_origin(Req) ->
+    case mochiweb_request:get_header_value("origin", Req) of
+        undefined -> true;
+        Origin ->
+            Scheme = case secure(Req) of true -> "https://"; false -> "http://" end,
+            case mochiweb_request:get_header_value("host", Req) of
+                undefined -> false;
+                Host -> string:lowercase(Origin) =:= string:lowercase(Scheme ++ Host)
+            end
+    end.
+
+cross_origin(Req) ->
+    json(Req, 403, error_json(cross_origin, <<"a request from another page (its Origin is not "
+                                              "this server) may not drive the robot">>)).
+
+too_many_failures(Req, Ms) ->
+    Seconds = (Ms + 999) div 1000,
+    mochiweb_request:respond(
+      {429, [{"Content-Type", "application/json"}, {"Retry-After", integer_to_list(Seconds)}],
+       toroco_live_json:encode(
+         error_json(too_many_failures,
+                    iolist_to_binary(io_lib:format("too many wrong tokens from this address: "
+                                                   "refused for ~b s more", [Seconds]))))},
+      Req).
+
+%% @doc The token a request carried: the bearer token, else `?token='
+%% (the rosbridge server's upgrade, SPEC §15).
 -spec token(term()) -> binary() | none.
 token(Req) ->
     case mochiweb_request:get_header_value("authorization", Req) of

@@ -20,7 +20,10 @@
 %% <tr><td>`toroco_live_rosbridge_total'</td><td>counter</td><td>`counter': the rosbridge server's totals (`toroco_live_rosbridge:stats/0': `connections', `messages', `dropped', `tap_dropped', `published', `publish_dropped', `refused_unauthorized', `faults', `disconnected', `fragments_expired')</td></tr>
 %% <tr><td>`toroco_live_connections'</td><td>gauge</td><td>`listener' (`dashboard', `foxglove', `rosbridge'): TCP connections holding a slot (`toroco_live_listener')</td></tr>
 %% <tr><td>`toroco_live_connections_accepted_total'</td><td>counter</td><td>`listener': connections given a slot</td></tr>
-%% <tr><td>`toroco_live_connections_closed_total'</td><td>counter</td><td>`listener', `reason': `request_timeout', `idle_timeout', `shed' (for a newcomer), `too_many_from_peer', `too_many_clients' (refused), `ended'</td></tr>
+%% <tr><td>`toroco_live_connections_closed_total'</td><td>counter</td><td>`listener', `reason': `request_timeout', `idle_timeout', `shed' (for a newcomer), `too_many_from_peer', `too_many_clients' (refused), `tls_handshake' (failed), `ended'</td></tr>
+%% <tr><td>`toroco_live_auth_failures_total'</td><td>counter</td><td>wrong tokens or sessions presented (`toroco_live_auth')</td></tr>
+%% <tr><td>`toroco_live_auth_limited_total'</td><td>counter</td><td>checks refused: the address failed ten times within a minute</td></tr>
+%% <tr><td>`toroco_live_auth_limited_addresses'</td><td>gauge</td><td>addresses refused now</td></tr>
 %% <tr><td>`toroco_live_rosclient_connected'</td><td>gauge</td><td>`url': a rosbridge client (SPEC §15, client mode), 1 connected, 0 dialling or waiting to</td></tr>
 %% <tr><td>`toroco_live_rosclient_attempts'</td><td>gauge</td><td>`url': failed attempts since it was last connected</td></tr>
 %% <tr><td>`toroco_live_rosclient_connects_total'</td><td>counter</td><td>`url': connections made</td></tr>
@@ -63,7 +66,20 @@ text() ->
             [{[], maps:get(skipped, Stats, 0)}]),
      family(toroco_live_tap_dropped_total, counter, "Tap events the dashboard fell behind on.",
             [{[], maps:get(tap_dropped, Stats, 0)}])
-     | foxglove() ++ rosbridge() ++ listeners() ++ rosclients()].
+     | foxglove() ++ rosbridge() ++ listeners() ++ auth() ++ rosclients()].
+
+%% The token checks (toroco_live_auth), while the dashboard runs.
+auth() ->
+    case toroco_live_auth:stats() of
+        #{failures := F, limited := L, banned_now := B} ->
+            [family(toroco_live_auth_failures_total, counter,
+                    "Wrong tokens or sessions presented, on any port.", [{[], F}]),
+             family(toroco_live_auth_limited_total, counter,
+                    "Token checks refused because the address failed too often.", [{[], L}]),
+             family(toroco_live_auth_limited_addresses, gauge,
+                    "Addresses whose token checks are refused now.", [{[], B}])];
+        #{} -> []
+    end.
 
 %% The Foxglove bridge's clients, when it runs.
 foxglove() ->

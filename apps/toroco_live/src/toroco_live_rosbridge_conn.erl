@@ -81,6 +81,7 @@
 
 -record(conn, {socket :: toroco_live_ws_conn:socket(),
                max :: pos_integer(),
+               peer :: inet:ip_address() | unknown,
                authorized :: boolean(),
                level = 3 :: 1..4,
                subs = #{} :: #{binary() => #sub{}},
@@ -99,16 +100,21 @@ serve(Req, Opts) ->
                    application:get_env(toroco_live, rosbridge_max_message, ?MAX_MESSAGE)),
     toroco_live_ws_conn:serve(Req, #{subprotocol => none, max => Max,
                                      endpoint => "a rosbridge v2 WebSocket endpoint"},
-                              {?MODULE, {Max, toroco_live_http:token(Req)}}).
+                              {?MODULE, {Max, toroco_live_http:peer(Req), toroco_live_http:token(Req)}}).
 
--spec join(toroco_live_ws_conn:socket(), {pos_integer(), binary() | none}) ->
+-spec join(toroco_live_ws_conn:socket(),
+           {pos_integer(), inet:ip_address() | unknown, binary() | none}) ->
           {ok, #conn{}} | {error, term()}.
-join(Socket, {Max, Token}) ->
+join(Socket, {Max, Peer, Token}) ->
     case toroco_live_rosbridge:join() of
-        ok -> {ok, #conn{socket = Socket, max = Max,
-                         authorized = toroco_live_config:authorized(Token)}};
+        ok -> {ok, #conn{socket = Socket, max = Max, peer = Peer,
+                         authorized = authorize(Peer, Token) =:= true}};
         {error, _} = Error -> Error
     end.
+
+%% The token checks of every port, failures per address (toroco_live_auth).
+authorize(_Peer, none) -> false;
+authorize(Peer, Token) -> toroco_live_auth:authorize(Peer, {token, Token}).
 
 %%====================================================================
 %% toroco_live_ws_conn
@@ -329,9 +335,13 @@ op(<<"auth">>, Id, M, C) ->
                 #{<<"mac">> := T} when is_binary(T) -> T;
                 _ -> none
             end,
-    case toroco_live_config:authorized(Token) of
+    case authorize(C#conn.peer, Token) of
         true -> {ok, status(C#conn{authorized = true}, info, Id, <<"authorized: this connection may publish">>)};
-        false -> fault(C, Id, <<"auth: not the dashboard's token">>)
+        false -> fault(C, Id, <<"auth: not the dashboard's token">>);
+        {limited, Ms} ->
+            fault(C, Id, iolist_to_binary(io_lib:format("auth: too many wrong tokens from this "
+                                                        "address: refused for ~b s more",
+                                                        [(Ms + 999) div 1000])))
     end;
 op(<<"fragment">>, Id, M, C) ->
     fragment(Id, M, C);

@@ -42,13 +42,21 @@
 %% not published on, nor asked again, until the next connection, and
 %% counted (`refused_topics').
 %%
-%% The URL is `ws://host[:port][/path][?query]' (`wss' is not supported);
-%% the query goes with the upgrade request, so `?token=T' authorises the
-%% client with a server that asks for one (this project's, SPEC §15).
+%% The URL is `ws://host[:port][/path][?query]' or `wss://...'; the query
+%% goes with the upgrade request, so `?token=T' authorises the client with
+%% a server that asks for one (this project's, SPEC §15), and is never
+%% shown (logs, {@link info/1}, `/metrics'). Over `wss://' the server's
+%% certificate is checked, against the CAs of `cacertfile' (and the URL's
+%% host) or against a pinned SHA-256 `fingerprint' (self-signed
+%% certificates, `scripts/tls-cert'); a `wss://' URL with neither is
+%% refused, and a server whose certificate does not match is not sent a
+%% byte: the attempt fails with `{tls, Why}' and is dialled again with
+%% backoff like any other failure.
 %%
 %% Options: `max_queue', `backoff_min', `backoff_max', `connect_timeout'
-%% (TCP connect and upgrade, default 5000 ms), `max_message' (largest
-%% message read, default 1 MiB).
+%% (TCP connect, TLS handshake and upgrade, default 5000 ms),
+%% `max_message' (largest message read, default 1 MiB), `cacertfile',
+%% `fingerprint'.
 -module(toroco_live_rosclient).
 -behaviour(gen_statem).
 
@@ -59,7 +67,8 @@
 
 -type opts() :: #{max_queue => pos_integer(), backoff_min => pos_integer(),
                   backoff_max => pos_integer(), connect_timeout => pos_integer(),
-                  max_message => pos_integer()}.
+                  max_message => pos_integer(),
+                  cacertfile => file:filename_all(), fingerprint => binary() | string()}.
 -type info() :: #{url := binary(), state := connecting | connected | waiting,
                   attempts := non_neg_integer(), connects := non_neg_integer(),
                   sent := non_neg_integer(), received := non_neg_integer(),
@@ -78,7 +87,8 @@
                port :: inet:port_number(),
                resource :: binary(),
                opts :: map(),
-               socket = none :: gen_tcp:socket() | none,
+               %% a TCP port, or an ssl socket for wss://
+               socket = none :: gen_tcp:socket() | ssl:sslsocket() | none,
                connector = none :: {pid(), reference()} | none,
                key = <<>> :: binary(),
                head = <<>> :: binary(),
@@ -112,18 +122,21 @@ info(Pid) ->
     gen_statem:call(Pid, info, 2000).
 
 %% @doc The URL parsed (the URL without its query, as shown, the host, the
-%% port, the resource asked for) and the options with their defaults, or the first
-%% thing wrong: `{bad_url, Url}', `{unsupported_scheme, S}',
-%% `{bad_option, {Key, Value}}'.
+%% port, the resource asked for) and the options with their defaults (and
+%% `verify', how the certificate is checked), or the first thing wrong:
+%% `{bad_url, Url}', `{unsupported_scheme, S}', `{bad_option, {Key,
+%% Value}}', `{unverified_wss, Why}' (`wss://' without `cacertfile' nor
+%% `fingerprint'), `{tls_options_without_wss, Why}'.
 -spec options(term(), term()) ->
           {ok, {binary(), string(), inet:port_number(), binary()}, map()} | {error, term()}.
 options(Url, Opts) when is_map(Opts) ->
     case parse_url(Url) of
-        {ok, Parsed} ->
+        {ok, {Scheme, Parsed}} ->
             Bad = [{K, V} || {K, V} <- lists:sort(maps:to_list(Opts)), not option(K, V)],
-            case Bad of
-                [] -> {ok, Parsed, maps:merge(?DEFAULTS, Opts)};
-                [First | _] -> {error, {bad_option, First}}
+            case {Bad, verify(Scheme, Opts)} of
+                {[], {ok, Verify}} -> {ok, Parsed, maps:merge(?DEFAULTS, Opts#{verify => Verify})};
+                {[], {error, _} = E} -> E;
+                {[First | _], _} -> {error, {bad_option, First}}
             end;
         {error, _} = E -> E
     end;
@@ -133,7 +146,46 @@ options(_Url, Opts) ->
 option(K, V) when K =:= max_queue; K =:= backoff_min; K =:= backoff_max; K =:= connect_timeout;
                   K =:= max_message ->
     is_integer(V) andalso V > 0;
+option(cacertfile, F) -> (is_list(F) orelse is_binary(F)) andalso filelib:is_regular(F);
+option(fingerprint, F) -> pin(F) =/= error;
 option(_, _) -> false.
+
+%% How the server's certificate is checked: not at all for ws://; for
+%% wss:// against `cacertfile' or the pinned `fingerprint', and refused
+%% with neither (an unchecked certificate is no better than ws://).
+verify(<<"ws">>, Opts) ->
+    case maps:with([cacertfile, fingerprint], Opts) of
+        M when map_size(M) =:= 0 -> {ok, none};
+        _ -> {error, {tls_options_without_wss, <<"cacertfile and fingerprint are for wss:// URLs">>}}
+    end;
+verify(<<"wss">>, #{cacertfile := _, fingerprint := _}) ->
+    {error, {bad_option, {fingerprint, <<"give cacertfile or fingerprint, not both">>}}};
+verify(<<"wss">>, #{cacertfile := F}) ->
+    case application:ensure_all_started(ssl) of
+        {ok, _} -> {ok, {cacertfile, F}};
+        {error, Why} -> {error, {ssl_not_started, Why}}
+    end;
+verify(<<"wss">>, #{fingerprint := F}) ->
+    case application:ensure_all_started(ssl) of
+        {ok, _} -> {ok, {fingerprint, pin(F)}};
+        {error, Why} -> {error, {ssl_not_started, Why}}
+    end;
+verify(<<"wss">>, _) ->
+    {error, {unverified_wss, <<"wss:// needs the server's certificate checked: "
+                               "#{cacertfile => File} or #{fingerprint => Sha256}">>}}.
+
+%% A SHA-256 fingerprint: 32 bytes, or 64 hex digits (colons allowed, as
+%% openssl and scripts/tls-cert print it).
+pin(F) when is_binary(F), byte_size(F) =:= 32 -> F;
+pin(F) when is_list(F) -> pin(unicode:characters_to_binary(F));
+pin(F) when is_binary(F) ->
+    Hex = binary:replace(F, <<":">>, <<>>, [global]),
+    case byte_size(Hex) =:= 64 andalso
+        lists:all(fun(C) -> lists:member(C, "0123456789abcdefABCDEF") end, binary_to_list(Hex)) of
+        true -> binary:decode_hex(Hex);
+        false -> error
+    end;
+pin(_) -> error.
 
 parse_url(Url) when is_list(Url) ->
     case unicode:characters_to_binary(Url) of
@@ -142,7 +194,8 @@ parse_url(Url) when is_list(Url) ->
     end;
 parse_url(Url) when is_binary(Url) ->
     case uri_string:parse(Url) of
-        #{scheme := <<"ws">>, host := Host} = U when Host =/= <<>> ->
+        #{scheme := Scheme, host := Host} = U when (Scheme =:= <<"ws">> orelse Scheme =:= <<"wss">>),
+                                                   Host =/= <<>> ->
             Path = case maps:get(path, U, <<>>) of
                        <<>> -> <<"/">>;
                        P -> P
@@ -154,8 +207,9 @@ parse_url(Url) when is_binary(Url) ->
             %% what is shown (logs, /api/state, /metrics) leaves out the
             %% query: it may hold a token
             Shown = uri_string:recompose(maps:without([query, fragment], U)),
-            {ok, {Shown, binary_to_list(Host), maps:get(port, U, 80), Resource}};
-        #{scheme := Scheme} when Scheme =/= <<"ws">> -> {error, {unsupported_scheme, Scheme}};
+            Default = case Scheme of <<"ws">> -> 80; <<"wss">> -> 443 end,
+            {ok, {Scheme, {Shown, binary_to_list(Host), maps:get(port, U, Default), Resource}}};
+        #{scheme := Scheme} -> {error, {unsupported_scheme, Scheme}};
         _ -> {error, {bad_url, Url}}
     end;
 parse_url(Url) ->
@@ -205,9 +259,10 @@ init({Url, Opts}) ->
 
 %% connecting: the TCP connect, then the upgrade.
 -spec connecting(gen_statem:event_type(), term(), #data{}) -> gen_statem:state_function_result().
-connecting(enter, _, D = #data{host = Host, port = Port, opts = #{connect_timeout := T}}) ->
+connecting(enter, _, D = #data{host = Host, port = Port, opts = #{connect_timeout := T} = O}) ->
     Owner = self(),
-    Connector = spawn_monitor(fun() -> dial(Owner, Host, Port, T) end),
+    Verify = maps:get(verify, O),
+    Connector = spawn_monitor(fun() -> dial(Owner, Host, Port, T, Verify) end),
     {keep_state, D#data{connector = Connector, head = <<>>}, [{state_timeout, T, timeout}]};
 connecting(info, {rosclient_dialled, Pid, {ok, Socket}}, D = #data{connector = {Pid, M}}) ->
     demonitor(M, [flush]),
@@ -217,24 +272,27 @@ connecting(info, {rosclient_dialled, Pid, {ok, Socket}}, D = #data{connector = {
                <<"\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: ">>, Key,
                <<"\r\nSec-WebSocket-Version: 13\r\n\r\n">>],
     D1 = D#data{connector = none, socket = Socket, key = Key},
-    case gen_tcp:send(Socket, Request) of
+    case sock_send(Socket, Request) of
         ok ->
-            ok = inet:setopts(Socket, [{active, once}]),
+            ok = active_once(Socket),
             {keep_state, D1};
         {error, Why} ->
             fail({send, Why}, D1)
     end;
+connecting(info, {rosclient_dialled, Pid, {error, {tls, _} = Why}}, D = #data{connector = {Pid, M}}) ->
+    demonitor(M, [flush]),
+    fail(Why, D#data{connector = none});
 connecting(info, {rosclient_dialled, Pid, {error, Why}}, D = #data{connector = {Pid, M}}) ->
     demonitor(M, [flush]),
     fail({connect, Why}, D#data{connector = none});
 connecting(info, {'DOWN', M, process, _, Why}, D = #data{connector = {_, M}}) ->
     fail({connect, Why}, D#data{connector = none});
-connecting(info, {tcp, S, Bytes}, D = #data{socket = S, head = Head}) ->
+connecting(info, {Data, S, Bytes}, D = #data{socket = S, head = Head}) when Data =:= tcp; Data =:= ssl ->
     upgrade(<<Head/binary, Bytes/binary>>, D);
-connecting(info, {Closed, S}, D = #data{socket = S}) when Closed =:= tcp_closed; Closed =:= tcp_error ->
+connecting(info, {Closed, S}, D = #data{socket = S}) when Closed =:= tcp_closed; Closed =:= ssl_closed ->
     fail(closed_during_upgrade, D);
-connecting(info, {tcp_error, S, Why}, D = #data{socket = S}) ->
-    fail({tcp_error, Why}, D);
+connecting(info, {Error, S, Why}, D = #data{socket = S}) when Error =:= tcp_error; Error =:= ssl_error ->
+    fail({Error, Why}, D);
 connecting(state_timeout, timeout, D) ->
     fail(timeout, D);
 connecting(EventType, Event, D) ->
@@ -245,16 +303,16 @@ connecting(EventType, Event, D) ->
 connected(enter, _, #data{url = Url}) ->
     logger:notice("rosbridge client: connected to ~ts", [Url], ?LOG),
     {keep_state_and_data, [{{timeout, refresh}, ?REFRESH_MS, refresh}]};
-connected(info, {tcp, S, Bytes}, D = #data{socket = S, decoder = Dec}) ->
-    ok = inet:setopts(S, [{active, once}]),
+connected(info, {Data, S, Bytes}, D = #data{socket = S, decoder = Dec}) when Data =:= tcp; Data =:= ssl ->
+    ok = active_once(S),
     case toroco_live_ws_frame:decode(Bytes, Dec) of
         {ok, Messages, Dec1} -> server_messages(Messages, D#data{decoder = Dec1});
         {error, Why} -> fail({frame, Why}, D)
     end;
-connected(info, {tcp_closed, S}, D = #data{socket = S}) ->
+connected(info, {Closed, S}, D = #data{socket = S}) when Closed =:= tcp_closed; Closed =:= ssl_closed ->
     fail(closed, D);
-connected(info, {tcp_error, S, Why}, D = #data{socket = S}) ->
-    fail({tcp_error, Why}, D);
+connected(info, {Error, S, Why}, D = #data{socket = S}) when Error =:= tcp_error; Error =:= ssl_error ->
+    fail({Error, Why}, D);
 connected(info, {toroco_live_world, changed}, D) ->
     Snapshot = try toroco_live_world:latest() catch exit:_ -> none end,
     publish_all(toroco_live_ros:of_world(Snapshot, erlang:system_time(nanosecond)), D);
@@ -287,7 +345,7 @@ common({call, From}, _, _State, _D) ->
     {keep_state_and_data, [{reply, From, {error, unknown_call}}]};
 common(info, {rosclient_dialled, _, {ok, Socket}}, _State, _D) ->
     %% a connect that finished after its attempt was given up
-    _ = gen_tcp:close(Socket),
+    _ = sock_close(Socket),
     keep_state_and_data;
 common(info, {toroco_event, _, {dropped, N}}, _State, D = #data{dropped = Dr}) ->
     %% from a subscription ended with the connection: not sent, counted
@@ -301,13 +359,13 @@ common(_, _, _State, _D) ->
 
 -spec terminate(term(), atom(), #data{}) -> ok.
 terminate(_Why, connected, D = #data{socket = S, url = Url}) ->
-    _ = gen_tcp:send(S, toroco_live_ws_frame:client_close_frame(1000, <<"bye">>)),
+    _ = sock_send(S, toroco_live_ws_frame:client_close_frame(1000, <<"bye">>)),
     _ = tap_off(D),
-    _ = gen_tcp:close(S),
+    _ = sock_close(S),
     logger:notice("rosbridge client: disconnected from ~ts", [Url], ?LOG),
     ok;
 terminate(_Why, _State, #data{socket = S, connector = C}) ->
-    S =:= none orelse gen_tcp:close(S),
+    S =:= none orelse sock_close(S),
     case C of
         {Pid, _} -> exit(Pid, kill);
         none -> ok
@@ -318,18 +376,94 @@ terminate(_Why, _State, #data{socket = S, connector = C}) ->
 %% Dialling
 %%====================================================================
 
-dial(Owner, Host, Port, Timeout) ->
+%% TCP, then for wss:// the TLS handshake with the server's certificate
+%% checked (verify/3), in the dialling process; the socket handed over.
+dial(Owner, Host, Port, Timeout, Verify) ->
     Result = case gen_tcp:connect(Host, Port, [binary, {active, false}, {packet, raw}, {nodelay, true},
                                                {send_timeout, ?SEND_TIMEOUT_MS},
                                                {send_timeout_close, true}], Timeout) of
-                 {ok, S} ->
+                 {ok, S} when Verify =:= none ->
                      case gen_tcp:controlling_process(S, Owner) of
                          ok -> {ok, S};
                          {error, _} = E -> gen_tcp:close(S), E
                      end;
+                 {ok, S} ->
+                     case secure(S, Host, Verify, Timeout) of
+                         {ok, Ssl} ->
+                             case ssl:controlling_process(Ssl, Owner) of
+                                 ok -> {ok, Ssl};
+                                 {error, _} = E -> _ = ssl:close(Ssl), E
+                             end;
+                         {error, Why} ->
+                             gen_tcp:close(S),
+                             {error, {tls, Why}}
+                     end;
                  {error, _} = E -> E
              end,
     Owner ! {rosclient_dialled, self(), Result}.
+
+%% The TLS handshake over `S', refused unless the server's certificate is
+%% the one asked for: signed by a CA of `cacertfile' for the URL's host
+%% (an address is checked as an address), or with the pinned SHA-256
+%% fingerprint, compared with the certificate the connection got.
+secure(S, Host, Verify, Timeout) ->
+    Base = [binary, {active, false}, {verify, verify_peer}, {versions, ['tlsv1.3', 'tlsv1.2']}],
+    Opts = case {Verify, inet:parse_address(Host)} of
+               {{cacertfile, F}, {ok, Ip}} ->
+                   [{cacertfile, F}, {server_name_indication, disable},
+                    {verify_fun, {fun check_ip/3, Ip}} | Base];
+               {{cacertfile, F}, {error, _}} ->
+                   [{cacertfile, F}, {server_name_indication, Host},
+                    {customize_hostname_check,
+                     [{match_fun, public_key:pkix_verify_hostname_match_fun(https)}]} | Base];
+               {{fingerprint, _}, _} ->
+                   %% whoever signed it: the pin below is the check
+                   [{server_name_indication, disable},
+                    {verify_fun, {fun(_, {bad_cert, _}, St) -> {valid, St};
+                                     (_, {extension, _}, St) -> {unknown, St};
+                                     (_, _, St) -> {valid, St}
+                                  end, none}} | Base]
+           end,
+    case ssl:connect(S, Opts, Timeout) of
+        {ok, Ssl} ->
+            case {Verify, ssl:peercert(Ssl)} of
+                {{cacertfile, _}, _} -> {ok, Ssl};
+                {{fingerprint, Pin}, {ok, Der}} ->
+                    case crypto:hash(sha256, Der) of
+                        Pin -> {ok, Ssl};
+                        Other ->
+                            _ = ssl:close(Ssl),
+                            {error, {fingerprint_mismatch, hex(Other)}}
+                    end;
+                {_, {error, Why}} ->
+                    _ = ssl:close(Ssl),
+                    {error, {no_peer_certificate, Why}}
+            end;
+        {error, _} = E -> E
+    end.
+
+%% With an address for a host, the chain as OTP checks it, and the
+%% server's certificate must name that address.
+check_ip(_, {bad_cert, Why}, _) -> {fail, Why};
+check_ip(_, {extension, _}, Ip) -> {unknown, Ip};
+check_ip(_, valid, Ip) -> {valid, Ip};
+check_ip(Cert, valid_peer, Ip) ->
+    case public_key:pkix_verify_hostname(Cert, [{ip, Ip}]) of
+        true -> {valid, Ip};
+        false -> {fail, {bad_cert, hostname_check_failed}}
+    end.
+
+hex(Bin) ->
+    iolist_to_binary(lists:join(":", [io_lib:format("~2.16.0B", [B]) || <<B>> <= Bin])).
+
+sock_send(S, Data) when is_port(S) -> gen_tcp:send(S, Data);
+sock_send(S, Data) -> ssl:send(S, Data).
+
+sock_close(S) when is_port(S) -> gen_tcp:close(S);
+sock_close(S) -> ssl:close(S).
+
+active_once(S) when is_port(S) -> inet:setopts(S, [{active, once}]);
+active_once(S) -> ssl:setopts(S, [{active, once}]).
 
 %% The server's answer: 101, the upgrade, the accept of our key.
 upgrade(Bytes, D = #data{socket = S, key = Key, opts = #{max_message := Max}}) ->
@@ -337,7 +471,7 @@ upgrade(Bytes, D = #data{socket = S, key = Key, opts = #{max_message := Max}}) -
         nomatch when byte_size(Bytes) > ?MAX_RESPONSE_HEAD ->
             fail(response_too_long, D);
         nomatch ->
-            ok = inet:setopts(S, [{active, once}]),
+            ok = active_once(S),
             {keep_state, D#data{head = Bytes}};
         {At, 4} ->
             <<Head:At/binary, _:4/binary, Rest/binary>> = Bytes,
@@ -352,7 +486,7 @@ upgrade(Bytes, D = #data{socket = S, key = Key, opts = #{max_message := Max}}) -
                         true ->
                             Dec = toroco_live_ws_frame:client_decoder(Max),
                             %% frames that came with the answer, once connected
-                            self() ! {tcp, S, Rest},
+                            self() ! {case is_port(S) of true -> tcp; false -> ssl end, S, Rest},
                             up(D#data{decoder = Dec, head = <<>>})
                     end;
                 {Status, _} -> fail({http_status, Status}, D);
@@ -386,7 +520,7 @@ headers(Bin, Status, Acc) ->
 
 %% Any failure: the socket closed, the subscriptions ended, the backoff.
 fail(Why, D = #data{attempts = A, url = Url, socket = S, connector = C}) ->
-    S =:= none orelse gen_tcp:close(S),
+    S =:= none orelse sock_close(S),
     case C of
         {Pid, M} -> demonitor(M, [flush]), exit(Pid, kill);
         none -> ok
@@ -474,10 +608,10 @@ encode(Term) ->
 send(_Json, D = #data{socket = none}) ->
     D;
 send(Json, D = #data{socket = S}) ->
-    case gen_tcp:send(S, toroco_live_ws_frame:client_frame(text, Json)) of
+    case sock_send(S, toroco_live_ws_frame:client_frame(text, Json)) of
         ok -> D;
         {error, Why} ->
-            _ = gen_tcp:close(S),
+            _ = sock_close(S),
             D#data{socket = none, last_error = {send, Why}}
     end.
 
@@ -491,10 +625,10 @@ server_messages([], D) ->
 server_messages([{text, Json} | Rest], D) ->
     server_messages(Rest, server_op(Json, D));
 server_messages([{ping, P} | Rest], D = #data{socket = S}) ->
-    _ = gen_tcp:send(S, toroco_live_ws_frame:client_frame(pong, P)),
+    _ = sock_send(S, toroco_live_ws_frame:client_frame(pong, P)),
     server_messages(Rest, D);
 server_messages([{close, Code, Reason} | _], D = #data{socket = S}) ->
-    _ = gen_tcp:send(S, toroco_live_ws_frame:client_close_frame(1000, <<>>)),
+    _ = sock_send(S, toroco_live_ws_frame:client_close_frame(1000, <<>>)),
     fail({closed_by_server, Code, Reason}, D);
 server_messages([_ | Rest], D) ->
     server_messages(Rest, D).

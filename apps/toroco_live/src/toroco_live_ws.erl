@@ -13,8 +13,11 @@
 %%
 %% Refusals at connection time are HTTP answers: 400 when the request is
 %% not a WebSocket upgrade, 503 `too_many_clients' past `max_clients'.
-%% Controls need the token on the URL (`/ws?token=T') or the bearer
-%% header; without it every control is refused (read-only). A frame larger
+%% Controls need the page's session cookie or the bearer header
+%% (`toroco_live_http' checks both, and the `Origin', before the upgrade);
+%% without them every control is refused (read-only). The first frame
+%% after the node's hello says which: `{"type": "session", "controls":
+%% true | false}'. A frame larger
 %% than `max_body' is refused with `too_large' and the connection stays;
 %% one over `?MAX_FRAME' breaks the framing and closes it.
 -module(toroco_live_ws).
@@ -67,8 +70,9 @@ refuse(Req, Status, Reason, Message) ->
 %%====================================================================
 
 -spec join(toroco_live_ws_conn:socket(), {binary(), map()}) -> {ok, map()}.
-join(Socket, {Hello, State}) ->
-    write(Socket, [Hello]),
+join(Socket, {Hello, State = #{authorized := Auth}}) ->
+    write(Socket, [Hello, toroco_live_json:encode(#{<<"type">> => <<"session">>,
+                                                    <<"controls">> => Auth})]),
     {ok, State#{socket => Socket}}.
 
 -spec handle_frame({text | binary, binary()}, map()) -> toroco_live_ws_conn:result(map()).

@@ -3,7 +3,7 @@
 %% `apps/toroco_live/web/test/driver.js' (one JSON command a line).
 -module(toroco_live_browser).
 
--export([available/0, start/0, cmd/2, cmd/3, stop/1, root/0]).
+-export([available/0, start/0, start/1, cmd/2, cmd/3, stop/1, root/0]).
 
 %% The repository's root, from where this module's source is.
 root() ->
@@ -25,12 +25,18 @@ available() ->
 %% A process owning the driver (Common Test runs init_per_suite and each
 %% case in processes of their own, so the driver outlives them all).
 start() ->
+    start([]).
+
+%% With more chromium switches (`Args', strings).
+start(Args) ->
     Caller = self(),
+    Switches = binary_to_list(jiffy:encode([list_to_binary(A) || A <- Args])),
     Pid = spawn(fun() ->
                         Port = open_port({spawn_executable, os:find_executable("node")},
                                          [{args, [filename:join([web(), "test", "driver.js"])]},
                                           {cd, web()}, {line, 1 bsl 20}, binary, exit_status,
-                                          use_stdio, {env, [{"PUPPETEER_SKIP_DOWNLOAD", "1"}]}]),
+                                          use_stdio, {env, [{"PUPPETEER_SKIP_DOWNLOAD", "1"},
+                                                  {"TOROCO_CHROMIUM_ARGS", Switches}]}]),
                         Caller ! {self(), started},
                         owner(Port)
                 end),

@@ -8,7 +8,18 @@
 all() ->
     [server_info_and_channels, values_in_order, channels_follow_wiring, connection_graph,
      publish_refused_when_off, publish_injects_when_on, misbehaving_client,
-     client_that_never_reads, not_a_websocket, simulated_world, runtime_restart].
+     client_that_never_reads, not_a_websocket, simulated_world, runtime_restart, {group, tls}].
+
+%% The bridge's clients again with TLS on the port (wss://, Foxglove's
+%% client trusting a test CA made at the group's start).
+groups() ->
+    [{tls, [], [server_info_and_channels, misbehaving_client, client_that_never_reads]}].
+
+init_per_group(tls, Config) ->
+    [{tls, tl_tls:make(?config(priv_dir, Config))} | Config].
+
+end_per_group(tls, _Config) ->
+    ok.
 
 suite() -> [{timetrap, {seconds, 60}}].
 
@@ -22,10 +33,14 @@ end_per_suite(Config) ->
 init_per_testcase(Case, Config) ->
     tl_live:fake_robot(),
     ok = application:set_env(toroco_live, client_publish, Case =:= publish_injects_when_on),
-    {ok, #{foxglove := Port}} = toroco_live:start(#{http => 0, foxglove => 0}),
+    {Tls, Scheme} = case proplists:get_value(tls, Config) of
+                        undefined -> {#{}, "ws://127.0.0.1"};
+                        T -> {#{tls => tl_tls:tls(T)}, "wss://localhost"}
+                    end,
+    {ok, #{foxglove := Port}} = toroco_live:start(Tls#{http => 0, foxglove => 0}),
     Transcript = filename:join(?config(priv_dir, Config), atom_to_list(Case) ++ ".jsonl"),
     toroco_live_js:transcript(Transcript),
-    [{port, Port}, {url, iolist_to_binary(io_lib:format("ws://127.0.0.1:~b/", [Port]))} | Config].
+    [{port, Port}, {url, iolist_to_binary(io_lib:format("~s:~b/", [Scheme, Port]))} | Config].
 
 %% The Node clients end with the case's process (their stdin closes).
 end_per_testcase(_Case, _Config) ->
@@ -279,13 +294,20 @@ runtime_restart(Config) ->
 %% Helpers
 %%====================================================================
 
+%% Foxglove's driver, trusting the test CA in the group `tls'.
+driver(Config) ->
+    case proplists:get_value(tls, Config) of
+        undefined -> toroco_live_js:start("fox_driver.js");
+        #{ca := Ca} -> toroco_live_js:start("fox_driver.js", [{"NODE_EXTRA_CA_CERTS", Ca}])
+    end.
+
 connect(Config) ->
-    C = toroco_live_js:start("fox_driver.js"),
+    C = driver(Config),
     toroco_live_js:send(C, #{cmd => connect, url => ?config(url, Config)}),
     C.
 
 connect_raw(Config, Read) ->
-    C = toroco_live_js:start("fox_driver.js"),
+    C = driver(Config),
     toroco_live_js:send(C, #{cmd => raw_connect, url => ?config(url, Config), read => Read}),
     C.
 

@@ -13,13 +13,14 @@ all() -> [{group, routes}, {group, refusals}, {group, clients}].
 groups() ->
     [{routes, [], [page_and_assets, api_state, metrics, api_world, control_suspend_resume,
                    control_inject, control_reset_restart, control_load_wiring,
-                   token_on_the_url, ws_pushes_state, ws_state_from_events, ws_device_counters_as_text,
-                   ws_control_with_token,
+                   first_visit_trades_the_token_for_a_cookie, token_on_a_control_url_is_not_a_credential,
+                   ws_pushes_state, ws_state_from_events, ws_device_counters_as_text,
+                   ws_control_with_token, ws_control_with_the_cookie,
                    start_options]},
      {refusals, [], [unknown_route, wrong_method, no_token, wrong_token, bad_json,
                      not_an_object, unknown_action, unknown_behavior, not_a_literal,
                      oversized_body, runtime_refusal, missing_fields, not_a_websocket,
-                     ws_refusals, too_many_clients]},
+                     ws_refusals, too_many_clients, cross_origin_control, cross_origin_websocket]},
      {clients, [], [fifty_clients, client_that_never_reads]}].
 
 %%====================================================================
@@ -193,11 +194,42 @@ control_load_wiring(Config) ->
     {409, _, #{<<"error">> := <<"refused">>}} =
         control(Config, #{action => load_wiring, file => <<"/nonexistent/x.wiring">>}).
 
-token_on_the_url() -> [{doc, "?token=T on the URL is as good as the bearer header"}].
-token_on_the_url(Config) ->
+first_visit_trades_the_token_for_a_cookie() ->
+    [{doc, "GET /?token=T answers 303 to the address without the token and an HttpOnly, "
+      "SameSite=Strict session cookie (not Secure over plain HTTP, not the token); the "
+      "cookie then drives the robot"}].
+first_visit_trades_the_token_for_a_cookie(Config) ->
+    Port = ?config(port, Config),
+    Token = binary_to_list(?config(token, Config)),
+    Url = "http://127.0.0.1:" ++ integer_to_list(Port) ++ "/?token=" ++ Token ++ "&view=wiring",
+    {ok, {{_, 303, _}, Headers, _}} = httpc:request(get, {Url, []}, [{autoredirect, false}], []),
+    "/?view=wiring" = proplists:get_value("location", Headers),
+    SetCookie = proplists:get_value("set-cookie", Headers),
+    ct:pal("Set-Cookie: ~s", [SetCookie]),
+    [Pair | Attrs] = [string:trim(A) || A <- string:split(SetCookie, ";", all)],
+    ?assertEqual(lists:sort(["Path=/", "HttpOnly", "SameSite=Strict"]), lists:sort(Attrs)),
+    "toroco_session=" ++ Session = Pair,
+    ?assertEqual(nomatch, string:find(SetCookie, Token)),
+    {200, _, _} = post(Port, "/api/control", jiffy:encode(#{action => suspend, name => relay2}),
+                       [{"cookie", Pair}]),
+    #{status := suspended} = toroco:inspect(relay2),
+    %% a session that is not this token's is no session
+    Forged = "toroco_session=" ++ lists:reverse(Session),
+    {401, _, _} = post(Port, "/api/control", jiffy:encode(#{action => resume, name => relay2}),
+                       [{"cookie", Forged}]),
+    %% a wrong token on the first visit: the page, read-only, and no cookie
+    {ok, {{_, 303, _}, Wrong, _}} =
+        httpc:request(get, {"http://127.0.0.1:" ++ integer_to_list(Port) ++ "/?token=nottheone",
+                            []}, [{autoredirect, false}], []),
+    "/" = proplists:get_value("location", Wrong),
+    undefined = proplists:get_value("set-cookie", Wrong).
+
+token_on_a_control_url_is_not_a_credential() ->
+    [{doc, "?token=T on /api/control is not read: the token belongs in a header or a cookie"}].
+token_on_a_control_url_is_not_a_credential(Config) ->
     Path = "/api/control?token=" ++ binary_to_list(?config(token, Config)),
-    {200, _, _} = post(?config(port, Config), Path, jiffy:encode(#{action => suspend, name => relay2})),
-    #{status := suspended} = toroco:inspect(relay2).
+    {401, _, _} = post(?config(port, Config), Path, jiffy:encode(#{action => suspend, name => relay2})),
+    #{status := running} = toroco:inspect(relay2).
 
 ws_pushes_state() -> [{doc, "A WebSocket client gets hello, then the state, then each change"}].
 ws_pushes_state(Config) ->
@@ -277,12 +309,29 @@ last(#{<<"type">> := <<"state">>, <<"nodes">> := Nodes}, N, I) ->
     end;
 last(_, _, _) -> none.
 
-ws_control_with_token() -> [{doc, "Over the WebSocket, a control with the token on its URL is done and answered"}].
+ws_control_with_token() -> [{doc, "Over the WebSocket opened with the bearer token, a control is done and answered"}].
 ws_control_with_token(Config) ->
-    C = toroco_live_test_client:ws(?config(port, Config), "?token=" ++ binary_to_list(?config(token, Config))),
+    C = toroco_live_test_client:ws(?config(port, Config), "", auth(Config)),
+    {ok, #{<<"controls">> := true}} = toroco_live_test_client:ws_next(
+                                         C, fun(J) -> maps:get(<<"type">>, J) =:= <<"session">> end, 3000),
     ok = toroco_live_test_client:ws_send(C, #{action => suspend, name => relay, id => 7}),
     {ok, #{<<"ok">> := true}} = toroco_live_test_client:ws_next(
                                    C, fun(J) -> maps:get(<<"id">>, J, null) =:= 7 end, 3000),
+    #{status := suspended} = toroco:inspect(relay),
+    toroco_live_test_client:ws_close(C).
+
+ws_control_with_the_cookie() ->
+    [{doc, "The page's WebSocket carries the session cookie and the page's own Origin: controls are on"}].
+ws_control_with_the_cookie(Config) ->
+    Port = ?config(port, Config),
+    Cookie = "toroco_session=" ++ binary_to_list(toroco_live_auth:session(?config(token, Config))),
+    C = toroco_live_test_client:ws(Port, "", [{"Cookie", Cookie},
+                                              {"Origin", "http://127.0.0.1:" ++ integer_to_list(Port)}]),
+    {ok, #{<<"controls">> := true}} = toroco_live_test_client:ws_next(
+                                         C, fun(J) -> maps:get(<<"type">>, J) =:= <<"session">> end, 3000),
+    ok = toroco_live_test_client:ws_send(C, #{action => suspend, name => relay, id => 8}),
+    {ok, #{<<"ok">> := true}} = toroco_live_test_client:ws_next(
+                                   C, fun(J) -> maps:get(<<"id">>, J, null) =:= 8 end, 3000),
     #{status := suspended} = toroco:inspect(relay),
     toroco_live_test_client:ws_close(C).
 
@@ -399,6 +448,33 @@ ws_refusals(Config) ->
     {ok, #{<<"id">> := 2}} = Err(<<"unauthorized">>),
     ?assertEqual(Before, snapshot()),
     toroco_live_test_client:ws_close(C).
+
+cross_origin_control() ->
+    [{doc, "A control whose Origin is another page is refused (403 cross_origin) even with the "
+      "session or the token; nothing changes; the page's own Origin is served"}].
+cross_origin_control(Config) ->
+    Port = ?config(port, Config),
+    Before = snapshot(),
+    Cookie = {"cookie", "toroco_session=" ++ binary_to_list(toroco_live_auth:session(?config(token, Config)))},
+    Body = jiffy:encode(#{action => suspend, name => relay}),
+    [{403, _, #{<<"error">> := <<"cross_origin">>}} =
+         post(Port, "/api/control", Body, [{"origin", Origin}, Cred])
+     || Origin <- ["http://evil.example", "http://127.0.0.1:" ++ integer_to_list(Port + 1),
+                   "https://127.0.0.1:" ++ integer_to_list(Port), "null"],
+        Cred <- [Cookie | auth(Config)]],
+    ?assertEqual(Before, snapshot()),
+    {200, _, _} = post(Port, "/api/control", Body,
+                       [{"origin", "http://127.0.0.1:" ++ integer_to_list(Port)}, Cookie]),
+    #{status := suspended} = toroco:inspect(relay).
+
+cross_origin_websocket() ->
+    [{doc, "A WebSocket opened from another page (its Origin not the server's) is refused with 403"}].
+cross_origin_websocket(Config) ->
+    P = ?config(port, Config),
+    {ok, Sock} = gen_tcp:connect({127, 0, 0, 1}, P, [binary, {active, false}]),
+    {403, Rest} = toroco_live_test_client:handshake(Sock, P, "", [{"Origin", "http://evil.example"}]),
+    {_, _} = binary:match(Rest, <<"cross_origin">>),
+    gen_tcp:close(Sock).
 
 too_many_clients() -> [{doc, "Past max_clients a new WebSocket is refused with 503 too_many_clients"}].
 too_many_clients(Config) ->

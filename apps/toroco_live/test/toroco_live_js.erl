@@ -3,7 +3,7 @@
 %% installs them itself), and a line-by-line JSON conversation with a
 %% script of test/js.
 -module(toroco_live_js).
--export([ensure_installed/0, start/1, send/2, await/3, stop/1, run/2, transcript/1]).
+-export([ensure_installed/0, start/1, start/2, send/2, await/3, stop/1, run/2, transcript/1]).
 
 %% Common Test runs in a log directory; the app is found from this
 %% module's source, which the compiler records.
@@ -26,8 +26,13 @@ env() -> [{"NODE_PATH", filename:join([app_dir(), "web", "node_modules"])}].
 
 %% A driver script: JSON commands in, JSON events out.
 start(Name) ->
+    start(Name, []).
+
+%% ... with more environment (`NODE_EXTRA_CA_CERTS' for a test CA).
+start(Name, Env) ->
     Port = open_port({spawn_executable, os:find_executable("node")},
-                     [{args, [script(Name)]}, {line, 1 bsl 20}, binary, exit_status, {env, env()}]),
+                     [{args, [script(Name)]}, {line, 1 bsl 20}, binary, exit_status,
+                      {env, env() ++ Env}]),
     {Port, []}.
 
 send({Port, _}, Map) ->

@@ -3,7 +3,9 @@
 %% one address does not keep another address from the page, `/api/state'
 %% or a Foxglove client; requests too slow and clients too idle are closed;
 %% a full port sheds its longest-idle connection; every close is counted
-%% in `/metrics'.
+%% in `/metrics'. The same again with TLS on the ports (group `tls'): the
+%% served clients speak TLS, the flood's connections never finish a
+%% handshake, and a handshake too slow is closed like a request too slow.
 -module(toroco_live_listen_SUITE).
 -include_lib("common_test/include/ct.hrl").
 -include_lib("stdlib/include/assert.hrl").
@@ -14,15 +16,40 @@
 
 all() ->
     [flood_from_one_address, slow_request_and_idle_timeouts, full_port_sheds_longest_idle,
-     silent_websocket_closed].
+     silent_websocket_closed, {group, tls}].
+
+groups() ->
+    [{tls, [], [flood_from_one_address, slow_request_and_idle_timeouts,
+                full_port_sheds_longest_idle, slow_tls_handshake_closed]}].
 
 suite() -> [{timetrap, {seconds, 120}}].
 
 init_per_suite(Config) ->
+    {ok, _} = application:ensure_all_started(ssl),
+    persistent_term:put({?MODULE, tls}, none),
     [{env, tl_live:start(#{})} | Config].
 
 end_per_suite(Config) ->
+    persistent_term:erase({?MODULE, tls}),
     tl_live:stop(?config(env, Config)).
+
+%% The helpers below read whether the ports speak TLS (the group's
+%% certificate, from a test CA) from here: they run in the flood's
+%% processes too.
+init_per_group(tls, Config) ->
+    Tls = tl_tls:make(?config(priv_dir, Config)),
+    persistent_term:put({?MODULE, tls}, Tls),
+    [{tls, Tls} | Config].
+
+end_per_group(tls, _Config) ->
+    persistent_term:put({?MODULE, tls}, none).
+
+%% toroco_live:start/1, with TLS in the group `tls'.
+start(Opts) ->
+    case persistent_term:get({?MODULE, tls}) of
+        none -> toroco_live:start(Opts);
+        Tls -> toroco_live:start(Opts#{tls => tl_tls:tls(Tls)})
+    end.
 
 end_per_testcase(_Case, _Config) ->
     application:unset_env(toroco_live, ws_ping_ms),
@@ -39,9 +66,11 @@ silent_websocket_closed(_Config) ->
     Ping = 200,
     ok = application:set_env(toroco_live, ws_ping_ms, Ping),
     {ok, #{http := Http}} = toroco_live:start(#{http => 0, foxglove => off}),
+    %% before the handshake: the server counts silence from its end of it,
+    %% which a loaded machine may finish well before this process hears
+    T0 = erlang:monotonic_time(millisecond),
     {ok, Silent, _} = toroco_live_test_client:raw_ws(Http, ""),
     {ok, Answering, _} = toroco_live_test_client:raw_ws(Http, ""),
-    T0 = erlang:monotonic_time(millisecond),
     Answerer = spawn_link(fun() -> answer_pings(Answering, <<>>) end),
     ok = gen_tcp:controlling_process(Answering, Answerer),
     Ops = ws_ops(Silent, <<>>, []),
@@ -114,7 +143,7 @@ flood_from_one_address() ->
       "the page, /api/state and a Foxglove client from 127.0.0.2 are served within 2 s, "
       "the node's memory stays bounded and /metrics counts the refused"}].
 flood_from_one_address(_Config) ->
-    {ok, #{http := Http, foxglove := Fox}} = toroco_live:start(#{http => 0, foxglove => 0}),
+    {ok, #{http := Http, foxglove := Fox}} = start(#{http => 0, foxglove => 0}),
     %% each flood socket is two descriptors in this VM (both ends), on
     %% each of the two ports: a lower `ulimit -n' gets a smaller flood
     Fds = fd_limit(),
@@ -165,16 +194,15 @@ slow_request_and_idle_timeouts() ->
 slow_request_and_idle_timeouts(_Config) ->
     {ReqT, IdleT} = {300, 900},
     {ok, #{http := Http, foxglove := Fox}} =
-        toroco_live:start(#{http => 0, foxglove => 0, request_timeout => ReqT,
-                            idle_timeout => IdleT}),
+        start(#{http => 0, foxglove => 0, request_timeout => ReqT, idle_timeout => IdleT}),
     T0 = erlang:monotonic_time(millisecond),
     Half = connect(Http, {127, 0, 0, 1}),
-    ok = gen_tcp:send(Half, <<"GET /api/sta">>),
+    ok = send(Half, <<"GET /api/sta">>),
     Handshake = connect(Fox, {127, 0, 0, 1}),
-    ok = gen_tcp:send(Handshake, <<"GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\n">>),
+    ok = send(Handshake, <<"GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\n">>),
     Kept = connect(Http, {127, 0, 0, 1}),
-    ok = gen_tcp:send(Kept, <<"GET /api/state HTTP/1.1\r\nHost: x\r\n\r\n">>),
-    {ok, <<"HTTP/1.1 200", _/binary>>} = gen_tcp:recv(Kept, 0, 5000),
+    ok = send(Kept, <<"GET /api/state HTTP/1.1\r\nHost: x\r\n\r\n">>),
+    {ok, <<"HTTP/1.1 200", _/binary>>} = recv(Kept, 0, 5000),
     Closed = fun(S) -> closed(S, T0) end,
     {THalf, TShake, TKept} = {Closed(Half), Closed(Handshake), Closed(Kept)},
     ct:pal("closed after ~b ms (half a request), ~b ms (half a handshake), ~b ms (kept alive); "
@@ -187,21 +215,24 @@ slow_request_and_idle_timeouts(_Config) ->
         toroco_live_listener:stats(toroco_live_foxglove_listener),
     {200, Metrics} = http_get(Http, "/metrics"),
     ?assertEqual(1, metric_value(metric_lines(Metrics), "dashboard", "idle_timeout")),
-    [gen_tcp:close(S) || S <- [Half, Handshake, Kept]],
+    [close(S) || S <- [Half, Handshake, Kept]],
     ok.
 
 full_port_sheds_longest_idle() ->
     [{doc, "A full port closes its longest-idle connection (once min_age old) for a "
       "newcomer; one too young is kept and the newcomer refused"}].
 full_port_sheds_longest_idle(_Config) ->
-    MinAge = 200,
-    {ok, #{http := Http}} = toroco_live:start(#{http => 0, foxglove => off, max_connections => 4,
-                                                min_age => MinAge, request_timeout => 60000}),
+    %% older than the four connections' opening takes (TLS handshakes
+    %% included, on a loaded machine)
+    MinAge = 1000,
+    {ok, #{http := Http}} = start(#{http => 0, foxglove => off, max_connections => 4,
+                                    min_age => MinAge, request_timeout => 60000}),
     Idle = [connect(Http, {127, 0, 0, 1}) || _ <- lists:seq(1, 4)],
     toroco_live_test_client:wait(
       fun() -> maps:get(connections, toroco_live_listener:stats(toroco_live_http)) =:= 4 end, 5000),
-    %% too young to be shed: the newcomer is refused
-    Early = connect(Http, ?OTHER),
+    %% too young to be shed: the newcomer is refused (at once, before
+    %% any TLS handshake)
+    Early = raw_connect(Http, ?OTHER),
     ?assertEqual({error, closed}, gen_tcp:recv(Early, 0, 5000)),
     %% the idle ones must be min_age old to be shed: a known wait
     receive after MinAge -> ok end,
@@ -210,10 +241,38 @@ full_port_sheds_longest_idle(_Config) ->
     %% one of the four (admitted in whatever order mochiweb's acceptors
     %% ran, so which one is the guard's to say) is closed, the others stay
     Shed = shed_one(Idle, erlang:monotonic_time(millisecond) + 5000),
-    [?assertEqual({error, timeout}, gen_tcp:recv(S, 0, 0)) || S <- Idle -- [Shed]],
+    [?assertEqual({error, timeout}, recv(S, 0, 0)) || S <- Idle -- [Shed]],
     #{closed_by := #{shed := 1, too_many_clients := 1}} =
         toroco_live_listener:stats(toroco_live_http),
-    [gen_tcp:close(S) || S <- [Early | Idle]],
+    [close(S) || S <- [Early | Idle]],
+    ok.
+
+slow_tls_handshake_closed() ->
+    [{doc, "Over TLS, a connection that never completes its handshake (silent, or half a "
+      "ClientHello) is closed after request_timeout and counted so; one that speaks plain "
+      "HTTP is closed at once (tls_handshake); a client from another address is served "
+      "meanwhile"}].
+slow_tls_handshake_closed(_Config) ->
+    ReqT = 300,
+    {ok, #{http := Http}} = start(#{http => 0, foxglove => off, request_timeout => ReqT}),
+    T0 = erlang:monotonic_time(millisecond),
+    Silent = raw_connect(Http, {127, 0, 0, 1}),
+    HalfHello = raw_connect(Http, {127, 0, 0, 1}),
+    %% a TLS record header announcing a ClientHello of 512 bytes, then 5 of them
+    ok = gen_tcp:send(HalfHello, <<22, 3, 1, 2, 0, 1, 0, 1, 252, 3>>),
+    Garbage = raw_connect(Http, {127, 0, 0, 1}),
+    %% plain HTTP: not a TLS record
+    ok = gen_tcp:send(Garbage, <<"GET / HTTP/1.1\r\nHost: x\r\n\r\n">>),
+    {200, _} = http_get(Http, "/api/state"),
+    %% the first to close first
+    TGarbage = closed(Garbage, T0),
+    {TSilent, THalf} = {closed(Silent, T0), closed(HalfHello, T0)},
+    ct:pal("closed after ~b ms (silent), ~b ms (half a ClientHello), ~b ms (not TLS); "
+           "request_timeout ~b", [TSilent, THalf, TGarbage, ReqT]),
+    ?assert(TSilent >= ReqT andalso THalf >= ReqT),
+    ?assert(TGarbage < TSilent),
+    #{closed_by := #{request_timeout := 2, tls_handshake := 1}} =
+        toroco_live_listener:stats(toroco_live_http),
     ok.
 
 %%====================================================================
@@ -222,7 +281,9 @@ full_port_sheds_longest_idle(_Config) ->
 
 %% The one socket of `Socks' the server closed (bounded wait).
 shed_one(Socks, Deadline) ->
-    case [S || S <- Socks, gen_tcp:recv(S, 0, 0) =:= {error, closed}] of
+    %% a TLS client's socket learns of the close only while it reads
+    Wait = fun(S) when is_port(S) -> 0; (_) -> 50 end,
+    case [S || S <- Socks, recv(S, 0, Wait(S)) =:= {error, closed}] of
         [S] -> S;
         [] ->
             case erlang:monotonic_time(millisecond) > Deadline of
@@ -261,9 +322,32 @@ unflood(Pid) ->
     Pid ! stop,
     receive {unflooded, Pid} -> ok after 30000 -> ct:fail(flood_not_closed) end.
 
+%% A client's connection from `From': TLS in the group `tls' (its
+%% handshake done, the server's certificate checked against the test CA).
 connect(Port, From) ->
+    S = raw_connect(Port, From),
+    case persistent_term:get({?MODULE, tls}) of
+        none -> S;
+        #{ca := Ca} ->
+            {ok, Ssl} = ssl:connect(S, [binary, {active, false}, {verify, verify_peer},
+                                        {cacertfile, Ca}, {server_name_indication, "localhost"}],
+                                    5000),
+            Ssl
+    end.
+
+%% A TCP connection, whatever the port speaks.
+raw_connect(Port, From) ->
     {ok, S} = gen_tcp:connect({127, 0, 0, 1}, Port, [binary, {active, false}, {ip, From}], 5000),
     S.
+
+send(S, Data) when is_port(S) -> gen_tcp:send(S, Data);
+send(S, Data) -> ssl:send(S, Data).
+
+recv(S, N, T) when is_port(S) -> gen_tcp:recv(S, N, T);
+recv(S, N, T) -> ssl:recv(S, N, T).
+
+close(S) when is_port(S) -> gen_tcp:close(S);
+close(S) -> ssl:close(S).
 
 %% When the server closed `S', in ms since `T0'.
 closed(S, T0) ->
@@ -276,7 +360,7 @@ recv_all(S, Timeout) ->
     recv_all(S, Timeout, <<>>).
 
 recv_all(S, Timeout, Acc) ->
-    case gen_tcp:recv(S, 0, Timeout) of
+    case recv(S, 0, Timeout) of
         {ok, B} -> recv_all(S, Timeout, <<Acc/binary, B/binary>>);
         {error, closed} -> {closed, Acc};
         {error, Why} -> {Why, Acc}
@@ -285,9 +369,9 @@ recv_all(S, Timeout, Acc) ->
 %% One request from 127.0.0.2, `Connection: close': status and body.
 http_get(Port, Path) ->
     S = connect(Port, ?OTHER),
-    ok = gen_tcp:send(S, ["GET ", Path, " HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n"]),
+    ok = send(S, ["GET ", Path, " HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n"]),
     {closed, Resp} = recv_all(S, 5000),
-    gen_tcp:close(S),
+    close(S),
     [Head, Body] = binary:split(Resp, <<"\r\n\r\n">>),
     <<"HTTP/1.1 ", Status:3/binary, _/binary>> = Head,
     {binary_to_integer(Status), dechunk(Head, Body)}.
@@ -310,21 +394,21 @@ chunks(Bin, Acc) ->
 foxglove_hello(Port) ->
     S = connect(Port, ?OTHER),
     Key = base64:encode(crypto:strong_rand_bytes(16)),
-    ok = gen_tcp:send(S, ["GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n"
+    ok = send(S, ["GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n"
                           "Connection: Upgrade\r\nSec-WebSocket-Key: ", Key, "\r\n"
                           "Sec-WebSocket-Version: 13\r\n"
                           "Sec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n"]),
     {ok, Head, Rest} = read_head(S, <<>>),
     <<"HTTP/1.1 101", _/binary>> = Head,
     Json = text_frame(S, Rest),
-    gen_tcp:close(S),
+    close(S),
     jiffy:decode(Json, [return_maps]).
 
 read_head(S, Acc) ->
     case binary:split(Acc, <<"\r\n\r\n">>) of
         [Head, Rest] -> {ok, Head, Rest};
         [_] ->
-            {ok, B} = gen_tcp:recv(S, 0, 5000),
+            {ok, B} = recv(S, 0, 5000),
             read_head(S, <<Acc/binary, B/binary>>)
     end.
 
@@ -332,7 +416,7 @@ text_frame(S, <<_:4, 1:4, 0:1, 126:7, Len:16, P:Len/binary, _/binary>>) -> ok(S,
 text_frame(S, <<_:4, 1:4, 0:1, 127:7, Len:64, P:Len/binary, _/binary>>) -> ok(S, P);
 text_frame(S, <<_:4, 1:4, 0:1, Len:7, P:Len/binary, _/binary>>) when Len < 126 -> ok(S, P);
 text_frame(S, Acc) ->
-    {ok, B} = gen_tcp:recv(S, 0, 5000),
+    {ok, B} = recv(S, 0, 5000),
     text_frame(S, <<Acc/binary, B/binary>>).
 
 ok(_S, P) -> P.

@@ -12,7 +12,18 @@ all() ->
     [topics_and_types, services_round_trip, publish_needs_the_token, subscribe_throttled, cbor_raw,
      fragments_out, bad_input, flood_disconnected, client_that_never_reads, not_a_websocket,
      start_options, lockstep_stimulus, simulated_range_and_odometry, drive_the_teleop_robot,
-     runtime_restart].
+     runtime_restart, {group, tls}].
+
+%% The hostile clients again with TLS on the port (wss://, Node trusting a
+%% test CA made at the group's start).
+groups() ->
+    [{tls, [], [publish_needs_the_token, bad_input, flood_disconnected, client_that_never_reads]}].
+
+init_per_group(tls, Config) ->
+    [{tls, tl_tls:make(?config(priv_dir, Config))} | Config].
+
+end_per_group(tls, _Config) ->
+    ok.
 
 suite() -> [{timetrap, {seconds, 90}}].
 
@@ -35,11 +46,15 @@ init_per_testcase(Case, Config) ->
     Sim orelse fake_robot(),
     ok = application:set_env(toroco_live, rosbridge_fragment_ms, 500),
     ok = application:set_env(toroco_live, rosbridge_max_message, 65536),
+    {Tls, Scheme} = case proplists:get_value(tls, Config) of
+                        undefined -> {#{}, "ws://127.0.0.1"};
+                        T -> {#{tls => tl_tls:tls(T)}, "wss://localhost"}
+                    end,
     {ok, #{rosbridge := Port, token := Token}} =
-        toroco_live:start(#{http => 0, foxglove => off, rosbridge => 0}),
+        toroco_live:start(Tls#{http => 0, foxglove => off, rosbridge => 0}),
     Transcript = filename:join(?config(priv_dir, Config), atom_to_list(Case) ++ ".jsonl"),
     toroco_live_js:transcript(Transcript),
-    Url = iolist_to_binary(io_lib:format("ws://127.0.0.1:~b/", [Port])),
+    Url = iolist_to_binary(io_lib:format("~s:~b/", [Scheme, Port])),
     [{port, Port}, {token, Token}, {url, Url},
      {token_url, <<Url/binary, "?token=", Token/binary>>} | Config].
 
@@ -500,15 +515,22 @@ runtime_restart(Config) ->
 %% Shared by the cases
 %%====================================================================
 
+%% roslib's driver, trusting the test CA in the group `tls'.
+driver(Config) ->
+    case proplists:get_value(tls, Config) of
+        undefined -> toroco_live_js:start("ros_driver.js");
+        #{ca := Ca} -> toroco_live_js:start("ros_driver.js", [{"NODE_EXTRA_CA_CERTS", Ca}])
+    end.
+
 connect(Config, Which) ->
-    C = toroco_live_js:start("ros_driver.js"),
+    C = driver(Config),
     {ok, _, _} = toroco_live_js:await(C, ev(<<"ready">>), 10000),
     toroco_live_js:send(C, #{cmd => connect, url => ?config(Which, Config)}),
     {ok, _, _} = await(C, <<"open">>),
     C.
 
 connect_raw(Config, Which, Read) ->
-    C = toroco_live_js:start("ros_driver.js"),
+    C = driver(Config),
     {ok, _, _} = toroco_live_js:await(C, ev(<<"ready">>), 10000),
     toroco_live_js:send(C, #{cmd => raw_connect, url => ?config(Which, Config), read => Read}),
     {ok, _, _} = toroco_live_js:await(C, ev(<<"raw_open">>), 10000),
@@ -618,15 +640,23 @@ same({X1, Y1, H1}, {X2, Y2, H2}) ->
     abs(X1 - X2) < 1.0e-4 andalso abs(Y1 - Y2) < 1.0e-4 andalso abs(H1 - H2) < 0.01.
 
 metrics() ->
-    #{http := Http} = toroco_live:info(),
-    {ok, S} = gen_tcp:connect({127, 0, 0, 1}, Http, [binary, {active, false}]),
-    ok = gen_tcp:send(S, <<"GET /metrics HTTP/1.0\r\n\r\n">>),
-    Body = recv_all(S, []),
-    gen_tcp:close(S),
+    {Mod, S} = case toroco_live:info() of
+                   #{http := Http, tls := true} ->
+                       {ok, _} = application:ensure_all_started(ssl),
+                       {ok, T} = ssl:connect({127, 0, 0, 1}, Http, [binary, {active, false},
+                                                                   {verify, verify_none}]),
+                       {ssl, T};
+                   #{http := Http} ->
+                       {ok, T} = gen_tcp:connect({127, 0, 0, 1}, Http, [binary, {active, false}]),
+                       {gen_tcp, T}
+               end,
+    ok = Mod:send(S, <<"GET /metrics HTTP/1.0\r\n\r\n">>),
+    Body = recv_all(Mod, S, []),
+    Mod:close(S),
     Body.
 
-recv_all(S, Acc) ->
-    case gen_tcp:recv(S, 0, 5000) of
-        {ok, B} -> recv_all(S, [Acc, B]);
+recv_all(Mod, S, Acc) ->
+    case Mod:recv(S, 0, 5000) of
+        {ok, B} -> recv_all(Mod, S, [Acc, B]);
         {error, closed} -> binary_to_list(iolist_to_binary(Acc))
     end.

@@ -13,7 +13,8 @@ all() ->
      reconnects_with_backoff,
      disconnect_ends_it,
      bad_handshakes_retried, bad_url_and_options_refused, stalled_server_costs_the_robot_nothing,
-     own_server_on_another_node, app_env_dials].
+     own_server_on_another_node, app_env_dials, wss_checked_by_ca_or_fingerprint,
+     wss_refuses_a_certificate_that_does_not_match].
 
 suite() -> [{timetrap, {seconds, 90}}].
 
@@ -33,6 +34,7 @@ init_per_testcase(_Case, Config) ->
 
 end_per_testcase(_Case, _Config) ->
     [ok = toroco_live:rosbridge_disconnect(P) || P <- toroco_live_rosclient_sup:clients()],
+    ok = toroco_live:stop(),
     toroco_test_lib:clear().
 
 %%====================================================================
@@ -218,11 +220,81 @@ bad_handshakes_retried(_Config) ->
     [gen_tcp:close(S) || S <- [S1, S2, S3]],
     gen_tcp:close(L).
 
+wss_checked_by_ca_or_fingerprint() ->
+    [{doc, "Over wss:// the client connects to this project's server (TLS, a test CA's "
+      "certificate) checked against the CA file, by name or by address, and to a self-signed "
+      "one by its pinned fingerprint (as scripts/tls-cert prints it)"}].
+wss_checked_by_ca_or_fingerprint(Config) ->
+    Tls = tl_tls:make(?config(priv_dir, Config)),
+    {ok, #{rosbridge := Port, token := Token}} =
+        toroco_live:start(#{http => 0, foxglove => off, rosbridge => 0, tls => tl_tls:tls(Tls)}),
+    Url = fun(Host) -> iolist_to_binary(io_lib:format("wss://~s:~b/?token=~s", [Host, Port, Token])) end,
+    Ca = #{cacertfile => maps:get(ca, Tls)},
+    {ok, ByName} = toroco_live:rosbridge_connect(Url("localhost"), Ca),
+    {ok, ByAddress} = toroco_live:rosbridge_connect(Url("127.0.0.1"), Ca),
+    await_state([ByName, ByAddress], connected),
+    %% the server took both as its clients
+    2 = maps:get(connections, toroco_live_rosbridge:stats()),
+    [ok = toroco_live:rosbridge_disconnect(P) || P <- [ByName, ByAddress]],
+    ok = toroco_live:stop(),
+    %% self-signed, pinned
+    {ok, #{rosbridge := Port2}} =
+        toroco_live:start(#{http => 0, foxglove => off, rosbridge => 0, tls => tl_tls:stranger_tls(Tls)}),
+    {ok, Pinned} = toroco_live:rosbridge_connect(
+                     iolist_to_binary(io_lib:format("wss://127.0.0.1:~b/", [Port2])),
+                     #{fingerprint => maps:get(stranger_fingerprint, Tls)}),
+    await_state([Pinned], connected),
+    ok = toroco_live:rosbridge_disconnect(Pinned),
+    ok = toroco_live:stop().
+
+wss_refuses_a_certificate_that_does_not_match() ->
+    [{doc, "A server whose certificate the CA file does not vouch for, or whose fingerprint "
+      "is not the pinned one, is refused before a byte is sent: {tls, Why} in last_error, "
+      "never connected, dialled again with backoff"}].
+wss_refuses_a_certificate_that_does_not_match(Config) ->
+    Tls = tl_tls:make(?config(priv_dir, Config)),
+    {ok, #{rosbridge := Port}} =
+        toroco_live:start(#{http => 0, foxglove => off, rosbridge => 0,
+                            tls => tl_tls:stranger_tls(Tls)}),
+    Url = iolist_to_binary(io_lib:format("wss://localhost:~b/", [Port])),
+    {ok, Ca} = toroco_live:rosbridge_connect(Url, #{cacertfile => maps:get(ca, Tls),
+                                                    backoff_min => 50, backoff_max => 200}),
+    {ok, Pin} = toroco_live:rosbridge_connect(Url, #{fingerprint => maps:get(fingerprint, Tls),
+                                                     backoff_min => 50, backoff_max => 200}),
+    toroco_live_test_client:wait(
+      fun() -> lists:all(fun(#{attempts := A}) -> A >= 3 end, toroco_live:rosbridge_clients()) end,
+      15000),
+    Infos = toroco_live:rosbridge_clients(),
+    ct:pal("refused: ~p", [[E || #{last_error := E} <- Infos]]),
+    2 = length([I || I = #{connects := 0, state := S, last_error := {tls, _}} <- Infos,
+                     S =/= connected]),
+    [{tls, {fingerprint_mismatch, _}}] =
+        [E || #{last_error := E = {tls, {fingerprint_mismatch, _}}} <- Infos],
+    %% the server saw no WebSocket client: nothing was sent past the handshake
+    0 = maps:get(connections, toroco_live_rosbridge:stats(), 0),
+    [ok = toroco_live:rosbridge_disconnect(P) || P <- [Ca, Pin]],
+    ok = toroco_live:stop().
+
+await_state(Pids, State) ->
+    toroco_live_test_client:wait(
+      fun() ->
+              Now = [S || P <- Pids, #{state := S} <- [toroco_live_rosclient:info(P)]],
+              Now =:= [State || _ <- Pids]
+      end, 15000).
+
 bad_url_and_options_refused() ->
     [{doc, "A URL that is not ws://, and options out of range, are refused naming them, and "
       "no client is started"}].
 bad_url_and_options_refused(_Config) ->
-    {error, {unsupported_scheme, <<"wss">>}} = toroco_live:rosbridge_connect("wss://h:9090/", #{}),
+    %% wss:// only with the server's certificate checked
+    {error, {unverified_wss, _}} = toroco_live:rosbridge_connect("wss://h:9090/", #{}),
+    {error, {tls_options_without_wss, _}} =
+        toroco_live:rosbridge_connect("ws://h:9090/", #{fingerprint => binary:copy(<<"ab">>, 32)}),
+    {error, {bad_option, {fingerprint, <<"AB:CD">>}}} =
+        toroco_live:rosbridge_connect("wss://h:9090/", #{fingerprint => <<"AB:CD">>}),
+    {error, {bad_option, {cacertfile, "/no/such/ca.pem"}}} =
+        toroco_live:rosbridge_connect("wss://h:9090/", #{cacertfile => "/no/such/ca.pem"}),
+    {error, {unsupported_scheme, <<"ftp">>}} = toroco_live:rosbridge_connect("ftp://h:9090/", #{}),
     {error, {unsupported_scheme, <<"http">>}} = toroco_live:rosbridge_connect(<<"http://h/">>, #{}),
     {error, {bad_url, _}} = toroco_live:rosbridge_connect("not a url", #{}),
     {error, {bad_url, 42}} = toroco_live:rosbridge_connect(42, #{}),

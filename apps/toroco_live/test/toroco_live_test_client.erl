@@ -3,8 +3,8 @@
 %% decoded, to its owner as `{wsc, Pid, Json}'.
 -module(toroco_live_test_client).
 
--export([wait/2, get/2, get/3, post/3, post/4, ws/2, ws_send/2, ws_send_raw/2, ws_close/1,
-         ws_next/3, raw_ws/2, handshake/3]).
+-export([wait/2, get/2, get/3, post/3, post/4, ws/2, ws/3, ws_send/2, ws_send_raw/2, ws_close/1,
+         ws_next/3, raw_ws/2, raw_ws/3, handshake/3, handshake/4]).
 
 %% Until Fun() is true, polling every 20 ms; fails the case after Timeout ms.
 wait(Fun, Timeout) ->
@@ -46,11 +46,14 @@ url(Port, Path) -> "http://127.0.0.1:" ++ integer_to_list(Port) ++ Path.
 
 %%--------------------------------------------------------------------- WebSocket
 
-%% A client process connected to /ws (Query: "" or "?token=T").
-ws(Port, Query) ->
+%% A client process connected to /ws (Query: "" or "?k=v"), with more
+%% headers on the upgrade request (`Authorization', `Cookie', `Origin').
+ws(Port, Query) -> ws(Port, Query, []).
+
+ws(Port, Query, Headers) ->
     Owner = self(),
     Pid = spawn_link(fun() ->
-                             {ok, Sock, Rest} = raw_ws(Port, Query),
+                             {ok, Sock, Rest} = raw_ws(Port, Query, Headers),
                              ok = inet:setopts(Sock, [{active, true}]),
                              Owner ! {wsc_up, self()},
                              loop(Sock, Owner, frames(Rest, Sock, Owner))
@@ -58,19 +61,24 @@ ws(Port, Query) ->
     receive {wsc_up, Pid} -> Pid after 5000 -> error(ws_connect_timeout) end.
 
 %% A connected socket after the handshake, passive: {ok, Sock, BytesAfterIt}.
-raw_ws(Port, Query) ->
+raw_ws(Port, Query) -> raw_ws(Port, Query, []).
+
+raw_ws(Port, Query, Headers) ->
     {ok, Sock} = gen_tcp:connect({127, 0, 0, 1}, Port, [binary, {active, false},
                                                         {recbuf, 4096}, {packet, 0}]),
-    case handshake(Sock, Port, Query) of
+    case handshake(Sock, Port, Query, Headers) of
         {101, Rest} -> {ok, Sock, Rest};
         Other -> gen_tcp:close(Sock), {error, Other}
     end.
 
 %% Sends the upgrade request; {Status, BytesAfterHeaders}.
-handshake(Sock, Port, Query) ->
+handshake(Sock, Port, Query) -> handshake(Sock, Port, Query, []).
+
+handshake(Sock, Port, Query, Headers) ->
     Key = base64:encode(crypto:strong_rand_bytes(16)),
     ok = gen_tcp:send(Sock, ["GET /ws", Query, " HTTP/1.1\r\nHost: 127.0.0.1:", integer_to_list(Port),
                              "\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n",
+                             [[K, ": ", V, "\r\n"] || {K, V} <- Headers],
                              "Sec-WebSocket-Key: ", Key, "\r\nSec-WebSocket-Version: 13\r\n\r\n"]),
     read_headers(Sock, <<>>).
 

@@ -3,10 +3,13 @@
 // and outputs, see toroco_live_state) and "world" frames (the simulated
 // arena, see toroco_live_world_json). The wiring is laid out with elkjs
 // when its shape changes and only restyled otherwise. Controls are POSTs
-// to /api/control carrying the token of the page's URL (?token=T).
+// to /api/control; the page's session cookie (set by the node at the first
+// visit with ?token=T, which it then drops from the address) carries the
+// right to drive the robot, and the node says on the WebSocket whether
+// this page has it ("session" frame).
 'use strict';
 
-const token = new URLSearchParams(location.search).get('token');
+let controls = false;      // whether the node takes this page's controls
 const $ = (sel) => document.querySelector(sel);
 const SVG = 'http://www.w3.org/2000/svg';
 const elk = new ELK();
@@ -29,7 +32,7 @@ function term(c) { return c ? c.term : '-'; }
 
 // ---------------------------------------------------------------- socket
 function connect() {
-  const ws = new WebSocket(`ws://${location.host}/ws` + (token ? `?token=${encodeURIComponent(token)}` : ''));
+  const ws = new WebSocket(`${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws`);
   ws.onopen = () => { $('#conn').textContent = 'live'; $('#conn').className = 'good'; };
   ws.onclose = () => {
     $('#conn').textContent = 'disconnected, retrying'; $('#conn').className = 'bad';
@@ -38,6 +41,7 @@ function connect() {
   ws.onmessage = (m) => {
     const f = JSON.parse(m.data);
     if (f.type === 'hello') $('#node').textContent = f.node;
+    else if (f.type === 'session') { controls = !!f.controls; if (state) renderControls(state); }
     else if (f.type === 'state') onState(f);
     else if (f.type === 'world') onWorld(f);
   };
@@ -107,8 +111,8 @@ function renderDevices(s) {
 }
 
 function renderControls(s) {
-  $('#mode').textContent = token ? 'controls on (token)' : 'read-only: open the URL with ?token=T for controls';
-  $('#controls-note').textContent = token ? '' : 'read-only without the token: the node will refuse';
+  $('#mode').textContent = controls ? 'controls on (session)' : 'read-only: open the URL with ?token=T once for controls';
+  $('#controls-note').textContent = controls ? '' : 'read-only without the token: the node will refuse';
   fill($('#control-name'), s.nodes.filter((n) => n.kind === 'behavior').map((n) => n.name));
   fill($('#inject-source'), s.nodes.flatMap((n) => n.outputs.map((o) => n.name + '.' + o.output)));
 }
@@ -287,8 +291,8 @@ async function showDetails(name, now) {
 // ---------------------------------------------------------------- controls
 async function control(req) {
   const headers = { 'Content-Type': 'application/json' };
-  if (token) headers.Authorization = 'Bearer ' + token;
-  const r = await fetch('/api/control', { method: 'POST', headers, body: JSON.stringify(req) });
+  const r = await fetch('/api/control', { method: 'POST', headers, body: JSON.stringify(req),
+    credentials: 'same-origin' });
   const j = await r.json();
   const line = document.createElement('div');
   const what = req.action + ' ' + (req.name || (req.source ? req.source.join('.') : '') || req.file || '');
