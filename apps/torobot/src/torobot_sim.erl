@@ -110,7 +110,6 @@
               next_status = 1000 :: non_neg_integer(),
               time = realtime :: realtime | lockstep,
               trace :: file:io_device() | undefined,
-              published = 0 :: integer(),
               %% the fault schedule (SPEC §17): the world's faults, the
               %% robot's events not applied yet, the seed; observations
               faults = [] :: torobot_faults:concrete(),
@@ -395,7 +394,9 @@ handle_info(lockstep, S = #sim{bots = Bots, tick = Tick}) ->
                 end || {B, Motors} <- Stepped],
     Moved = move([B || {B, _} <- Stepped], Commands, Tick),
     S1 = status(observed(Moved, S0#sim{bots = Moved})),
-    next(publish_paced(S1), fun(S2) -> self() ! lockstep, S2 end);
+    %% every tick: a recording of a lockstep run has the pose at each
+    publish(S1),
+    next(S1, fun(S2) -> self() ! lockstep, S2 end);
 handle_info({'DOWN', _, process, Caller, _}, S = #sim{caller = Caller}) ->
     {stop, normal, S};
 handle_info(_Info, S) ->
@@ -608,19 +609,10 @@ trace(Fd, Name, T, Lines, Motors, Before) ->
              end,
     ok = file:write(Fd, [[Prefix, Line] || Line <- Lines ++ Wheels]).
 
-%% The dashboard's view, at most 20 times a second of real time however
-%% fast the world goes.
-publish_paced(S = #sim{published = Last}) ->
-    Now = erlang:monotonic_time(millisecond),
-    case Now - Last >= 50 of
-        true -> publish(S), S#sim{published = Now};
-        false -> S
-    end.
-
 %% The dashboard's view of the world (toroco_live_world's message, written
 %% down there): a plain send, and only when toroco_live runs in this node.
 %% A robot of the one-robot form is named `torobot'.
-publish(#sim{bots = Bots, t0 = T0}) ->
+publish(#sim{bots = Bots, t0 = T0, time = Time}) ->
     case whereis(toroco_live_world) of
         undefined ->
             ok;
@@ -639,6 +631,7 @@ publish(#sim{bots = Bots, t0 = T0}) ->
             Viewer ! {toroco_live_world, snapshot,
                       #{run => {self(), T0},
                         t_ms => lists:max([torobot_world:time_ms(B#bot.world) || B <- Bots]),
+                        lockstep => Time =:= lockstep,
                         arena => torobot_world:arena(W), walls => torobot_world:walls(W),
                         objects => torobot_world:objects(W), robots => Robots}},
             ok

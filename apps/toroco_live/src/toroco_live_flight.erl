@@ -121,7 +121,7 @@ init([]) ->
     Max = application:get_env(toroco_live, flight_max_events, ?MAX_EVENTS),
     MaxBytes = application:get_env(toroco_live, flight_max_bytes, ?MAX_BYTES),
     %% toroco_live_world starts before this process (toroco_live_sup).
-    _ = (catch toroco_live_world:subscribe()),
+    _ = (catch toroco_live_world:subscribe_all()),
     {_, Tap} = toroco_live_tap:on(toroco_live_tap:new(#{buffer => ?BUFFER,
                                                         retry_ms => ?RESUBSCRIBE_MS})),
     {ok, #flight{tap = Tap, window_ns = Seconds * 1000000000, max = Max, max_bytes = MaxBytes}}.
@@ -152,16 +152,12 @@ handle_cast(_, F) ->
     {noreply, F}.
 
 -spec handle_info(term(), #flight{}) -> {noreply, #flight{}} | {noreply, #flight{}, hibernate}.
-handle_info({toroco_live_world, changed}, F = #flight{recording = R}) ->
-    Snapshot = toroco_live_world:latest(),
-    Now = erlang:system_time(nanosecond),
-    {Msgs, Scene} = toroco_live_channels:world(Snapshot, Now, F#flight.scene),
-    R1 = case R of
-             none -> none;
-             _ -> toroco_live_recorder:world(Snapshot, Now, Msgs, R)
-         end,
-    noreply(lists:foldl(fun({K, T, J}, Acc) -> keep({T, {message, K, J}}, Acc) end,
-                        F#flight{scene = Scene, recording = R1}, Msgs));
+handle_info({toroco_live_world, changed}, F) ->
+    noreply(world(toroco_live_world:latest(), erlang:system_time(nanosecond), F));
+%% A world in lockstep: every tick's snapshot, stamped with its simulated
+%% time as the tap's events are (SPEC §14).
+handle_info({toroco_live_world, at, Snapshot = #{t_ms := Ms}}, F) ->
+    noreply(world(Snapshot, Ms * 1000000, F));
 handle_info(Info, F = #flight{tap = Tap}) ->
     case toroco_live_tap:handle(Info, Tap) of
         {events, Events} -> noreply(lists:foldl(fun event/2, F, Events));
@@ -169,6 +165,15 @@ handle_info(Info, F = #flight{tap = Tap}) ->
         {retry, Tap1} -> {_, Tap2} = toroco_live_tap:on(Tap1), {noreply, F#flight{tap = Tap2}};
         _ -> {noreply, F}
     end.
+
+world(Snapshot, Now, F = #flight{recording = R}) ->
+    {Msgs, Scene} = toroco_live_channels:world(Snapshot, Now, F#flight.scene),
+    R1 = case R of
+             none -> none;
+             _ -> toroco_live_recorder:world(Snapshot, Now, Msgs, R)
+         end,
+    lists:foldl(fun({K, T, J}, Acc) -> keep({T, {message, K, J}}, Acc) end,
+                F#flight{scene = Scene, recording = R1}, Msgs).
 
 -spec terminate(term(), #flight{}) -> ok.
 terminate(_, #flight{recording = none}) ->

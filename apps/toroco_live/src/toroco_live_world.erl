@@ -18,6 +18,12 @@
 %%     <td>a new snapshot came, and the subscriber has read
 %%         ({@link latest/0}) since the last such message: at most one is
 %%         ever waiting in a subscriber's mailbox</td><td>none</td></tr>
+%% <tr><td>`{toroco_live_world, at, Snapshot}'</td>
+%%     <td>`toroco_live_world' → each subscriber of {@link subscribe_all/0}</td>
+%%     <td>a snapshot of a world in lockstep (`lockstep => true'): every
+%%         one, since the world sends one a tick and goes as fast as the CPU
+%%         allows (a recording then has the pose at every tick, stamped with
+%%         its simulated time)</td><td>none</td></tr>
 %% </table>
 %%
 %% `Snapshot' is a map (metres, degrees counter-clockwise from +x,
@@ -26,6 +32,7 @@
 %% <table>
 %% <tr><th>key</th><th>value</th></tr>
 %% <tr><td>`run'</td><td>any term naming this run; a new one starts new trajectories</td></tr>
+%% <tr><td>`lockstep'</td><td>optional, `true' when the world is the clock</td></tr>
 %% <tr><td>`t_ms'</td><td>world time of the step</td></tr>
 %% <tr><td>`arena'</td><td>`{Width, Height}'; walls all around, origin bottom-left</td></tr>
 %% <tr><td>`walls'</td><td>`[{{X1, Y1}, {X2, Y2}}]', inside the arena</td></tr>
@@ -46,7 +53,7 @@
 -module(toroco_live_world).
 -behaviour(gen_server).
 
--export([start_link/0, latest/0, subscribe/0, unsubscribe/0]).
+-export([start_link/0, latest/0, subscribe/0, subscribe_all/0, unsubscribe/0]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 
 -export_type([snapshot/0]).
@@ -60,7 +67,9 @@
 
 -record(w, {latest = none :: snapshot() | none,
             trails = #{} :: #{atom() => {non_neg_integer(), [tuple()]}},
-            subscribers = #{} :: #{pid() => {reference(), Notified :: boolean()}}}).
+            subscribers = #{} :: #{pid() => {reference(), Notified :: boolean()}},
+            %% the subscribers that take every snapshot of a world in lockstep
+            all = #{} :: #{pid() => true}}).
 
 -spec start_link() -> {ok, pid()} | {error, term()}.
 start_link() ->
@@ -76,6 +85,13 @@ latest() ->
 -spec subscribe() -> ok.
 subscribe() ->
     gen_server:call(?MODULE, subscribe).
+
+%% @doc As {@link subscribe/0}, and the caller also gets every snapshot of
+%% a world in lockstep as `{toroco_live_world, at, Snapshot}' (instead of
+%% `changed' for those).
+-spec subscribe_all() -> ok.
+subscribe_all() ->
+    gen_server:call(?MODULE, subscribe_all).
 
 -spec unsubscribe() -> ok.
 unsubscribe() ->
@@ -102,12 +118,15 @@ handle_call(subscribe, {Pid, _}, W = #w{subscribers = Subs}) ->
         #{Pid := _} -> {reply, ok, W};
         #{} -> {reply, ok, W#w{subscribers = Subs#{Pid => {monitor(process, Pid), false}}}}
     end;
+handle_call(subscribe_all, From = {Pid, _}, W) ->
+    {reply, ok, W1} = handle_call(subscribe, From, W),
+    {reply, ok, W1#w{all = (W1#w.all)#{Pid => true}}};
 handle_call(unsubscribe, {Pid, _}, W = #w{subscribers = Subs}) ->
     case Subs of
         #{Pid := {Ref, _}} -> demonitor(Ref, [flush]);
         #{} -> ok
     end,
-    {reply, ok, W#w{subscribers = maps:remove(Pid, Subs)}};
+    {reply, ok, W#w{subscribers = maps:remove(Pid, Subs), all = maps:remove(Pid, W#w.all)}};
 handle_call(_Request, _From, W) ->
     {reply, {error, unknown_call}, W}.
 
@@ -125,7 +144,8 @@ handle_info({?MODULE, snapshot, #{run := Run, robots := Robots} = Snap}, W) when
     {noreply, notify(W#w{latest = Snap, trails = Trails1})};
 handle_info({'DOWN', Ref, process, Pid, _}, W = #w{subscribers = Subs}) ->
     case Subs of
-        #{Pid := {Ref, _}} -> {noreply, W#w{subscribers = maps:remove(Pid, Subs)}};
+        #{Pid := {Ref, _}} -> {noreply, W#w{subscribers = maps:remove(Pid, Subs),
+                                            all = maps:remove(Pid, W#w.all)}};
         #{} -> {noreply, W}
     end;
 handle_info(_Info, W) ->
@@ -141,10 +161,18 @@ trail(#{name := Name, pose := {X, Y, _}} = Robot, Trails) ->
 trail(_, Trails) ->
     Trails.
 
-notify(W = #w{subscribers = Subs}) ->
-    Subs1 = maps:map(fun(Pid, {Ref, false}) ->
+notify(W = #w{subscribers = Subs, all = All, latest = Latest}) ->
+    Every = case Latest of
+                #{lockstep := true} -> All;
+                _ -> #{}
+            end,
+    maps:foreach(fun(Pid, _) -> Pid ! {?MODULE, at, Latest} end, Every),
+    Subs1 = maps:map(fun(Pid, Sub) when is_map_key(Pid, Every) ->
+                             Sub;
+                        (Pid, {Ref, false}) ->
                              Pid ! {?MODULE, changed},
                              {Ref, true};
-                        (_, Sub) -> Sub
+                        (_, Sub) ->
+                             Sub
                      end, Subs),
     W#w{subscribers = Subs1}.

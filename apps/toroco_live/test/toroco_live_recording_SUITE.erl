@@ -2,6 +2,7 @@
 %% format's reference reader (@mcap/core's indexed reader, in Node).
 -module(toroco_live_recording_SUITE).
 -include_lib("common_test/include/ct.hrl").
+-include_lib("stdlib/include/assert.hrl").
 -compile([export_all, nowarn_export_all]).
 
 all() ->
@@ -12,7 +13,7 @@ all() ->
      flight_recorder_after_restart,
      foreign_files_refused,
      simulated_run_replays,
-     recording_in_lockstep_has_simulated_time,
+     recording_in_lockstep_has_simulated_time, lockstep_run_recorded_every_tick,
      ros2_recording_of_simulated_run, ros2_recording_of_range, ros2_profile_refused,
      ros2_recording_replays].
 %% The ROS 2 profile (SPEC §15) is read back as ROS 2 tooling reads it:
@@ -28,6 +29,7 @@ end_per_suite(Config) ->
     tl_live:stop(?config(env, Config)).
 
 init_per_testcase(C, Config) when C =:= simulated_run_replays;
+                                  C =:= lockstep_run_recorded_every_tick;
                                   C =:= ros2_recording_of_simulated_run;
                                   C =:= ros2_recording_replays ->
     Config;
@@ -58,6 +60,33 @@ recording_in_lockstep_has_simulated_time(Config) ->
     {ok, Bin} = file:read_file(Path),
     {ok, #{messages := [#{log_time := T}]}} = toroco_live_mcap:read(Bin),
     1500000000 = T.
+
+lockstep_run_recorded_every_tick() ->
+    [{doc, "A recording of a simulated run in lockstep has the robot's pose at every tick "
+      "of the world (/toroco/sim/pose), stamped with its simulated time, so a replayed or "
+      "recorded failure of the robustness lab can be watched in Foxglove."}].
+lockstep_run_recorded_every_tick(Config) ->
+    World = filename:join(?config(data_dir, Config), "short.world"),
+    {ok, [W]} = torobot_world:load_all(World),
+    Path = path(Config, "lockstep_sim.mcap"),
+    ok = toroco_live:record(Path, #{}),
+    {ok, #{red_touched_ms := Red}} = torobot_sim:run(World, #{wiring => wiring_file(),
+                                                             time => lockstep}),
+    {ok, #{dropped := 0}} = toroco_live:stop_recording(),
+    Ticks = case Red of
+                none -> torobot_world:duration_ms(W);
+                _ -> Red
+            end div torobot_world:tick_ms(W),
+    {ok, Bin} = file:read_file(Path),
+    {ok, #{messages := Msgs, channels := Channels}} = toroco_live_mcap:read(Bin),
+    [Pose] = [Id || {Id, #{topic := <<"/toroco/sim/pose">>}} <- maps:to_list(Channels)],
+    Times = [T || #{channel := C, log_time := T} <- Msgs, C =:= Pose],
+    ct:log("~b poses for ~b ticks, first at ~p ns", [length(Times), Ticks, hd(lists:sort(Times))]),
+    ?assert(length(Times) >= Ticks),
+    %% simulated time: each stamp a whole tick of the world, none past its end
+    Tick = torobot_world:tick_ms(W) * 1000000,
+    [] = [T || T <- Times, T rem Tick =/= 0],
+    ?assert(lists:max(Times) =< torobot_world:duration_ms(W) * 1000000).
 
 recording_reads_back() ->
     [{doc, "A recording validates with @mcap/core's indexed reader: the channels and schemas "
