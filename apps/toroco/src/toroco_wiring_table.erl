@@ -18,7 +18,7 @@
 %% </table>
 -module(toroco_wiring_table).
 
--export([claim/0, lookup/1, known/1, subs_of/1, row/2, plan_changed/2, forget/2,
+-export([claim/0, lookup/1, known/1, subs_of/1, ports_of/1, row/2, plan_changed/2, forget/2,
          nodes_changed/2, write_meta/1, restore/1]).
 
 -define(TABLE, toroco_wiring).
@@ -42,6 +42,16 @@ lookup(Key) ->
 known(Name) ->
     try ets:member(?TABLE, {nodes, Name})
     catch error:badarg -> false
+    end.
+
+%% @doc The inputs and outputs of `Name' in the wiring (an open behavior's
+%% grow as the wiring names them), `#{}' if it has no node of that name.
+-spec ports_of(atom()) -> #{inputs => [atom()], outputs => [atom()]}.
+ports_of(Name) ->
+    try ets:lookup(?TABLE, {nodes, Name}) of
+        [{_, {_Kind, _M, _L, Ins, Outs}}] -> #{inputs => Ins, outputs => Outs};
+        [] -> #{}
+    catch error:badarg -> #{}
     end.
 
 %% @doc The consumers each output of emitter `Name' is planned to feed.
