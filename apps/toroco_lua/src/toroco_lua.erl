@@ -23,9 +23,8 @@
 %% behaviors outlives it), while Erlang behaviors go on.
 %%
 %% <b>Adding</b>: `toroco:add_behavior(Name, toroco_lua, #{file => Path,
-%% params => P, layer => L})' as SPEC §16 writes it (this module declares its
-%% ports from its options: {@link interface/1}, the inputs and outputs the
-%% file uses); {@link add_behavior/2} is the same with the name passed on for
+%% params => P, layer => L})' as SPEC §16 writes it (its ports are open:
+%% {@link interface/1}); {@link add_behavior/2} is the same with the name passed on for
 %% the log; {@link load_main/2} for a whole program. <b>Looking</b>: {@link
 %% waits/1}, {@link memory/1}.
 %% <b>Changing</b>: {@link reload/1}.
@@ -47,10 +46,16 @@
 %% flight at most (env `window', default 32; 1: one at a time);
 %% `inputs'/`outputs' ports added to those found in the file (for names
 %% built at run time).
+%% `host' (set by a Lua behavior's `add_behavior' with inline functions,
+%% or its `configure_polling' with a converter): the behavior's code is slot
+%% `Slot' of the Lua state opened as `Id', and `file' and `root' are its
+%% creator's; `layers' the layer of each behavior a program adds, by name.
 -type opts() :: #{file := file:filename_all(), root => file:filename_all(), name => atom(),
                   params => map(), layer => non_neg_integer(),
                   budget => pos_integer(), memory => pos_integer(), window => pos_integer(),
-                  inputs => [atom()], outputs => [atom()]}.
+                  inputs => [atom()], outputs => [atom()],
+                  host => {toroco_lua_port:id(), pos_integer()},
+                  layers => #{atom() => non_neg_integer()}}.
 
 %% `layers' the layer of each behavior main.lua loads (default 0: the
 %% original has no layers, only priorities); `params' the main file's
@@ -98,10 +103,16 @@ load_main(Path, Opts) ->
     case toroco_lua_port:open(filename:basename(Abs), filename:dirname(Abs),
                               maps:get(params, Opts, #{}), Limits, toroco_clock:now_ms()) of
         {ok, Id, _Port, Actions} ->
-            _ = toroco_lua_port:close(Id),
             _ = [print(Text, D) || {print, Text} <- Actions],
-            Ctx = #{root => filename:dirname(Path), opts => Opts},
-            apply_main([{Op, Line, Args} || {main, Op, Line, Args} <- Actions], Path, Ctx, []);
+            Ctx = #{root => filename:dirname(Path), opts => Opts, host => Id, file => Path},
+            Calls = [{Op, Line, Args} || {main, Op, Line, Args} <- Actions],
+            %% converters first, so that the wiring names what they emit
+            {Polling, Others} = lists:partition(fun({Op, _, _}) -> Op =:= <<"configure_polling">> end,
+                                                Calls),
+            Result = apply_main(Polling ++ Others, Path, Ctx, []),
+            %% the state lives on while a behavior it hosts does
+            _ = toroco_lua_port:close(Id),
+            Result;
         {stopped, {lua_error, _, Line, Msg} = R, _} ->
             {error, {path(element(2, R), D), Line, Msg}};
         {stopped, {lua_limit, Src, What}, _} ->
@@ -124,9 +135,18 @@ apply_main([{Op, Line, Args} | Rest], Path, Ctx, Loaded) ->
 main_call(<<"load_behavior">>, [Name, File, Params], #{root := Root, opts := Opts}) ->
     B = binary_to_atom(Name),
     Layer = maps:get(B, maps:get(layers, Opts, #{}), 0),
-    Limits = maps:with([budget, memory], Opts),
+    Limits = maps:with([budget, memory, layers], Opts),
     case toroco_lua:add_behavior(B, Limits#{file => lua_file(Root, File), root => Root,
                                             layer => Layer, params => table(Params)}) of
+        ok -> {loaded, B};
+        Error -> Error
+    end;
+main_call(<<"add_behavior">>, [Name, Slot], Ctx = #{root := Root, opts := Opts, host := Host}) ->
+    B = binary_to_atom(Name),
+    Layer = maps:get(B, maps:get(layers, Opts, #{}), 0),
+    Limits = maps:with([budget, memory, layers], Opts),
+    case toroco_lua:add_behavior(B, Limits#{file => maps:get(file, Ctx), root => Root, layer => Layer,
+                                            host => {Host, Slot}}) of
         ok -> {loaded, B};
         Error -> Error
     end;
@@ -141,12 +161,45 @@ main_call(<<"set_inhibitors">>, [E, Outputs], _Ctx) ->
 main_call(<<"suspend_behavior">>, [B], _Ctx) -> toroco:suspend_behavior(binary_to_atom(B));
 main_call(<<"resume_behavior">>, [B], _Ctx) -> toroco:resume_behavior(binary_to_atom(B));
 main_call(<<"remove_behavior">>, [B], _Ctx) -> toroco:remove_behavior(binary_to_atom(B));
-main_call(<<"configure_polling">>, [D, E, Ms], _Ctx) ->
+main_call(<<"configure_polling">>, [D, E, Ms, false], _Ctx) ->
     configure_polling(D, E, Ms);
+main_call(<<"configure_polling">>, [D, E, Ms, Slot], Ctx) ->
+    case configure_polling(D, E, Ms) of
+        ok -> converter(binary_to_atom(D), binary_to_atom(E), Slot, Ctx);
+        Error -> Error
+    end;
 main_call(<<"run">>, _, _Ctx) -> ok;
 main_call(Op, Args, _Ctx) -> {error, {bad_main_call, {Op, Args}}}.
 
-sources(Ss) -> [{binary_to_atom(E), binary_to_atom(O)} || [E, O] <- Ss].
+%% A source a converter converts is its converter's output.
+sources(Ss) -> [converted({binary_to_atom(E), binary_to_atom(O)}) || [E, O] <- Ss].
+
+converted({D, E} = Src) ->
+    Conv = converter_name(D, E),
+    case toroco:inspect(Conv) of
+        #{kind := behavior, module := ?MODULE} -> {Conv, E};
+        _ -> Src
+    end.
+
+%% The behavior that runs the converter of source `{D, E}': `'D.E'', in the
+%% Lua state of the code that configured it, between the device and those
+%% wired to `device.D.E' by Lua code; the layer of the lowest.
+converter_name(D, E) ->
+    binary_to_atom(<<(atom_to_binary(D))/binary, ".", (atom_to_binary(E))/binary>>).
+
+converter(D, E, Slot, Ctx = #{root := Root, opts := Opts, host := Host}) ->
+    Conv = converter_name(D, E),
+    _ = case toroco:inspect(Conv) of
+            #{kind := behavior, module := ?MODULE} -> toroco:remove_behavior(Conv);
+            _ -> ok
+        end,
+    Limits = maps:with([budget, memory], Opts),
+    case toroco_lua:add_behavior(Conv, Limits#{file => maps:get(file, Ctx), root => Root,
+                                               layer => 0, host => {Host, Slot},
+                                               inputs => [E], outputs => [E]}) of
+        ok -> toroco:set_inputs(Conv, #{E => [{D, E}]});
+        Error -> Error
+    end.
 
 %% configure_polling(device.D.E, seconds): D must be a device on the node
 %% with output E; one that can be polled (toroco_poll_sensor) is asked to
@@ -181,32 +234,16 @@ lua_file(Dir, File) ->
     end.
 
 %% @doc The ports of a Lua behavior (the `toroco_behavior' callback, given
-%% the options of `add_behavior' but the layer): every `input.NAME' (or
-%% `input["NAME"]') its file uses, every key of its `send_output{...}' /
-%% `set_output{...}' tables and every `output.NAME', plus the options
-%% `inputs' / `outputs'. Raises `{lua_file, {File, Why}}' for a file it
-%% cannot read.
--spec interface(map()) -> #{inputs := [atom()], outputs := [atom()]}.
-interface(#{file := _} = Args) ->
-    case ports(Args) of
-        {ok, Ports} -> Ports;
-        {error, Why} -> error(Why)
-    end;
-interface(Args) ->
-    error({no_file, Args}).
-
-ports(Args = #{file := File}) ->
-    case file:read_file(File) of
-        {ok, Src} ->
-            Code = strip_comments(Src),
-            Ins = names(Code, "\\binput\\s*\\.\\s*([A-Za-z_][A-Za-z0-9_]*)")
-                ++ names(Code, "\\binput\\s*\\[\\s*['\"]([^'\"]+)['\"]\\s*\\]"),
-            Outs = output_keys(Code) ++ names(Code, "\\boutput\\s*\\.\\s*([A-Za-z_][A-Za-z0-9_]*)"),
-            {ok, #{inputs => lists:usort([binary_to_atom(I) || I <- Ins] ++ maps:get(inputs, Args, [])),
-                   outputs => lists:usort([binary_to_atom(O) || O <- Outs] ++ maps:get(outputs, Args, []))}};
-        {error, Why} ->
-            {error, {lua_file, {File, Why}}}
-    end.
+%% the options of `add_behavior' but the layer): open, as in the original
+%% Torocó. Its inputs are every input its wiring names, read or not, and its
+%% outputs every output its code emits on or its wiring names; nothing is
+%% read from the file. The options `inputs' / `outputs' declare some
+%% beforehand (they show in `toroco:inspect/1' before any wiring).
+-spec interface(map()) -> #{inputs := [atom()], outputs := [atom()], open := true}.
+interface(Args) when is_map(Args) ->
+    #{inputs => lists:usort(maps:get(inputs, Args, [])),
+      outputs => lists:usort(maps:get(outputs, Args, [])),
+      open => true}.
 
 %% @doc What the tasks of Lua behavior `Name' wait for: `[#{task => T, kind =>
 %% file | coroutine | trigger, input => I | none, timer => boolean()}]'.
@@ -249,11 +286,13 @@ init(Args = #{file := File}) ->
             ok = toroco_lua_port:close_all(),
             D = #{name => Name, file => File, args => Args,
                   owner => erlang:monitor(process, Owner), id => none, port => none,
+                  host => maps:get(host, Args, none),
                   reattached => [], out => queue:new(), seq => 1, batch => [],
                   watched => false, stuck_ms => toroco_lua_port:stuck_ms(),
                   window => window(maps:get(window, Args, env(window)))},
             case open(D) of
                 {ok, D1, Actions} -> {ok, running, D1, actions(Actions, D1)};
+                {error, {unknown_state, _}} -> {ok, running, orphan(host_gone, D)};
                 {error, _} = Error -> Error
             end
     end.
@@ -271,6 +310,8 @@ registered_name() ->
     end.
 
 -spec handle_input(atom(), term(), running, map()) -> toroco_behavior:result().
+handle_input(_Input, _Value, _S, #{id := none}) ->
+    keep_state_and_data;                      % an orphan, leaving (orphan/2)
 handle_input(Input, Value, _S, D) ->
     activate({input, toroco_clock:now_ms(), Input, Value}, D).
 
@@ -278,6 +319,8 @@ handle_input(Input, Value, _S, D) ->
 %% {@link waits/1} gives them, `memory' the bytes of the Lua state.
 -spec info(running, map()) -> #{waits := [map()] | {error, term()},
                                 memory := non_neg_integer() | {error, term()}}.
+info(_S, #{id := none}) ->
+    #{waits => [], memory => 0};
 info(_S, D) ->
     #{waits => case waits_of(D) of {ok, Ws} -> Ws; Error -> Error end,
       memory => case toroco_lua_port:memory(conn(D)) of {ok, M} -> M; Error -> Error end}.
@@ -350,6 +393,14 @@ handle_event(Type, Content, _S, #{name := Name}) ->
 %% Activations
 %%====================================================================
 
+open(D = #{host := {Host, Slot}}) ->
+    case toroco_lua_port:attach(Host, Slot, toroco_clock:now_ms()) of
+        {ok, Id, Port, Actions} -> {ok, D#{id := Id, port := Port}, Actions};
+        {stopped, Reason, Actions} ->
+            _ = actions(Actions, D),
+            {error, reason(Reason, D)};
+        {error, _} = Error -> Error
+    end;
 open(D = #{file := File, args := Args}) ->
     {Root, Rel} = root(File, Args),
     Limits = #{budget => maps:get(budget, Args, env(budget)),
@@ -564,6 +615,8 @@ activation({error, Why}, _D) ->
 %% it, so one program death is not one restart per Lua behavior of a layer.
 %% A program that dies more than ?REATTACH_MAX times in ?REATTACH_WINDOW_MS
 %% stops the behavior with `{lua_port_down, Why}'.
+reattach(Why, D = #{host := {_, _}}) ->
+    {keep_state, orphan({lua_port_down, Why}, D), [unset]};
 reattach(Why, D = #{name := Name, reattached := Times}) ->
     Now = erlang:monotonic_time(millisecond),
     Recent = [T || T <- Times, Now - T < ?REATTACH_WINDOW_MS],
@@ -583,6 +636,21 @@ reattach(Why, D = #{name := Name, reattached := Times}) ->
                     {stop, Reason}
             end
     end.
+
+%% A behavior whose code was made in a Lua state that is gone (with the
+%% program that held it): nothing can run it again, so it leaves the
+%% network (a call its own callback cannot make: done once it returns) and
+%% meanwhile answers inspect with no state.
+orphan(Why, D = #{name := Name}) ->
+    logger:error("toroco_lua: ~p: the Lua state its code was made in is gone (~p); "
+                 "removing it", [Name, Why], ?LOG#{name => Name}),
+    _ = spawn(fun() -> toroco:remove_behavior(Name) end),
+    D#{id := none, out := queue:new(), batch := []}.
+
+%% The Lua state a behavior's code runs in, as its slots' behaviors name it
+%% (`host'): the one it opened, or the one it was made in.
+state_id(#{host := {Host, _}}) -> Host;
+state_id(#{id := Id}) -> Id.
 
 %% {lua_error, File, Line, Message}: File as the user named it for the
 %% behavior's own file, else the module's path in the program's folder.
@@ -624,9 +692,32 @@ waits_of(D) ->
 waited(false) -> none;
 waited(I) -> binary_to_atom(I).
 
-%% The port's actions as the engine's: emissions and timers.
-actions(Actions, D) ->
-    lists:filtermap(fun(A) -> action(A, D) end, Actions).
+%% The port's actions as the engine's: emissions and timers. A behavior
+%% removing, suspending or resuming itself would wait on itself from its
+%% own callback: that is done once the callback is over, after the calls
+%% it made next (the thesis' level2 removes itself, then adds level3).
+actions(Actions, D = #{name := Name}) ->
+    Self = atom_to_binary(Name),
+    {Later, Now} = lists:partition(
+                     fun({main, Op, _, [B]}) ->
+                             B =:= Self andalso lists:member(Op, [<<"remove_behavior">>,
+                                                                  <<"suspend_behavior">>,
+                                                                  <<"resume_behavior">>]);
+                        (_) -> false
+                     end, Actions),
+    Result = lists:filtermap(fun(A) -> action(A, D) end, Now),
+    case Later of
+        [] -> ok;
+        _ ->
+            Ctx = main_ctx(D),
+            _ = spawn(fun() -> [main_call_logged(Op, Args, Ctx, Name)
+                                || {main, Op, _, Args} <- Later] end)
+    end,
+    Result.
+
+main_ctx(D = #{file := File, args := Args0}) ->
+    #{root => element(1, root(File, Args0)), file => File, host => state_id(D),
+      opts => maps:with([budget, memory, layers], Args0)}.
 
 action({send, Out, V, Hold}, D) ->
     with_output(Out, D, fun(O) -> case Hold of
@@ -647,17 +738,12 @@ action({cancel, Task}, _D) ->
 action({print, Text}, D) ->
     print(Text, D),
     false;
-action({main, Op, _Line, Args}, #{name := Name, file := File, args := Args0}) ->
+action({warning, Text}, #{name := Name}) ->
+    logger:warning("toroco_lua: ~p: ~ts", [Name, Text], ?LOG#{name => Name}),
+    false;
+action({main, Op, _Line, Args}, D = #{name := Name}) ->
     %% a behavior changing the network (the thesis' suspender, add/remove)
-    Ctx = #{root => element(1, root(File, Args0)), opts => maps:with([budget, memory], Args0)},
-    Self = atom_to_binary(Name),
-    case Op =/= <<"load_behavior">> andalso Args =:= [Self] of
-        true ->
-            %% from its own callback it would wait on itself
-            logger:warning("toroco_lua: ~p cannot ~ts itself; ignored", [Name, Op],
-                           ?LOG#{name => Name});
-        false -> main_call_logged(Op, Args, Ctx, Name)
-    end,
+    _ = main_call_logged(Op, Args, main_ctx(D), Name),
     false.
 
 main_call_logged(Op, Args, Ctx, Name) ->
@@ -670,61 +756,21 @@ main_call_logged(Op, Args, Ctx, Name) ->
 print(Text, #{name := Name}) ->
     logger:notice("~p: ~ts", [Name, Text], ?LOG#{name => Name}).
 
-%% Output names are atoms the interface made when the behavior was added;
-%% a name made at run time that no atom has is dropped here, as the engine
-%% drops an undeclared output.
+%% Ports are open: an output exists once the code emits on it. Names are
+%% atoms, so a name that no atom has yet is made one while the atom table
+%% is less than 90 % full (a program that makes names without end would
+%% fill it and take the node down); past that such emissions are dropped
+%% with a warning.
 with_output(Out, #{name := Name}, Fun) ->
     try binary_to_existing_atom(Out) of
         O -> {true, Fun(O)}
     catch error:badarg ->
-            logger:warning("toroco_lua: ~p emitted on undeclared output ~ts; dropped",
-                           [Name, Out], ?LOG#{name => Name}),
-            false
-    end.
-
-%%====================================================================
-%% The file's interface
-%%====================================================================
-
-strip_comments(Src) ->
-    NoBlocks = re:replace(Src, "--\\[(=*)\\[.*?\\]\\1\\]", "", [global, dotall, {return, binary}]),
-    re:replace(NoBlocks, "--[^\\n]*", "", [global, {return, binary}]).
-
-names(Code, Re) ->
-    case re:run(Code, Re, [global, {capture, all_but_first, binary}]) of
-        {match, Ms} -> [N || [N] <- Ms];
-        nomatch -> []
-    end.
-
-%% The top-level keys of each send_output{...} / set_output{...} table.
-output_keys(Code) ->
-    case re:run(Code, "\\b(?:send|set)_output\\s*\\(?\\s*\\{", [global, {capture, first, index}]) of
-        {match, Ms} ->
-            lists:append([keys(Code, Start + Len) || [{Start, Len}] <- Ms]);
-        nomatch -> []
-    end.
-
-%% Walks the table after its opening brace: keys at depth 1 only.
-keys(Code, Pos) ->
-    keys(Code, Pos, 1, []).
-
-keys(Code, Pos, _Depth, Acc) when Pos >= byte_size(Code) -> Acc;
-keys(_Code, _Pos, 0, Acc) -> Acc;
-keys(Code, Pos, Depth, Acc) ->
-    case binary:at(Code, Pos) of
-        ${ -> keys(Code, Pos + 1, Depth + 1, Acc);
-        $} -> keys(Code, Pos + 1, Depth - 1, Acc);
-        _ when Depth =:= 1 ->
-            Rest = binary:part(Code, Pos, byte_size(Code) - Pos),
-            case re:run(Rest, "^(?:([A-Za-z_][A-Za-z0-9_]*)|\\[\\s*['\"]([^'\"]+)['\"]\\s*\\])\\s*=(?!=)",
-                        [{capture, all_but_first, binary}]) of
-                {match, [K]} -> keys(Code, Pos + byte_size(K), Depth, [K | Acc]);
-                {match, [<<>>, K]} -> keys(Code, Pos + byte_size(K), Depth, [K | Acc]);
-                nomatch ->
-                    case re:run(Rest, "^[A-Za-z0-9_]+", [{capture, first, index}]) of
-                        {match, [{0, L}]} -> keys(Code, Pos + L, Depth, Acc);
-                        nomatch -> keys(Code, Pos + 1, Depth, Acc)
-                    end
-            end;
-        _ -> keys(Code, Pos + 1, Depth, Acc)
+            case erlang:system_info(atom_count) < erlang:system_info(atom_limit) * 9 div 10
+                andalso byte_size(Out) =< 255 of
+                true -> {true, Fun(binary_to_atom(Out))};
+                false ->
+                    logger:warning("toroco_lua: ~p emitted on new output ~ts with the atom "
+                                   "table nearly full; dropped", [Name, Out], ?LOG#{name => Name}),
+                    false
+            end
     end.

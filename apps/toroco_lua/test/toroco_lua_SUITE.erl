@@ -10,7 +10,11 @@
 
 -export([all/0, groups/0, suite/0, init_per_testcase/2, end_per_testcase/2]).
 -export([log/2]).
--export([interface_from_the_file/1, values_cross_both_ways/1, a_burst_arrives_whole_and_in_order/1,
+-export([open_ports/1, wired_inputs_the_file_never_reads/1,
+         inline_behavior_replaces_its_creator/1, inline_behavior_crash_restarts_it_alone/1,
+         converter_values_reach_the_behavior/1, random_per_state_and_seeded/1,
+         empty_file_is_a_behavior_with_no_tasks/1,
+         interface_from_the_file/1, values_cross_both_ways/1, a_burst_arrives_whole_and_in_order/1,
          wait_for_input_with_and_without_timeout/1, sleep_on_the_runtime_clock/1,
          latches_reach_the_actuator/1, print_goes_to_the_logger/1,
          lua_error_names_file_and_line/1, emissions_before_a_fault_in_a_burst_go_out/1,
@@ -28,10 +32,14 @@ suite() ->
     [{timetrap, {seconds, 60}}].
 
 all() ->
-    [{group, api}, {group, faults}, {group, reload}, {group, lockstep}].
+    [{group, api}, {group, original}, {group, faults}, {group, reload}, {group, lockstep}].
 
 groups() ->
-    [{api, [], [interface_from_the_file, values_cross_both_ways, a_burst_arrives_whole_and_in_order,
+    [{original, [], [open_ports, wired_inputs_the_file_never_reads,
+                      inline_behavior_replaces_its_creator, inline_behavior_crash_restarts_it_alone,
+                      converter_values_reach_the_behavior, random_per_state_and_seeded,
+                      empty_file_is_a_behavior_with_no_tasks]},
+     {api, [], [interface_from_the_file, values_cross_both_ways, a_burst_arrives_whole_and_in_order,
                 wait_for_input_with_and_without_timeout, sleep_on_the_runtime_clock,
                 latches_reach_the_actuator, print_goes_to_the_logger, reset_starts_a_fresh_state,
                 load_main_errors_name_the_line, load_main_from_the_program_folder,
@@ -73,25 +81,183 @@ text({report, R}) -> iolist_to_binary(io_lib:format("~p", [R]));
 text({F, A}) -> iolist_to_binary(io_lib:format(F, A)).
 
 %%% ---------------------------------------------------------------------
+%%% Programs written for the original
+%%% ---------------------------------------------------------------------
+
+open_ports(doc) ->
+    ["Ports are open: set_inputs names any input of a Lua behavior, an output exists "
+     "once the code emits on it or the wiring names it; a refused change changes nothing"];
+open_ports(Config) ->
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [value]}),
+    actuator(a, [echo, other]),
+    ok = toroco_lua:add_behavior(e, #{file => data(Config, "echo.lua")}),
+    #{inputs := Ins0, outputs := Outs0} = toroco:inspect(e),
+    ?assertEqual({[], []}, {maps:keys(Ins0), maps:keys(Outs0)}),
+    ok = toroco:set_inputs(e, #{value => [{s, value}], never_read => [{s, value}]}),
+    ok = toroco:set_inputs(a, #{echo => [{e, echo}], other => [{e, not_emitted_yet}]}),
+    #{inputs := Ins, outputs := Outs} = toroco:inspect(e),
+    ?assertEqual([never_read, value], lists:sort(maps:keys(Ins))),
+    ?assertEqual([echo, not_emitted_yet], lists:sort(maps:keys(Outs))),
+    ok = toroco:inject({s, value}, 7),
+    await(a, echo, [7]),
+    %% emitted on, wired by nobody: it exists now
+    #{outputs := Outs1} = toroco:inspect(e),
+    ?assertEqual([count, echo, made, not_emitted_yet], lists:sort(maps:keys(Outs1))),
+    %% devices keep their declared ports, and a refused change changes nothing
+    ?assertEqual({error, {unknown_output, {s, nope}}},
+                 toroco:set_inputs(e, #{value => [{s, value}], another => [{s, nope}]})),
+    #{inputs := Ins2} = toroco:inspect(e),
+    ?assertEqual([never_read, value], lists:sort(maps:keys(Ins2))).
+
+wired_inputs_the_file_never_reads(doc) ->
+    ["A main file wiring inputs its behavior never reads loads and runs; comments and "
+     "strings in the behavior's file make no port"];
+wired_inputs_the_file_never_reads(Config) ->
+    ok = toroco:add_device(mouse, toroco_fake_sensor, #{outputs => [left, right]}),
+    actuator(actuator, [signal]),
+    ?assertEqual({ok, #{behaviors => [counter]}},
+                 toroco_lua:load_main(data(Config, "open_ports/main.lua"), #{})),
+    #{inputs := Ins, outputs := Outs} = toroco:inspect(counter),
+    ?assertEqual([reset, spare, tick], lists:sort(maps:keys(Ins))),
+    ?assertEqual([count], maps:keys(Outs)),
+    ok = toroco:inject({mouse, left}, pressed),
+    ok = toroco:inject({mouse, right}, pressed),
+    ok = toroco:inject({mouse, left}, released),
+    await(actuator, signal, [1, 2]),
+    #{outputs := Outs1} = toroco:inspect(counter),
+    ?assertEqual([count, made_later], lists:sort(maps:keys(Outs1))).
+
+inline_behavior_replaces_its_creator(doc) ->
+    ["A behavior removes itself, adds level3 whose trigger is an inline Lua function "
+     "(with params), and rewires reporter's input to it: level3 runs in the state its "
+     "creator made, after the creator is gone"];
+inline_behavior_replaces_its_creator(Config) ->
+    ok = toroco:add_device(mouse, toroco_fake_sensor, #{outputs => [left]}),
+    actuator(actuator, [signal]),
+    ?assertEqual({ok, #{behaviors => [level2, reporter]}},
+                 toroco_lua:load_main(data(Config, "levels/main.lua"), #{})),
+    ok = toroco:inject({mouse, left}, pressed),
+    await(actuator, signal, [2]),
+    Gone = erlang:monitor(process, whereis(toroco_names:process(level2))),
+    ok = toroco:inject({mouse, left}, released),
+    receive {'DOWN', Gone, process, _, _} -> ok after ?WAIT -> ct:fail(level2_not_removed) end,
+    toroco_test_lib:wait_until(fun() -> is_map(toroco:inspect(level3)) end, ?WAIT, level3),
+    #{behaviors := Bs} = toroco:inspect(),
+    ?assertEqual([level3, reporter], lists:sort(Bs)),
+    #{inputs := #{level := #{sources := [{level3, level}]}}} = toroco:inspect(reporter),
+    ok = toroco:inject({mouse, left}, pressed),
+    await(actuator, signal, [2, {3, <<"pressed">>}]),
+    %% a supervised behavior like any other: inspect shows its task
+    {ok, [#{kind := trigger, input := left}]} = toroco_lua:waits(level3),
+    ok = toroco:suspend_behavior(level3),
+    ok = toroco:inject({mouse, left}, released),
+    ok = toroco:resume_behavior(level3),
+    ok = toroco:inject({mouse, left}, pressed),
+    await(actuator, signal, [2, {3, <<"pressed">>}, {3, <<"pressed">>}]).
+
+inline_behavior_crash_restarts_it_alone(doc) ->
+    ["A Lua error in a behavior made with inline code restarts it alone, in the same "
+     "Lua state (its creator's upvalues live on), and its creator goes on in the same process"];
+inline_behavior_crash_restarts_it_alone(Config) ->
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [value, make]}),
+    actuator(a, [child, made]),
+    ok = toroco_lua:add_behavior(maker, #{file => data(Config, "levels/maker.lua")}),
+    ok = toroco:set_inputs(maker, #{make => [{s, make}]}),
+    ok = toroco:set_inputs(a, #{made => [{maker, made}]}),
+    ok = toroco:inject({s, make}, go),
+    await(a, made, [1]),
+    toroco_test_lib:wait_until(fun() -> is_pid(whereis(toroco_names:process(child))) end,
+                               ?WAIT, child),
+    ok = toroco:inject({s, value}, 1),
+    await(a, child, [{1, 1}]),
+    Maker = whereis(toroco_names:process(maker)),
+    Child = whereis(toroco_names:process(child)),
+    Ref = erlang:monitor(process, Child),
+    ok = toroco:inject({s, value}, <<"boom">>),
+    receive {'DOWN', Ref, process, _, Why} ->
+            ?assertMatch({lua_error, _, 17, <<"boom in child">>}, Why)
+    after ?WAIT -> ct:fail(child_not_stopped)
+    end,
+    back(child),
+    ?assertNotEqual(Child, whereis(toroco_names:process(child))),
+    ok = toroco:inject({s, value}, 2),
+    await(a, child, [{1, 1}, {2, 2}]),
+    ?assertEqual(Maker, whereis(toroco_names:process(maker))),
+    ok = toroco:inject({s, make}, go),
+    await(a, made, [1, 2]).
+
+converter_values_reach_the_behavior(doc) ->
+    ["configure_polling with a converter: the converter runs in Lua on each reading "
+     "and its return values are the event's values; a pollable device is polled at "
+     "the period; one that emits by itself gets only the converter"];
+converter_values_reach_the_behavior(Config) ->
+    ok = toroco:add_device(trc_grey_left, toroco_fake_sensor, #{outputs => [value]}),
+    actuator(trc_motor, [setvel2mtr]),
+    ?assertEqual({ok, #{behaviors => [follower]}},
+                 toroco_lua:load_main(data(Config, "line/main.lua"), #{})),
+    ok = toroco:inject({trc_grey_left, value}, 700),
+    await(trc_motor, setvel2mtr, [{10, 20, 700}]),
+    ok = toroco:inject({trc_grey_left, value}, 100),
+    await(trc_motor, setvel2mtr, [{10, 20, 700}, {20, 10, 100}]),
+    %% a device that can be polled: polled at the period, each reading converted
+    ok = toroco_test_lib:clear(),
+    Polls = counters:new(1, []),
+    Reading = fun() -> ok = counters:add(Polls, 1, 1), 100 + 800 * (counters:get(Polls, 1) rem 2) end,
+    ok = toroco:add_device(trc_grey_left, toroco_poll_sensor, #{fn => Reading, every_ms => 60000}),
+    actuator(trc_motor, [setvel2mtr]),
+    {ok, _} = toroco_lua:load_main(data(Config, "line/main.lua"), #{}),
+    #{device := #{every_ms := 50}} = toroco:inspect(trc_grey_left),
+    ok = toroco_fake_actuator:await(trc_motor, fun(H) -> length(H) >= 3 end, ?WAIT),
+    Got = lists:usort([V || {setvel2mtr, V, _} <- toroco_fake_actuator:history(trc_motor)]),
+    ?assertEqual([{10, 20, 900}, {20, 10, 100}], Got).
+
+random_per_state_and_seeded(doc) ->
+    ["math.random is each state's own: two behaviors seeded alike draw alike however "
+     "their draws interleave; os.time() is the runtime clock's seconds"];
+random_per_state_and_seeded(Config) ->
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [a, b]}),
+    actuator(act, [a, b]),
+    [ok = toroco_lua:add_behavior(N, #{file => data(Config, "random.lua"), params => #{seed => 42}})
+     || N <- [ra, rb]],
+    ok = toroco:set_inputs(ra, #{go => [{s, a}]}),
+    ok = toroco:set_inputs(rb, #{go => [{s, b}]}),
+    ok = toroco:set_inputs(act, #{a => [{ra, drawn}], b => [{rb, drawn}]}),
+    [ok = toroco:inject({s, a}, 1) || _ <- lists:seq(1, 3)],
+    ok = toroco_fake_actuator:await(act, fun(H) -> length(H) =:= 3 end, ?WAIT),
+    [ok = toroco:inject({s, b}, 1) || _ <- lists:seq(1, 3)],
+    ok = toroco_fake_actuator:await(act, fun(H) -> length(H) =:= 6 end, ?WAIT),
+    A = [R || {R, _} <- values(act, a)],
+    ?assertEqual(A, [R || {R, _} <- values(act, b)]),
+    ?assertEqual(3, length(lists:usort(A))),
+    [{_, T} | _] = values(act, a),
+    ?assert(abs(T - toroco_clock:now_ms() div 1000) =< 5).
+
+empty_file_is_a_behavior_with_no_tasks(doc) ->
+    ["An empty behavior file loads as a behavior with no tasks, with a warning"];
+empty_file_is_a_behavior_with_no_tasks(Config) ->
+    ok = toroco_lua:add_behavior(nothing, #{file => data(Config, "empty.lua")}),
+    receive {lua_log, nothing, Text} ->
+            ?assertMatch({_, _}, binary:match(Text, <<"returns nothing">>))
+    after ?WAIT -> ct:fail(no_warning)
+    end,
+    ?assertEqual({ok, []}, toroco_lua:waits(nothing)).
+
+%%% ---------------------------------------------------------------------
 %%% The API
 %%% ---------------------------------------------------------------------
 
 interface_from_the_file(doc) ->
-    ["A Lua behavior's inputs and outputs are those its file uses, and "
-     "toroco:add_behavior(Name, toroco_lua, #{file => ...}) takes it as SPEC §16 writes"];
+    ["toroco:add_behavior(Name, toroco_lua, #{file => ...}) as SPEC §16 writes it; the "
+     "ports are open (nothing read from the file): `inputs'/`outputs' declare some beforehand"];
 interface_from_the_file(Config) ->
-    ?assertEqual(#{inputs => [value], outputs => [count, echo, made]},
+    ?assertEqual(#{inputs => [], outputs => [], open => true},
                  toroco_lua:interface(#{file => data(Config, "echo.lua")})),
-    ?assertEqual(#{inputs => [go, more], outputs => [got, more, timeout]},
-                 toroco_lua:interface(#{file => data(Config, "waiter.lua")})),
-    ?assertEqual(#{inputs => [extra, update], outputs => [motors_setvel]},
+    ?assertEqual(#{inputs => [extra], outputs => [], open => true},
                  toroco_lua:interface(#{file => data(Config, "latch.lua"), inputs => [extra]})),
-    ?assertError({lua_file, {_, enoent}}, toroco_lua:interface(#{file => "nope.lua"})),
     %% as SPEC §16 writes it, straight through the runtime's API
     ok = toroco:add_behavior(lb, toroco_lua, #{file => data(Config, "echo.lua"), layer => 2,
                                                params => #{}}),
-    #{module := toroco_lua, layer := 2, inputs := #{value := _},
-      outputs := #{count := _, echo := _, made := _}} = toroco:inspect(lb),
+    #{module := toroco_lua, layer := 2} = toroco:inspect(lb),
     ?assertMatch({error, _}, toroco:add_behavior(nf, toroco_lua, #{file => "nope.lua"})).
 
 values_cross_both_ways(doc) ->
@@ -242,8 +408,8 @@ load_main_from_the_program_folder(Config) ->
 
 configure_polling_sets_the_period(doc) ->
     ["configure_polling(device.D.E, s) has a device that can be polled poll every s "
-     "and leaves one that emits by itself as it is; a converter, or an output the "
-     "device has not, is refused with the main file's line"];
+     "and leaves one that emits by itself as it is; an output the device has not is "
+     "refused with the main file's line"];
 configure_polling_sets_the_period(Config) ->
     ok = toroco:add_device(p, toroco_poll_sensor, #{fn => fun() -> 1 end, every_ms => 60000}),
     ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [value]}),
@@ -254,9 +420,6 @@ configure_polling_sets_the_period(Config) ->
     %% polled again and again: at 60 s a period, the first poll would be the only one
     Deadline = erlang:monotonic_time(millisecond) + ?WAIT,
     polled(p, 5, Deadline),
-    Conv = data(Config, "polling/converter.lua"),
-    {error, {Conv, 2, Msg}} = toroco_lua:load_main(Conv, #{}),
-    ?assertMatch({_, _}, binary:match(Msg, <<"converters are not supported">>)),
     Unknown = data(Config, "polling/unknown.lua"),
     ?assertEqual({error, {Unknown, 3, {unknown_output, {p, nope}}}},
                  toroco_lua:load_main(Unknown, #{})).
