@@ -303,6 +303,11 @@ handle_event(Type, Content, S, E) ->
 %% it inserts are handled too.
 event(info, ?WIRE_STEP(Token, Msg), S, E) ->
     toroco_wire:step_done(Token, step(Msg, S, E));
+%% A step whose work is still out of the process (a Lua behavior's
+%% activation, answered by a message): done once the callback module
+%% leaves state `step_pending' (gen_statem retries a postponed event then).
+event(internal, ?WIRE_STEP_DONE(_), step_pending, _E) ->
+    {keep_state_and_data, [postpone]};
 event(internal, ?WIRE_STEP_DONE(Token), _S, _E) ->
     toroco_lockstep:done(Token),
     keep_state_and_data;
