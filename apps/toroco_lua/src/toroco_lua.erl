@@ -287,7 +287,7 @@ init(Args = #{file := File}) ->
             D = #{name => Name, file => File, args => Args,
                   owner => erlang:monitor(process, Owner), id => none, port => none,
                   host => maps:get(host, Args, none),
-                  reattached => [], out => queue:new(), seq => 1, batch => [],
+                  reattached => [], out => queue:new(), seq => 1, batch => queue:new(),
                   watched => false, stuck_ms => toroco_lua_port:stuck_ms(),
                   window => window(maps:get(window, Args, env(window)))},
             case open(D) of
@@ -309,7 +309,10 @@ registered_name() ->
         _ -> self()
     end.
 
--spec handle_input(atom(), term(), running, map()) -> toroco_behavior:result().
+%% `step_pending': in lockstep, an activation is out (see activate/2).
+-type state() :: running | step_pending.
+
+-spec handle_input(atom(), term(), state(), map()) -> toroco_behavior:result().
 handle_input(_Input, _Value, _S, #{id := none}) ->
     keep_state_and_data;                      % an orphan, leaving (orphan/2)
 handle_input(Input, Value, _S, D) ->
@@ -317,25 +320,33 @@ handle_input(Input, Value, _S, D) ->
 
 %% @doc What `toroco:inspect(Name)' shows under `behavior': `waits' as
 %% {@link waits/1} gives them, `memory' the bytes of the Lua state.
--spec info(running, map()) -> #{waits := [map()] | {error, term()},
-                                memory := non_neg_integer() | {error, term()}}.
+%% While activations are out, the program would answer after them: then
+%% `waits' is `{busy, N}' (N requests out) and nothing is asked, so that
+%% inspect is answered at once.
+-spec info(state(), map()) -> #{waits := [map()] | {busy, pos_integer()} | {error, term()},
+                                memory := non_neg_integer() | unknown | {error, term()}}.
 info(_S, #{id := none}) ->
     #{waits => [], memory => 0};
-info(_S, D) ->
-    #{waits => case waits_of(D) of {ok, Ws} -> Ws; Error -> Error end,
-      memory => case toroco_lua_port:memory(conn(D)) of {ok, M} -> M; Error -> Error end}.
+info(_S, D = #{out := Out, batch := Batch}) ->
+    case queue:len(Out) + queue:len(Batch) of
+        0 ->
+            #{waits => case waits_of(D) of {ok, Ws} -> Ws; Error -> Error end,
+              memory => case toroco_lua_port:memory(conn(D)) of {ok, M} -> M; Error -> Error end};
+        Busy ->
+            #{waits => {busy, Busy}, memory => unknown}
+    end.
 
--spec handle_event(gen_statem:event_type(), term(), running, map()) -> toroco_behavior:result().
+-spec handle_event(gen_statem:event_type(), term(), state(), map()) -> toroco_behavior:result().
 handle_event({timeout, {lua, Task}}, {lua_timer, Id, Task, Seq}, _S, D = #{id := Id}) ->
     activate({timer, toroco_clock:now_ms(), Task, Seq}, D);
 handle_event({timeout, {lua, _}}, {lua_timer, _OldId, _, _}, _S, _D) ->
     keep_state_and_data;                      % a timer of the state before a reload
-handle_event(info, {toroco_lua_port, replies, Replies}, _S, D) ->
-    replies(Replies, D);
+handle_event(info, {toroco_lua_port, replies, Replies}, S, D) ->
+    settle(S, replies(Replies, D));
 handle_event(info, {toroco_lua_port, reply, _Ref, _Bin}, _S, _D) ->
     keep_state_and_data;                      % a call's, after its caller gave up
-handle_event(info, {?MODULE, flush, Id}, _S, D = #{id := Id}) ->
-    flushed(D);
+handle_event(info, {?MODULE, flush, Id}, S, D = #{id := Id}) ->
+    settle(S, flushed(D));
 handle_event(info, {?MODULE, flush, _OldId}, _S, _D) ->
     keep_state_and_data;
 handle_event(info, {timeout, _, lua_stuck}, _S, D = #{out := Out, port := Port}) ->
@@ -354,17 +365,29 @@ handle_event(info, {timeout, _, lua_stuck}, _S, D = #{out := Out, port := Port})
     end;
 handle_event(info, {'DOWN', MRef, process, _, Why}, _S, #{owner := MRef}) ->
     {stop, {lua_port_down, Why}};
-handle_event(info, ?LUA_PORT_DOWN(Ids, Why), _S, D = #{id := Id}) ->
+handle_event(info, ?LUA_PORT_DOWN(Ids, Why), S, D = #{id := Id}) ->
     case lists:member(Id, Ids) of
-        true -> reattach(Why, D);
+        true -> settle(S, reattach(Why, D));
         false -> keep_state_and_data          % a state it already re-opened
     end;
 handle_event({call, From}, {?MODULE, waits}, _S, D) ->
     {keep_state_and_data, [{reply, From, waits_of(D)}]};
 handle_event({call, From}, {?MODULE, memory}, _S, D) ->
     {keep_state_and_data, [{reply, From, toroco_lua_port:memory(conn(D))}]};
-handle_event({call, From}, {?MODULE, reload}, _S, D0) ->
+handle_event({call, From}, {?MODULE, reload}, S, D0) ->
     %% the events sent to the old code are answered by it first
+    settle(S, reload(From, D0));
+%% The engine's default for what nobody handles: this module's handle_event
+%% is called through each behavior's own callback module, so it cannot fall
+%% through to the engine by a function_clause.
+handle_event({call, From}, Request, _S, #{name := Name}) ->
+    {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
+handle_event(Type, Content, _S, #{name := Name}) ->
+    logger:warning("toroco_lua: ~p ignored ~p event ~p", [Name, Type, Content],
+                   ?LOG#{name => Name}),
+    keep_state_and_data.
+
+reload(From, D0) ->
     case drain(D0) of
         {keep_state, D = #{id := Old, name := Name}, Drained} ->
             case open(D) of
@@ -378,16 +401,7 @@ handle_event({call, From}, {?MODULE, reload}, _S, D0) ->
             end;
         Stop ->
             Stop
-    end;
-%% The engine's default for what nobody handles: this module's handle_event
-%% is called through each behavior's own callback module, so it cannot fall
-%% through to the engine by a function_clause.
-handle_event({call, From}, Request, _S, #{name := Name}) ->
-    {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
-handle_event(Type, Content, _S, #{name := Name}) ->
-    logger:warning("toroco_lua: ~p ignored ~p event ~p", [Name, Type, Content],
-                   ?LOG#{name => Name}),
-    keep_state_and_data.
+    end.
 
 %%====================================================================
 %% Activations
@@ -418,52 +432,56 @@ env(Key) ->
     {ok, V} = application:get_env(toroco_lua, Key),
     V.
 
-%% An activation. In real time up to `window' (app env, default 32) of a
-%% behavior's activations are in flight: the request is written to the
-%% program and the callback returns, the answer comes as a message and its
-%% emissions are the actions of that event, in the order the inputs came
-%% (the program answers in order). The program then reads the requests
-%% that queued up in one go and the answers come back in one go, instead of
-%% one round trip through the pipe each: an event stream is not paced by the
-%% round trip. At the window's end the oldest answer is awaited. In
-%% lockstep, one at a time and inside the callback, so that a step holds
-%% its emissions.
+%% An activation. Up to `window' (app env, default 32) of a behavior's
+%% activations are in flight: the request is written to the program and the
+%% callback returns, the answer comes as a message and its emissions are
+%% the actions of that event, in the order the inputs came (the program
+%% answers in order). The program then reads the requests that queued up in
+%% one go and the answers come back in one go, instead of one round trip
+%% through the pipe each: an event stream is not paced by the round trip.
+%% Past the window, requests wait here and go out as answers come: the
+%% callback never waits, so inspect, suspend and the tap are answered at
+%% once whatever the program is doing.
+%%
+%% In lockstep the behavior enters state `step_pending' until every answer
+%% is in: the engine holds the lockstep step until it leaves that state
+%% (toroco_behavior), so that a step still holds its emissions.
 activate(Req, D) ->
     case toroco_clock:lockstep_server() of
         none -> pipeline(Req, D);
         _ ->
-            case drain(D) of
-                {keep_state, D1, Drained} ->
-                    then(Drained, activation(call(D1, Req), D1));
-                Stop -> Stop
+            case queue(Req, D) of
+                {ok, D1} ->
+                    case flush(D1) of
+                        {ok, D2} -> {next_state, step_pending, D2, []};
+                        {Error, D2} -> settle(step_pending, activation(Error, D2))
+                    end;
+                Error -> activation(Error, D)
             end
     end.
 
-call(D, Req) ->
-    case toroco_lua_port:request(conn(D), 0, Req) of
-        {ok, Ref} -> toroco_lua_port:await(conn(D), Ref);
+%% A request kept, to be written by flush/1.
+queue(Req, D = #{seq := Seq, batch := Batch}) ->
+    case toroco_lua_port:encode(conn(D), Seq, Req) of
+        {ok, Ref, Frame} -> {ok, D#{seq := Seq rem 65535 + 1, batch := queue:in({Ref, Frame}, Batch)}};
         Error -> Error
     end.
 
 %% While more messages wait in the mailbox, the requests are kept and
 %% written together when the `flush' this sends itself comes, after them:
 %% one write for a burst of inputs.
-pipeline(Req, D0 = #{id := Id, out := Out, seq := Seq, window := Window, batch := Batch}) ->
-    case toroco_lua_port:encode(conn(D0), Seq, Req) of
-        {ok, Ref, Frame} ->
-            D = watchdog(D0),
-            Out1 = queue:in({Ref, erlang:monotonic_time(millisecond) + maps:get(stuck_ms, D)}, Out),
-            D1 = D#{out := Out1, seq := Seq rem 65535 + 1, batch := [Frame | Batch]},
-            case {queue:len(Out1) >= Window, Batch =:= [] andalso queue:is_empty(Out)} of
-                {true, _} -> oldest(D1);
-                {false, false} ->
+pipeline(Req, D0 = #{id := Id, out := Out, batch := Batch}) ->
+    case queue(Req, D0) of
+        {ok, D1} ->
+            case queue:is_empty(Batch) andalso queue:is_empty(Out) of
+                false ->
                     %% its flush is on its way, or requests written are in
                     %% flight: this one is written, with whatever else
                     %% comes meanwhile, when their answers come (the
                     %% program would take it after them anyway): one write
                     %% instead of one per input
                     {keep_state, D1, []};
-                {false, true} ->
+                true ->
                     case process_info(self(), message_queue_len) of
                         {message_queue_len, 0} -> flushed(D1);
                         _ ->
@@ -475,13 +493,22 @@ pipeline(Req, D0 = #{id := Id, out := Out, seq := Seq, window := Window, batch :
             activation(Error, D0)
     end.
 
-%% The requests kept, written.
-flush(D = #{batch := []}) ->
-    {ok, D};
-flush(D = #{batch := Batch}) ->
-    case toroco_lua_port:write(conn(D), lists:reverse(Batch)) of
-        ok -> {ok, D#{batch := []}};
-        Error -> {Error, D#{batch := []}}
+%% The requests kept, written, as many as the window has room for; the
+%% watchdog counts from now for them.
+flush(D = #{batch := Batch, out := Out, window := Window}) ->
+    case min(Window - queue:len(Out), queue:len(Batch)) of
+        N when N =< 0 -> {ok, D};
+        N ->
+            {Now, Later} = queue:split(N, Batch),
+            Items = queue:to_list(Now),
+            D1 = watchdog(D),
+            Due = erlang:monotonic_time(millisecond) + maps:get(stuck_ms, D1),
+            D2 = D1#{batch := Later,
+                     out := queue:join(Out, queue:from_list([{Ref, Due} || {Ref, _} <- Items]))},
+            case toroco_lua_port:write(conn(D2), [Frame || {_, Frame} <- Items]) of
+                ok -> {ok, D2};
+                Error -> {Error, D2}
+            end
     end.
 
 flushed(D) ->
@@ -489,6 +516,15 @@ flushed(D) ->
         {ok, D1} -> {keep_state, D1, []};
         {Error, D1} -> activation(Error, D1)
     end.
+
+%% In lockstep, the step is over once no request is out any more.
+settle(step_pending, {keep_state, D = #{out := Out, batch := Batch}, Actions}) ->
+    case queue:is_empty(Out) andalso queue:is_empty(Batch) of
+        true -> {next_state, running, D, Actions};
+        false -> {keep_state, D, Actions}
+    end;
+settle(_S, Result) ->
+    Result.
 
 %% The answers to pipelined activations that came together, in order: the
 %% actions of all of them, one event. One that ends the behavior (or fails)
@@ -527,30 +563,22 @@ replies([{Ref, Bin} | More] = Replies, D = #{out := Out}, Acc) ->
             replies(More, D, Acc)             % of a state it no longer has
     end.
 
-%% The window is full: the oldest answer, awaited, with those that came
-%% with it.
-oldest(D) ->
-    case flush(D) of
-        {ok, D1 = #{out := Out}} ->
-            {value, {Oldest, _}} = queue:peek(Out),
-            case toroco_lua_port:await_replies(conn(D1), Oldest) of
-                {replies, Replies} -> replies(Replies, D1);
-                Error -> activation(Error, D1)
-            end;
-        {Error, D1} ->
-            activation(Error, D1)
-    end.
-
-%% The answers in flight, awaited in order: their actions, or the end.
+%% The answers to every request kept or in flight, awaited in order (a
+%% reload's: the events sent to the old code are answered by it first).
 drain(D) ->
-    case flush(D) of
-        {ok, D1} -> drain(D1, []);
-        {Error, D1} -> activation(Error, D1)
-    end.
+    drain(D, []).
 
-drain(D = #{out := Out}, Acc) ->
+drain(D = #{out := Out, batch := Batch}, Acc) ->
     case queue:peek(Out) of
-        empty -> {keep_state, D, lists:append(lists:reverse(Acc))};
+        empty ->
+            case queue:is_empty(Batch) of
+                true -> {keep_state, D, lists:append(lists:reverse(Acc))};
+                false ->
+                    case flush(D) of
+                        {ok, D1} -> drain(D1, Acc);
+                        {Error, D1} -> then(lists:append(lists:reverse(Acc)), activation(Error, D1))
+                    end
+            end;
         {value, {Ref, _}} ->
             case toroco_lua_port:await_replies(conn(D), Ref) of
                 {replies, Replies} -> drained(Replies, D, Acc);
@@ -630,7 +658,7 @@ reattach(Why, D = #{name := Name, reattached := Times}) ->
                 {ok, D1, Actions} ->
                     logger:warning("toroco_lua: ~p: lua_port died (~p); its Lua code starts "
                                    "again in the new program", [Name, Why], ?LOG#{name => Name}),
-                    D2 = D1#{reattached := [Now | Recent], out := queue:new(), batch := []},
+                    D2 = D1#{reattached := [Now | Recent], out := queue:new(), batch := queue:new()},
                     {keep_state, D2, [unset | actions(Actions, D2)]};
                 {error, Reason} ->
                     {stop, Reason}
@@ -645,7 +673,7 @@ orphan(Why, D = #{name := Name}) ->
     logger:error("toroco_lua: ~p: the Lua state its code was made in is gone (~p); "
                  "removing it", [Name, Why], ?LOG#{name => Name}),
     _ = spawn(fun() -> toroco:remove_behavior(Name) end),
-    D#{id := none, out := queue:new(), batch := []}.
+    D#{id := none, out := queue:new(), batch := queue:new()}.
 
 %% The Lua state a behavior's code runs in, as its slots' behaviors name it
 %% (`host'): the one it opened, or the one it was made in.
