@@ -54,7 +54,9 @@
 %%
 %% Options of {@link run/2}: `svg' (a path; no picture without it),
 %% `wiring' (default: app env `wiring' of `torobot', else
-%% `config/torobot.wiring'), `time' (`realtime', the default, or
+%% `config/torobot.wiring'), `lua' (a program written for the original
+%% Torocó, its main.lua, run with `toroco_lua:load_main/2' after the wiring,
+%% whose default is then `config/torobot_lua.wiring': SPEC §16), `time' (`realtime', the default, or
 %% `lockstep'), `trace' (a path, lockstep only), `speed' (a number > 0,
 %% default 1, real time only), `nodes'
 %% (`local' or `peer'; see above), `status' (`false', the default; `true'
@@ -75,7 +77,7 @@
 -type status() :: boolean() | tty | fun((iodata()) -> any()).
 -type opts() :: #{svg => file:name_all(), wiring => file:name_all(), status => status(),
                   speed => number(), nodes => local | peer, time => realtime | lockstep,
-                  trace => file:name_all()}.
+                  trace => file:name_all(), lua => file:name_all()}.
 %% A world file, or the terms of one (as `torobot_worlds:generate/2' makes).
 -type world_spec() :: file:name_all() | [tuple()].
 %% One robot's summary, or one per robot for a world of named robots.
@@ -107,7 +109,7 @@
               trace :: file:io_device() | undefined,
               published = 0 :: integer()}).
 
--define(OPTIONS, [svg, wiring, status, speed, nodes, time, trace]).
+-define(OPTIONS, [svg, wiring, status, speed, nodes, time, trace, lua]).
 
 %%====================================================================
 %% API
@@ -140,7 +142,10 @@ run(WorldSpec, Opts) ->
           {ok, torobot_world:world() | [torobot_world:world()]} | {error, term()}.
 simulate(WorldSpec, Opts) when is_map(Opts) ->
     WiringFile = maps:get(wiring, Opts,
-                          application:get_env(torobot, wiring, "config/torobot.wiring")),
+                          case Opts of
+                              #{lua := _} -> "config/torobot_lua.wiring";
+                              #{} -> application:get_env(torobot, wiring, "config/torobot.wiring")
+                          end),
     Speed = maps:get(speed, Opts, 1),
     Time = maps:get(time, Opts, realtime),
     Trace = maps:get(trace, Opts, undefined),
@@ -221,11 +226,12 @@ with_robots(Worlds, Nodes, Opts) ->
     {ok, Sim} = gen_server:start(?MODULE, {self(), maps:get(status, Opts, false), Speed,
                                            torobot_world:tick_ms(hd(Worlds)), Time, Trace}, []),
     MRef = monitor(process, Sim),
-    RobotOpts = #{wiring => WiringFile, speed => Speed, time => Time,
+    RobotOpts0 = #{wiring => WiringFile, speed => Speed, time => Time,
                   trace => Trace =/= undefined,
                   thresholds => torobot_world:ir_thresholds(hd(Worlds)),
                   sensors => [{Name, Outputs(hd(Worlds))}
                               || {Name, Outputs} <- torobot_sensors:devices()]},
+    RobotOpts = maps:merge(RobotOpts0, maps:with([lua], Opts)),
     Started = start_robots(Worlds, Nodes, RobotOpts),
     try
         Bots = [case Result of

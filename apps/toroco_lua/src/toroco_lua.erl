@@ -171,19 +171,21 @@ main_call(<<"configure_polling">>, [D, E, Ms, Slot], Ctx) ->
 main_call(<<"run">>, _, _Ctx) -> ok;
 main_call(Op, Args, _Ctx) -> {error, {bad_main_call, {Op, Args}}}.
 
-%% A source a converter converts is its converter's output.
 sources(Ss) -> [converted({binary_to_atom(E), binary_to_atom(O)}) || [E, O] <- Ss].
 
+%% The behavior named `'D.E'', when there is one, stands for source `{D,
+%% E}': a converter (below), or a device's output under the name the
+%% original gave it (torobot's `camera.update').
 converted({D, E} = Src) ->
     Conv = converter_name(D, E),
     case toroco:inspect(Conv) of
-        #{kind := behavior, module := ?MODULE} -> {Conv, E};
+        #{kind := behavior} -> {Conv, E};
         _ -> Src
     end.
 
 %% The behavior that runs the converter of source `{D, E}': `'D.E'', in the
 %% Lua state of the code that configured it, between the device and those
-%% wired to `device.D.E' by Lua code; the layer of the lowest.
+%% wired to `device.D.E' by Lua code, in layer 0.
 converter_name(D, E) ->
     binary_to_atom(<<(atom_to_binary(D))/binary, ".", (atom_to_binary(E))/binary>>).
 
@@ -287,6 +289,10 @@ init(Args = #{file := File}) ->
             D = #{name => Name, file => File, args => Args,
                   owner => erlang:monitor(process, Owner), id => none, port => none,
                   host => maps:get(host, Args, none),
+                  %% which of this process's states it is (1, 2, ...): its
+                  %% timers carry it, so the old state's do nothing, and a
+                  %% run's trace does not depend on the program's ids
+                  gen => 0,
                   reattached => [], out => queue:new(), seq => 1, batch => queue:new(),
                   watched => false, stuck_ms => toroco_lua_port:stuck_ms(),
                   window => window(maps:get(window, Args, env(window)))},
@@ -337,9 +343,9 @@ info(_S, D = #{out := Out, batch := Batch}) ->
     end.
 
 -spec handle_event(gen_statem:event_type(), term(), state(), map()) -> toroco_behavior:result().
-handle_event({timeout, {lua, Task}}, {lua_timer, Id, Task, Seq}, _S, D = #{id := Id}) ->
+handle_event({timeout, {lua, Task}}, {lua_timer, Gen, Task, Seq}, _S, D = #{gen := Gen}) ->
     activate({timer, toroco_clock:now_ms(), Task, Seq}, D);
-handle_event({timeout, {lua, _}}, {lua_timer, _OldId, _, _}, _S, _D) ->
+handle_event({timeout, {lua, _}}, {lua_timer, _OldGen, _, _}, _S, _D) ->
     keep_state_and_data;                      % a timer of the state before a reload
 handle_event(info, {toroco_lua_port, replies, Replies}, S, D) ->
     settle(S, replies(Replies, D));
@@ -409,7 +415,8 @@ reload(From, D0) ->
 
 open(D = #{host := {Host, Slot}}) ->
     case toroco_lua_port:attach(Host, Slot, toroco_clock:now_ms()) of
-        {ok, Id, Port, Actions} -> {ok, D#{id := Id, port := Port}, Actions};
+        {ok, Id, Port, Actions} ->
+            {ok, D#{id := Id, port := Port, gen := maps:get(gen, D) + 1}, Actions};
         {stopped, Reason, Actions} ->
             _ = actions(Actions, D),
             {error, reason(Reason, D)};
@@ -421,7 +428,8 @@ open(D = #{file := File, args := Args}) ->
                memory => maps:get(memory, Args, env(memory))},
     case toroco_lua_port:open(Rel, Root, maps:get(params, Args, #{}), Limits,
                               toroco_clock:now_ms()) of
-        {ok, Id, Port, Actions} -> {ok, D#{id := Id, port := Port}, Actions};
+        {ok, Id, Port, Actions} ->
+            {ok, D#{id := Id, port := Port, gen := maps:get(gen, D) + 1}, Actions};
         {stopped, Reason, Actions} ->
             _ = actions(Actions, D),
             {error, reason(Reason, D)};
@@ -759,8 +767,8 @@ action({unset, all}, _D) ->
     {true, unset};
 action({unset, Out}, D) ->
     with_output(Out, D, fun(O) -> {unset, [O]} end);
-action({timer, Task, Seq, Ms}, #{id := Id}) ->
-    {true, {{timeout, {lua, Task}}, Ms, {lua_timer, Id, Task, Seq}}};
+action({timer, Task, Seq, Ms}, #{gen := Gen}) ->
+    {true, {{timeout, {lua, Task}}, Ms, {lua_timer, Gen, Task, Seq}}};
 action({cancel, Task}, _D) ->
     {true, {{timeout, {lua, Task}}, cancel}};
 action({print, Text}, D) ->
