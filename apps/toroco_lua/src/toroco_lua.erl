@@ -742,13 +742,13 @@ actions(Actions, D = #{name := Name}) ->
                         (_) -> false
                      end, Actions),
     Result = lists:filtermap(fun(A) -> action(A, D) end, Now),
-    case Later of
-        [] -> ok;
-        _ ->
-            Ctx = main_ctx(D),
-            _ = spawn(fun() -> [main_call_logged(Op, Args, Ctx, Name)
+    _ = case Later of
+            [] -> ok;
+            _ ->
+                Ctx = main_ctx(D),
+                spawn(fun() -> [main_call_logged(Op, Args, Ctx, Name)
                                 || {main, Op, _, Args} <- Later] end)
-    end,
+        end,
     Result.
 
 main_ctx(D = #{file := File, args := Args0}) ->
