@@ -24,7 +24,7 @@
          port_killed_every_lua_behavior_back/1, bad_frames_are_answered/1,
          port_dying_again_and_again_is_left_to_supervision/1,
          reload_all_or_nothing/1, reload_under_1khz_input/1,
-         load_main_errors_name_the_line/1, configure_polling_sets_the_period/1, load_main_from_the_program_folder/1, lockstep_timers_at_simulated_deadlines/1]).
+         load_main_errors_name_the_line/1, lockstep_step_pending_answers_at_once/1, configure_polling_sets_the_period/1, load_main_from_the_program_folder/1, lockstep_timers_at_simulated_deadlines/1]).
 
 -define(WAIT, 3000).
 
@@ -52,7 +52,8 @@ groups() ->
                    port_killed_every_lua_behavior_back,
                    port_dying_again_and_again_is_left_to_supervision, bad_frames_are_answered]},
      {reload, [], [reload_all_or_nothing, reload_under_1khz_input]},
-     {lockstep, [], [lockstep_timers_at_simulated_deadlines]}].
+     {lockstep, [], [lockstep_timers_at_simulated_deadlines,
+                      lockstep_step_pending_answers_at_once]}].
 
 init_per_testcase(_Case, Config) ->
     ok = toroco_test_lib:start(),
@@ -63,7 +64,9 @@ init_per_testcase(_Case, Config) ->
     [{primary_level, Level} | Config].
 
 end_per_testcase(Case, Config) ->
-    _ = Case =:= lockstep_timers_at_simulated_deadlines andalso toroco_clock:realtime(),
+    _ = lists:member(Case, [lockstep_timers_at_simulated_deadlines,
+                            lockstep_step_pending_answers_at_once])
+        andalso toroco_clock:realtime(),
     _ = logger:remove_handler(lua_suite),
     ok = logger:set_primary_config(level, ?config(primary_level, Config)),
     %% the behaviors first, so none sees its port go
@@ -267,7 +270,7 @@ inspect_at_once_with_a_full_window(Config) ->
                  {T3, ok} = timer:tc(toroco, resume_behavior, [slow]),
                  max(T, max(T2, T3))
              end || _ <- lists:seq(1, 3)],
-    ct:pal("inspect, suspend, resume while the window is full: ~p us", [Times]),
+    ct:pal("inspect, suspend, resume while the window is full: ~w us", [Times]),
     ?assert(lists:max(Times) < 10000),
     ok = toroco_fake_actuator:await(a, fun(H) -> length(H) >= N end, 20000),
     ?assertEqual(lists:seq(1, N), values(a, done)).
@@ -721,6 +724,35 @@ lockstep_timers_at_simulated_deadlines(Config) ->
         false -> {skip, "this runtime has no lockstep yet"};
         true -> lockstep(Config)
     end.
+
+lockstep_step_pending_answers_at_once(doc) ->
+    ["In lockstep a step that waits for a slow Lua activation holds the world, yet "
+     "the behavior answers inspect, suspend and resume at once meanwhile; its emission "
+     "is in the step"];
+lockstep_step_pending_answers_at_once(Config) ->
+    ok = toroco_clock:lockstep(#{}),
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [value]}),
+    actuator(a, [done]),
+    ok = toroco_lua:add_behavior(slow, #{file => data(Config, "slow.lua"), budget => 100000000}),
+    ok = toroco:set_inputs(slow, #{value => [{s, value}]}),
+    ok = toroco:set_inputs(a, #{done => [{slow, done}]}),
+    {ok, _} = toroco_clock:tick(100, []),
+    Self = self(),
+    Ticker = spawn_link(fun() ->
+                                ok = toroco:inject({s, value}, 1),
+                                Self ! {ticked, toroco_clock:settle()}
+                        end),
+    %% the step is out while lua_port counts
+    toroco_test_lib:wait_until(fun() -> is_map(toroco:inspect(slow))
+                                            andalso maps:get(state, maps:get(process, toroco:inspect(slow)))
+                                            =:= step_pending end, ?WAIT, step_pending),
+    {T, #{behavior := #{waits := {busy, 1}}}} = timer:tc(toroco, inspect, [slow]),
+    {T2, ok} = timer:tc(toroco, suspend_behavior, [slow]),
+    {T3, ok} = timer:tc(toroco, resume_behavior, [slow]),
+    ct:pal("inspect, suspend, resume while a lockstep step waits for Lua: ~w us", [[T, T2, T3]]),
+    ?assert(lists:max([T, T2, T3]) < 10000),
+    receive {ticked, ok} -> ok after 2 * ?WAIT -> ct:fail({no_tick, Ticker}) end,
+    ?assertEqual([{done, 1, 100}], toroco_fake_actuator:history(a)).
 
 lockstep(Config) ->
     ok = toroco_clock:lockstep(#{}),
