@@ -70,6 +70,8 @@
 %% dies again and again is left to the layers' supervision.
 -define(REATTACH_MAX, 3).
 -define(REATTACH_WINDOW_MS, 10000).
+%% How long inspect waits for the program to say what the state waits for.
+-define(INFO_MS, 100).
 
 %%====================================================================
 %% API
@@ -336,8 +338,13 @@ info(_S, #{id := none}) ->
 info(_S, D = #{out := Out, batch := Batch}) ->
     case queue:len(Out) + queue:len(Batch) of
         0 ->
-            #{waits => case waits_of(D) of {ok, Ws} -> Ws; Error -> Error end,
-              memory => case toroco_lua_port:memory(conn(D)) of {ok, M} -> M; Error -> Error end};
+            %% bounded: a program busy with other behaviors' work (or
+            %% hung) does not hold inspect up
+            #{waits => case waits_of(D, ?INFO_MS) of {ok, Ws} -> Ws; Error -> Error end,
+              memory => case toroco_lua_port:memory(conn(D), ?INFO_MS) of
+                            {ok, M} -> M;
+                            Error -> Error
+                        end};
         Busy ->
             #{waits => {busy, Busy}, memory => unknown}
     end.
@@ -719,7 +726,10 @@ conn(#{id := Id, port := Port, owner := Owner}) ->
     {Id, Port, Owner}.
 
 waits_of(D) ->
-    case toroco_lua_port:waits(conn(D)) of
+    waits_of(D, toroco_lua_port:stuck_ms()).
+
+waits_of(D, Ms) ->
+    case toroco_lua_port:waits(conn(D), Ms) of
         {ok, Ws} -> {ok, [#{task => T, kind => binary_to_atom(K), input => waited(I), timer => Timer}
                           || [T, K, I, Timer] <- Ws]};
         Error -> Error

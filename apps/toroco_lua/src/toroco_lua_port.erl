@@ -64,7 +64,7 @@
 -include("toroco_lua_port.hrl").
 
 -export([start_link/0, os_pid/0, ping/0, raw/1, states/0,
-         open/5, attach/3, input/4, timer/4, waits/1, memory/1, close/1, close_all/0, crossable/1,
+         open/5, attach/3, input/4, timer/4, waits/1, waits/2, memory/1, memory/2, close/1, close_all/0, crossable/1,
          request/3, encode/3, write/2, answer/2, await/2, await_replies/2, stuck/1, stuck_ms/0]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3]).
 -export_type([id/0, conn/0, ref/0, request/0, action/0, result/0, limits/0]).
@@ -175,6 +175,19 @@ waits(C) ->
 memory(C) ->
     call(C, memory).
 
+%% @doc As `waits/1', giving up after `Ms' (the program is busy with other
+%% states' work, or hung): `{error, {lua_port_timeout, Ref}}', and the late
+%% answer comes to the caller as a `{toroco_lua_port, reply, Ref, Bytes}'
+%% to drop. For `toroco:inspect/1', which must answer at once.
+-spec waits(conn(), non_neg_integer()) -> {ok, list()} | {error, term()}.
+waits(C, Ms) ->
+    call(C, waits, Ms).
+
+%% @doc As `memory/1', giving up after `Ms' (see `waits/2').
+-spec memory(conn(), non_neg_integer()) -> {ok, non_neg_integer()} | {error, term()}.
+memory(C, Ms) ->
+    call(C, memory, Ms).
+
 %% @doc Writes a request of the state to the program without waiting:
 %% `{ok, Ref}', and its answer comes to the calling process: for `Seq' 0
 %% (`call/2''s) as `{toroco_lua_port, reply, Ref, Bytes}' (read it with
@@ -242,6 +255,12 @@ call(C, Req) ->
         {error, _} = Error -> Error
     end.
 
+call(C = {Id, Port, OwnerMon}, Req, Ms) ->
+    case request(C, 0, Req) of
+        {ok, Ref} -> await(Id, Ref, one, Port, OwnerMon, {bounded, Ms});
+        {error, _} = Error -> Error
+    end.
+
 frame({input, Now, Input, Value}, Ref, Id) ->
     case crossable(Value) of
         true -> sized(term_to_binary({input, Ref, Id, Now, Input, Value}), Id);
@@ -288,14 +307,18 @@ await(Id, Ref, Kind, Port, OwnerMon, Wait) ->
             end;
         {'DOWN', OwnerMon, process, _, Why} ->
             {error, {lua_port_owner_down, Why}}
-    after Wait ->
+    after wait_ms(Wait) ->
             case Wait of
+                {bounded, _} -> {error, {lua_port_timeout, Ref}};
                 ?CALL_TIMEOUT -> {error, {lua_port_timeout, Ref}};
                 _ ->
                     stuck(Port),
                     await(Id, Ref, Kind, Port, OwnerMon, ?CALL_TIMEOUT)
             end
     end.
+
+wait_ms({bounded, Ms}) -> Ms;
+wait_ms(Ms) -> Ms.
 
 %% @doc A state's request written to `Port' had no answer in stuck_ms: the
 %% owner kills the program if it is still the one running.
