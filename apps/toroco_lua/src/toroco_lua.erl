@@ -16,9 +16,9 @@
 %% run in lockstep too.
 %%
 %% The behavior ends with `{lua_error, File, Line, Message}' or `{lua_limit,
-%% File, budget | memory}' and its layer restarts it. If the program dies,
-%% every Lua behavior of the node starts its Lua code again in the new
-%% program without a supervisor restart (see {@link reattach/2}: a program
+%% File, budget | memory}' and its layer restarts it. If the program dies
+%% (or its owner, with it), every Lua behavior of the node starts its Lua
+%% code again in the new program without a supervisor restart (see {@link reattach/2}: a program
 %% crash is one fault, not one per behavior, so a layer of any number of Lua
 %% behaviors outlives it), while Erlang behaviors go on.
 %%
@@ -72,6 +72,9 @@
 -define(REATTACH_WINDOW_MS, 10000).
 %% How long inspect waits for the program to say what the state waits for.
 -define(INFO_MS, 100).
+%% After its owner died, how long a behavior looks for the new one.
+-define(OWNER_POLL_MS, 10).
+-define(OWNER_WAIT_MS, 5000).
 
 %%====================================================================
 %% API
@@ -350,6 +353,8 @@ info(_S, D = #{out := Out, batch := Batch}) ->
     end.
 
 -spec handle_event(gen_statem:event_type(), term(), state(), map()) -> toroco_behavior:result().
+handle_event({timeout, {lua, _}}, _, _S, #{id := none}) ->
+    keep_state_and_data;                      % no state now: see owner_down/2
 handle_event({timeout, {lua, Task}}, {lua_timer, Gen, Task, Seq}, _S, D = #{gen := Gen}) ->
     activate({timer, toroco_clock:now_ms(), Task, Seq}, D);
 handle_event({timeout, {lua, _}}, {lua_timer, _OldGen, _, _}, _S, _D) ->
@@ -376,13 +381,18 @@ handle_event(info, {timeout, _, lua_stuck}, _S, D = #{out := Out, port := Port})
         empty ->
             {keep_state, D#{watched := false}}
     end;
-handle_event(info, {'DOWN', MRef, process, _, Why}, _S, #{owner := MRef}) ->
-    {stop, {lua_port_down, Why}};
+handle_event(info, {'DOWN', MRef, process, _, Why}, S, D = #{owner := MRef}) ->
+    settle(S, owner_down(Why, D));
+handle_event(info, {timeout, _, {lua_owner, Why, Tries}}, S, D) ->
+    settle(S, owner_back(Why, Tries, D));
 handle_event(info, ?LUA_PORT_DOWN(Ids, Why), S, D = #{id := Id}) ->
     case lists:member(Id, Ids) of
         true -> settle(S, reattach(Why, D));
         false -> keep_state_and_data          % a state it already re-opened
     end;
+handle_event({call, From}, {?MODULE, _}, _S, #{id := none, name := Name}) ->
+    %% no Lua state now (its owner is being restarted, or it is leaving)
+    {keep_state_and_data, [{reply, From, {error, {no_lua_state, Name}}}]};
 handle_event({call, From}, {?MODULE, waits}, _S, D) ->
     {keep_state_and_data, [{reply, From, waits_of(D)}]};
 handle_event({call, From}, {?MODULE, memory}, _S, D) ->
@@ -678,6 +688,28 @@ reattach(Why, D = #{name := Name, reattached := Times}) ->
                 {error, Reason} ->
                     {stop, Reason}
             end
+    end.
+
+%% The owner died, and the program with it: its supervisor starts another.
+%% The behavior drops its inputs until then (real time: the world does not
+%% wait) and starts its Lua code again in the new program, as when the
+%% program alone dies, so that a layer of any number of Lua behaviors
+%% outlives this too. No owner within ?OWNER_WAIT_MS: it stops.
+owner_down(Why, D = #{host := {_, _}}) ->
+    {keep_state, orphan({lua_port_owner_down, Why}, D#{owner := none}), [unset]};
+owner_down(Why, D) ->
+    _ = erlang:start_timer(?OWNER_POLL_MS, self(), {lua_owner, Why, ?OWNER_WAIT_MS div ?OWNER_POLL_MS}),
+    {keep_state, D#{owner := none, id := none, out := queue:new(), batch := queue:new()}, [unset]}.
+
+owner_back(Why, Tries, D) ->
+    case whereis(toroco_lua_port) of
+        Owner when is_pid(Owner) ->
+            reattach({lua_port_owner_down, Why}, D#{owner := erlang:monitor(process, Owner)});
+        undefined when Tries > 0 ->
+            _ = erlang:start_timer(?OWNER_POLL_MS, self(), {lua_owner, Why, Tries - 1}),
+            keep_state_and_data;
+        undefined ->
+            {stop, {lua_port_down, Why}}
     end.
 
 %% A behavior whose code was made in a Lua state that is gone (with the

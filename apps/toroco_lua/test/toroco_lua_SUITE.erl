@@ -21,7 +21,7 @@
          endless_loop_hits_the_budget/1,
          endless_allocation_hits_the_memory_cap/1, hung_port_is_killed/1,
          lua_faults_leave_erlang_layers_flowing/1, reset_starts_a_fresh_state/1,
-         port_killed_every_lua_behavior_back/1, bad_frames_are_answered/1,
+         port_killed_every_lua_behavior_back/1, owner_killed_every_lua_behavior_back/1, bad_frames_are_answered/1,
          port_dying_again_and_again_is_left_to_supervision/1,
          reload_all_or_nothing/1, reload_under_1khz_input/1,
          load_main_errors_name_the_line/1, lockstep_step_pending_answers_at_once/1, configure_polling_sets_the_period/1, load_main_from_the_program_folder/1, lockstep_timers_at_simulated_deadlines/1]).
@@ -49,7 +49,7 @@ groups() ->
                    endless_loop_hits_the_budget,
                    endless_allocation_hits_the_memory_cap, hung_port_is_killed,
                    lua_faults_leave_erlang_layers_flowing,
-                   port_killed_every_lua_behavior_back,
+                   port_killed_every_lua_behavior_back, owner_killed_every_lua_behavior_back,
                    port_dying_again_and_again_is_left_to_supervision, bad_frames_are_answered]},
      {reload, [], [reload_all_or_nothing, reload_under_1khz_input]},
      {lockstep, [], [lockstep_timers_at_simulated_deadlines,
@@ -607,6 +607,35 @@ port_killed_every_lua_behavior_back(Config) ->
     ?assertEqual(Sensor, whereis(toroco_names:process(s))),
     ?assertEqual([1], maps:keys(maps:get(layers, toroco:inspect())) -- [0]),
     await(a, erl, [1, 2]).
+
+owner_killed_every_lua_behavior_back(doc) ->
+    ["The program's owner killed (and the program with it): every Lua behavior, 8 in "
+     "one layer, starts its code again in the new program in the same process, and "
+     "the layer is not taken out"];
+owner_killed_every_lua_behavior_back(Config) ->
+    ok = toroco:add_device(s, toroco_fake_sensor, #{outputs => [value]}),
+    Names = [list_to_atom("o" ++ integer_to_list(K)) || K <- lists:seq(0, 7)],
+    Echo = fun(N) -> list_to_atom("echo_" ++ atom_to_list(N)) end,
+    actuator(a, [Echo(N) || N <- Names]),
+    [begin
+         ok = toroco_lua:add_behavior(N, #{file => data(Config, "echo.lua"), layer => 1}),
+         ok = toroco:set_inputs(N, #{value => [{s, value}]})
+     end || N <- Names],
+    ok = toroco:set_inputs(a, maps:from_list([{Echo(N), [{N, echo}]} || N <- Names])),
+    ok = toroco:inject({s, value}, 1),
+    [await(a, Echo(N), [1]) || N <- Names],
+    Pids = [whereis(toroco_names:process(N)) || N <- Names],
+    OsPid = toroco_lua_port:os_pid(),
+    Owner = whereis(toroco_lua_port),
+    exit(Owner, kill),
+    toroco_test_lib:wait_until(fun() -> is_pid(whereis(toroco_lua_port))
+                                            andalso whereis(toroco_lua_port) =/= Owner end,
+                               ?WAIT, new_owner),
+    reattached(Names, OsPid),
+    ok = toroco:inject({s, value}, 2),
+    [await(a, Echo(N), [1, 2]) || N <- Names],
+    ?assertEqual(Pids, [whereis(toroco_names:process(N)) || N <- Names]),
+    ?assertEqual([1], maps:keys(maps:get(layers, toroco:inspect())) -- [0]).
 
 port_dying_again_and_again_is_left_to_supervision(doc) ->
     ["A program that dies more than 3 times in 10 s under a Lua behavior stops it "
