@@ -774,7 +774,13 @@ waited(I) -> binary_to_atom(I).
 %% removing, suspending or resuming itself would wait on itself from its
 %% own callback: that is done once the callback is over, after the calls
 %% it made next (the thesis' level2 removes itself, then adds level3).
-actions(Actions, D = #{name := Name}) ->
+actions(Actions, D) ->
+    case lists:keymember(main, 1, Actions) of
+        false -> lists:filtermap(fun(A) -> action(A, D) end, Actions);
+        true -> wiring_actions(Actions, D)
+    end.
+
+wiring_actions(Actions, D = #{name := Name}) ->
     Self = atom_to_binary(Name),
     {Later, Now} = lists:partition(
                      fun({main, Op, _, [B]}) ->

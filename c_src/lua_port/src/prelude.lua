@@ -414,11 +414,13 @@ local file_params = M.params
 
 -- Each request runs one slot's tasks, with that slot's params.
 local function enter(n)
-  slot = n
-  made = {}             -- those of a request that failed never start
-  local sl = slots[n]
-  M.params = sl and sl.params or file_params
-  params = M.params
+  if #made > 0 then made = {} end   -- those of a request that failed never start
+  if n ~= slot or n ~= 0 then
+    slot = n
+    local sl = slots[n]
+    M.params = sl and sl.params or file_params
+    params = M.params
+  end
 end
 
 -- The behavior's file: its body runs as a task; the functions it returns
