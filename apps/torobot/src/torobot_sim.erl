@@ -56,7 +56,8 @@
 %% `wiring' (default: app env `wiring' of `torobot', else
 %% `config/torobot.wiring'), `lua' (a program written for the original
 %% Torocó, its main.lua, run with `toroco_lua:load_main/2' after the wiring,
-%% whose default is then `config/torobot_lua.wiring': SPEC §16), `time' (`realtime', the default, or
+%% whose default is then `config/torobot_lua.wiring': SPEC §16), `time'
+%% (`realtime', the default, or
 %% `lockstep'), `trace' (a path, lockstep only), `speed' (a number > 0,
 %% default 1, real time only), `nodes'
 %% (`local' or `peer'; see above), `status' (`false', the default; `true'

@@ -91,7 +91,8 @@ names_behavior() ->
 
 run(Config, Trace) ->
     {ok, Summary} = torobot_sim:run(?config(world, Config),
-                                    #{lua => ?config(main, Config), wiring => ?config(wiring, Config),
+                                    #{lua => ?config(main, Config),
+                                      wiring => ?config(wiring, Config),
                                       time => lockstep, trace => Trace}),
     {ok, Bin} = file:read_file(Trace),
     {Summary, crypto:hash(sha256, Bin)}.

@@ -112,8 +112,8 @@ load_main(Path, Opts) ->
             Ctx = #{root => filename:dirname(Path), opts => Opts, host => Id, file => Path},
             Calls = [{Op, Line, Args} || {main, Op, Line, Args} <- Actions],
             %% converters first, so that the wiring names what they emit
-            {Polling, Others} = lists:partition(fun({Op, _, _}) -> Op =:= <<"configure_polling">> end,
-                                                Calls),
+            {Polling, Others} = lists:partition(
+                                  fun({Op, _, _}) -> Op =:= <<"configure_polling">> end, Calls),
             Result = apply_main(Polling ++ Others, Path, Ctx, []),
             %% the state lives on while a behavior it hosts does
             _ = toroco_lua_port:close(Id),
@@ -150,8 +150,8 @@ main_call(<<"add_behavior">>, [Name, Slot], Ctx = #{root := Root, opts := Opts, 
     B = binary_to_atom(Name),
     Layer = maps:get(B, maps:get(layers, Opts, #{}), 0),
     Limits = maps:with([budget, memory, layers], Opts),
-    case toroco_lua:add_behavior(B, Limits#{file => maps:get(file, Ctx), root => Root, layer => Layer,
-                                            host => {Host, Slot}}) of
+    case toroco_lua:add_behavior(B, Limits#{file => maps:get(file, Ctx), root => Root,
+                                            layer => Layer, host => {Host, Slot}}) of
         ok -> {loaded, B};
         Error -> Error
     end;
@@ -488,7 +488,8 @@ activate(Req, D) ->
 %% A request kept, to be written by flush/1.
 queue(Req, D = #{seq := Seq, batch := Batch}) ->
     case toroco_lua_port:encode(conn(D), Seq, Req) of
-        {ok, Ref, Frame} -> {ok, D#{seq := Seq rem 65535 + 1, batch := queue:in({Ref, Frame}, Batch)}};
+        {ok, Ref, Frame} ->
+            {ok, D#{seq := Seq rem 65535 + 1, batch := queue:in({Ref, Frame}, Batch)}};
         Error -> Error
     end.
 
@@ -683,7 +684,8 @@ reattach(Why, D = #{name := Name, reattached := Times}) ->
                 {ok, D1, Actions} ->
                     logger:warning("toroco_lua: ~p: lua_port died (~p); its Lua code starts "
                                    "again in the new program", [Name, Why], ?LOG#{name => Name}),
-                    D2 = D1#{reattached := [Now | Recent], out := queue:new(), batch := queue:new()},
+                    D2 = D1#{reattached := [Now | Recent], out := queue:new(),
+                             batch := queue:new()},
                     {keep_state, D2, [unset | actions(Actions, D2)]};
                 {error, Reason} ->
                     {stop, Reason}
@@ -698,7 +700,8 @@ reattach(Why, D = #{name := Name, reattached := Times}) ->
 owner_down(Why, D = #{host := {_, _}}) ->
     {keep_state, orphan({lua_port_owner_down, Why}, D#{owner := none}), [unset]};
 owner_down(Why, D) ->
-    _ = erlang:start_timer(?OWNER_POLL_MS, self(), {lua_owner, Why, ?OWNER_WAIT_MS div ?OWNER_POLL_MS}),
+    Tries = ?OWNER_WAIT_MS div ?OWNER_POLL_MS,
+    _ = erlang:start_timer(?OWNER_POLL_MS, self(), {lua_owner, Why, Tries}),
     {keep_state, D#{owner := none, id := none, out := queue:new(), batch := queue:new()}, [unset]}.
 
 owner_back(Why, Tries, D) ->

@@ -38,7 +38,8 @@
 %%
 %% <table>
 %% <tr><th>message</th><th>from → to</th><th>when</th><th>answer</th></tr>
-%% <tr><td>call `{request, Req}', `{open, ...}', `{attach, ...}'</td><td>a Lua behavior → owner</td>
+%% <tr><td>call `{request, Req}', `{open, ...}', `{attach, ...}'</td>
+%%     <td>a Lua behavior → owner</td>
 %%     <td>`open', `attach', `close', `ping'</td>
 %%     <td>the program's result for that request</td></tr>
 %% <tr><td>frame `{Op, Id, Id, ...}'</td><td>a Lua behavior → the program</td>
@@ -64,7 +65,8 @@
 -include("toroco_lua_port.hrl").
 
 -export([start_link/0, os_pid/0, ping/0, raw/1, states/0,
-         open/5, attach/3, input/4, timer/4, waits/1, waits/2, memory/1, memory/2, close/1, close_all/0, crossable/1,
+         open/5, attach/3, input/4, timer/4, waits/1, waits/2, memory/1, memory/2, close/1,
+         close_all/0, crossable/1,
          request/3, encode/3, write/2, answer/2, await/2, await_replies/2, stuck/1, stuck_ms/0]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3]).
 -export_type([id/0, conn/0, ref/0, request/0, action/0, result/0, limits/0]).

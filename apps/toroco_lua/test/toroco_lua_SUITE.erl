@@ -21,7 +21,8 @@
          endless_loop_hits_the_budget/1,
          endless_allocation_hits_the_memory_cap/1, hung_port_is_killed/1,
          lua_faults_leave_erlang_layers_flowing/1, reset_starts_a_fresh_state/1,
-         port_killed_every_lua_behavior_back/1, owner_killed_every_lua_behavior_back/1, bad_frames_are_answered/1,
+         port_killed_every_lua_behavior_back/1, owner_killed_every_lua_behavior_back/1,
+         bad_frames_are_answered/1,
          port_dying_again_and_again_is_left_to_supervision/1,
          reload_all_or_nothing/1, reload_under_1khz_input/1,
          load_main_errors_name_the_line/1, lockstep_step_pending_answers_at_once/1, configure_polling_sets_the_period/1, load_main_from_the_program_folder/1, lockstep_timers_at_simulated_deadlines/1]).
