@@ -289,8 +289,13 @@ init(Args = #{file := File}) ->
         undefined ->
             {error, {lua_port_not_running, Name}};
         Owner ->
-            %% a reset runs init/1 again in this process: its last state goes
-            ok = toroco_lua_port:close_all(),
+            %% a reset runs init/1 again in this process: its last state
+            %% goes (a slot's behavior attaches again instead, which takes
+            %% its place: closing it could end the state it lives in)
+            ok = case Args of
+                     #{host := _} -> ok;
+                     #{} -> toroco_lua_port:close_all()
+                 end,
             D = #{name => Name, file => File, args => Args,
                   owner => erlang:monitor(process, Owner), id => none, port => none,
                   host => maps:get(host, Args, none),

@@ -158,7 +158,12 @@ inline_behavior_replaces_its_creator(Config) ->
     ok = toroco:inject({mouse, left}, released),
     ok = toroco:resume_behavior(level3),
     ok = toroco:inject({mouse, left}, pressed),
-    await(actuator, signal, [2, {3, <<"pressed">>}, {3, <<"pressed">>}]).
+    await(actuator, signal, [2, {3, <<"pressed">>}, {3, <<"pressed">>}]),
+    %% a Brooks reset starts its trigger again in the same state
+    ok = toroco:reset_behavior(level3),
+    ok = toroco:inject({mouse, left}, pressed),
+    await(actuator, signal, [2, {3, <<"pressed">>}, {3, <<"pressed">>}, {3, <<"pressed">>}]),
+    {ok, [#{kind := trigger, input := left}]} = toroco_lua:waits(level3).
 
 inline_behavior_crash_restarts_it_alone(doc) ->
     ["A Lua error in a behavior made with inline code restarts it alone, in the same "

@@ -269,6 +269,14 @@ static void do_attach(struct port *p, struct term_reader *r, size_t arity, long 
         { reply_error(x, ref, "unknown_state", host); return; }
     if (p->n >= MAX_STATES)
         { reply_error(x, ref, "too_many_states", id); return; }
+    /* the slot's behavior starting again in its process (a Brooks reset):
+     * the entry it had goes, the slot stays held, its tasks start anew */
+    for (int k = 0; k < p->n; k++)
+        if (p->entries[k].s == s && p->entries[k].slot == (int)slot) {
+            p->entries[k] = p->entries[--p->n];
+            (void)lstate_detach(s, (int)slot, false);
+            break;
+        }
     if (!add_entry(p, id, s, (int)slot))
         { reply_error(x, ref, "out_of_memory", id); return; }
     if (!lstate_attach(s, (int)slot, now)) {

@@ -329,8 +329,13 @@ static void an_inline_behavior_outlives_its_creator_and_fails_alone(void)
     CHECK_STR(attach(p, 22, 20, 1), "{reply,4,{ok,[]}}");
     CHECK_STR(input_atom(p, 22, "x", "c"),
               "{reply,3,{ok,[{send,<<\"out\">>,{<<\"c\">>,3,<<\"kid\">>},default}]}}");
+    /* attached again (a reset): the new id takes the slot's place */
+    CHECK_STR(attach(p, 24, 20, 1), "{reply,4,{ok,[]}}");
+    CHECK_STR(input_atom(p, 22, "x", "d"), "{reply,3,{error,{unknown_state,22}}}");
+    CHECK_STR(input_atom(p, 24, "x", "d"),
+              "{reply,3,{ok,[{send,<<\"out\">>,{<<\"d\">>,4,<<\"kid\">>},default}]}}");
     /* the last behavior closed: the state goes */
-    CHECK_STR(close_state(p, 22), "{reply,5,ok}");
+    CHECK_STR(close_state(p, 24), "{reply,5,ok}");
     CHECK_STR(attach(p, 23, 20, 1), "{reply,4,{error,{unknown_state,20}}}");
     port_free(p);
 }
