@@ -2,6 +2,7 @@
 #   make run   - the Torobot in the simulated world (default config);
 #                make run LOCKSTEP=1 runs it in lockstep (as fast as the CPU allows);
 #                make run ROBOT=wall_follower runs a library robot of config/robots/
+#                make run LUA=path/to/main.lua runs a program written for the original Torocó
 #   make test  - every test suite: C port, detector, Common Test, PropEr, Dialyzer
 .PHONY: run test deps compile port port-test lua-port lua-port-test detector detector-test ct dialyzer bench release board-check board-bench clean eval chaos
 
@@ -48,7 +49,7 @@ test:
 	scripts/test
 
 run: compile
-	SPEED=$(SPEED) SPLIT=$(SPLIT) LOCKSTEP=$(LOCKSTEP) TRACE=$(TRACE) REPLAY=$(REPLAY) scripts/run $(if $(ROBOT),config/worlds/$(ROBOT).world _build/$(ROBOT).svg config/robots/$(ROBOT).wiring,$(WORLD))
+	SPEED=$(SPEED) SPLIT=$(SPLIT) LOCKSTEP=$(LOCKSTEP) TRACE=$(TRACE) REPLAY=$(REPLAY) LUA=$(LUA) scripts/run $(if $(ROBOT),config/worlds/$(ROBOT).world _build/$(ROBOT).svg config/robots/$(ROBOT).wiring,$(WORLD))
 
 # The simulated lab: the wiring on N generated worlds, scored (SPEC §14).
 # Lockstep by default; TIME=realtime [SPEED=10] for real time, and

@@ -11,8 +11,9 @@
 -export([main/1, format_error/1, await_node/2]).
 
 %% @doc `[WorldFile, SvgFile, Status, WiringFile]', then optionally
-%% `Speed', `Time' (`realtime' or `lockstep') and a trace path (lockstep),
-%% as `erl -run' passes them; `Status' is `tty' (rewrite one line) or
+%% `Speed', `Time' (`realtime' or `lockstep'), a trace path (lockstep) and
+%% the main.lua of a program for the original Torocó (SPEC §16), as `erl
+%% -run' passes them (an empty one for none); `Status' is `tty' (rewrite one line) or
 %% `lines'. Never returns.
 -spec main([string()]) -> no_return().
 main([World, Svg, Status, Wiring]) ->
@@ -22,11 +23,17 @@ main([World, Svg, Status, Wiring, Speed]) ->
 main([World, Svg, Status, Wiring, Speed, Time]) ->
     main([World, Svg, Status, Wiring, Speed, Time, ""]);
 main([World, Svg, Status, Wiring, Speed, Time, Trace]) ->
-    Base = #{svg => Svg, wiring => Wiring,
+    main([World, Svg, Status, Wiring, Speed, Time, Trace, ""]);
+main([World, Svg, Status, Wiring, Speed, Time, Trace, Lua]) ->
+    Base0 = #{svg => Svg, wiring => Wiring,
              status => case Status of
                            "tty" -> tty;
                            _ -> true
                        end},
+    Base = case Lua of
+               "" -> Base0;
+               _ -> Base0#{lua => Lua}
+           end,
     Opts = case {Time, Trace} of
                {"lockstep", ""} -> Base#{time => lockstep};
                {"lockstep", _} -> Base#{time => lockstep, trace => Trace};

@@ -54,7 +54,10 @@
 %%
 %% Options of {@link run/2}: `svg' (a path; no picture without it),
 %% `wiring' (default: app env `wiring' of `torobot', else
-%% `config/torobot.wiring'), `time' (`realtime', the default, or
+%% `config/torobot.wiring'), `lua' (a program written for the original
+%% Torocó, its main.lua, run with `toroco_lua:load_main/2' after the wiring,
+%% whose default is then `config/torobot_lua.wiring': SPEC §16), `time'
+%% (`realtime', the default, or
 %% `lockstep'), `trace' (a path, lockstep only), `speed' (a number > 0,
 %% default 1, real time only), `nodes'
 %% (`local' or `peer'; see above), `status' (`false', the default; `true'
@@ -76,7 +79,8 @@
 -type opts() :: #{svg => file:name_all(), wiring => file:name_all(), status => status(),
                   speed => number(), nodes => local | peer, time => realtime | lockstep,
                   trace => file:name_all(), faults => torobot_faults:concrete(),
-                  seed => integer(), stop => fun(([map()]) -> boolean())}.
+                  seed => integer(), stop => fun(([map()]) -> boolean()),
+                  lua => file:name_all()}.
 %% A world file, or the terms of one (as `torobot_worlds:generate/2' makes).
 -type world_spec() :: file:name_all() | [tuple()].
 %% One robot's summary, or one per robot for a world of named robots.
@@ -118,7 +122,7 @@
               seed = 0 :: integer(),
               obs = [] :: [torobot_props:observation()]}).
 
--define(OPTIONS, [svg, wiring, status, speed, nodes, time, trace, faults, seed, stop]).
+-define(OPTIONS, [svg, wiring, status, speed, nodes, time, trace, faults, seed, stop, lua]).
 
 %%====================================================================
 %% API
@@ -167,7 +171,10 @@ simulate(WorldSpec, Opts) when is_map(Opts) ->
           | {error, term()}.
 observe(WorldSpec, Opts) when is_map(Opts) ->
     WiringFile = maps:get(wiring, Opts,
-                          application:get_env(torobot, wiring, "config/torobot.wiring")),
+                          case Opts of
+                              #{lua := _} -> "config/torobot_lua.wiring";
+                              #{} -> application:get_env(torobot, wiring, "config/torobot.wiring")
+                          end),
     Speed = maps:get(speed, Opts, 1),
     Time = maps:get(time, Opts, realtime),
     Trace = maps:get(trace, Opts, undefined),
@@ -253,11 +260,12 @@ with_robots(Worlds, Nodes, Opts) ->
                                            maps:get(stop, Opts, none)},
                                  []),
     MRef = monitor(process, Sim),
-    RobotOpts = #{wiring => WiringFile, speed => Speed, time => Time,
+    RobotOpts0 = #{wiring => WiringFile, speed => Speed, time => Time,
                   trace => Trace =/= undefined,
                   thresholds => torobot_world:ir_thresholds(hd(Worlds)),
                   sensors => [{Name, Outputs(hd(Worlds))}
                               || {Name, Outputs} <- torobot_sensors:devices()]},
+    RobotOpts = maps:merge(RobotOpts0, maps:with([lua], Opts)),
     Started = start_robots(Worlds, Nodes, RobotOpts),
     try
         Bots = [case Result of

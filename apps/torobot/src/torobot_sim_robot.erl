@@ -62,7 +62,8 @@
                   speed := number(),
                   time => realtime | lockstep,
                   trace => boolean(),
-                  sensors => [{atom(), [atom()]}]}.
+                  sensors => [{atom(), [atom()]}],
+                  lua => file:name_all()}.
 %% Where a robot runs: this node, or a peer node.
 -type handle() :: local | {peer, pid()}.
 
@@ -231,12 +232,26 @@ init(#{wiring := Wiring, thresholds := Thresholds, speed := Speed,
         ok = step(wheels, toroco:add_device(wheels, torobot_sim_wheels, #{sim => self()})),
         ok = step({wiring, Wiring}, toroco:load_wiring(Wiring)),
         ok = step(wheels, toroco:set_inputs(wheels, #{applied => [{motors, applied}]})),
-        {ok, S}
+        {ok, lua(Opts, S)}
     catch
         throw:{step, Step, Failure} ->
             teardown(S),
             {stop, {Step, Failure}}
     end.
+
+%% A program written for the original Torocó, after the wiring (SPEC §16):
+%% its behaviors are removed with the rest.
+lua(#{lua := Main}, S = #robot{behaviors = Bs}) ->
+    case application:ensure_all_started(toroco_lua) of
+        {ok, _} -> ok;
+        {error, Why} -> throw({step, {lua, Main}, Why})
+    end,
+    case toroco_lua:load_main(Main, #{}) of
+        {ok, #{behaviors := Names}} -> S#robot{behaviors = Bs ++ [{behavior, N} || N <- Names]};
+        {error, Why1} -> throw({step, {lua, Main}, Why1})
+    end;
+lua(#{}, S) ->
+    S.
 
 -spec handle_call(term(), gen_server:from(), #robot{}) ->
           {reply, term(), #robot{}} | {noreply, #robot{}}.

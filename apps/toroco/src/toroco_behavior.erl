@@ -40,11 +40,12 @@
 -export_type([spec/0, action/0, actions/0, result/0]).
 
 -callback interface() -> #{inputs := [atom()], outputs := [atom()]}.
-%% A behavior whose ports depend on its options (a Lua behavior's on its
-%% file) exports `interface/1' instead: it and `init/1' get the options of
-%% `toroco:add_behavior/3' but `layer' (`params' among them), and any
-%% option is accepted.
--callback interface(Opts :: map()) -> #{inputs := [atom()], outputs := [atom()]}.
+%% A behavior whose ports depend on its options exports `interface/1'
+%% instead: it and `init/1' get the options of `toroco:add_behavior/3' but
+%% `layer' (`params' among them), and any option is accepted. `open => true'
+%% (a Lua behavior's) makes its ports open: see interface/3.
+-callback interface(Opts :: map()) -> #{inputs := [atom()], outputs := [atom()],
+                                          open => boolean()}.
 %% `{error, Reason}' refuses to start: `add_behavior' answers
 %% `{error, {start_failed, {Name, Reason}}}' (the library's bad parameters).
 -callback init(Params :: map()) ->
@@ -126,7 +127,10 @@
             %% that a reset cancels them
             timers = [] :: [term()],
             %% emissions on undeclared outputs: when last logged, how many since
-            undeclared = {never, 0} :: {never | integer(), non_neg_integer()}}).
+            undeclared = {never, 0} :: {never | integer(), non_neg_integer()},
+            %% open ports (interface/1's `open'): an output comes into being
+            %% when it is emitted on or subscribed to
+            open = false :: boolean()}).
 
 -define(LOG, #{domain => [toroco, engine]}).
 -define(IS_TIMEOUT(K), (K =:= state_timeout orelse K =:= timeout orelse
@@ -149,8 +153,11 @@ child_spec(Spec = #{name := Name, kind := Kind}) ->
       shutdown => 2000, type => worker, modules => [?MODULE, maps:get(module, Spec)]}.
 
 %% @doc The declared ports of a behavior (`Kind = behavior') or device module.
+%% An interface with `open => true' (a Lua behavior's) has, besides those
+%% it declares, every input its wiring names and every output its wiring
+%% names or it emits on.
 -spec interface(behavior | device, module(), term()) ->
-          {ok, #{inputs := [atom()], outputs := [atom()]}} | {error, term()}.
+          {ok, #{inputs := [atom()], outputs := [atom()], open => true}} | {error, term()}.
 interface(Kind, Module, Args) ->
     try case Kind of
             behavior ->
@@ -162,6 +169,7 @@ interface(Kind, Module, Args) ->
         end of
         #{inputs := Ins, outputs := Outs} = I when is_list(Ins), is_list(Outs) ->
             case lists:all(fun is_atom/1, Ins ++ Outs) of
+                true when map_get(open, I) =:= true -> {ok, maps:with([inputs, outputs, open], I)};
                 true -> {ok, maps:with([inputs, outputs], I)};
                 false -> {error, {bad_interface, {Module, I}}}
             end;
@@ -213,13 +221,23 @@ callback_mode() -> handle_event_function.
 init(#{kind := Kind, name := Name, module := M, layer := Layer, args := Args}) ->
     process_flag(trap_exit, true),
     case interface(Kind, M, Args) of
-        {ok, #{inputs := Ins, outputs := Outs}} ->
+        {ok, I = #{inputs := Ins0, outputs := Outs0}} ->
             ok = toroco_tap:join(),
             Planned = toroco_wiring:subs_of(Name),
+            Open = maps:get(open, I, false),
+            %% open ports: those the wiring named before this start too
+            {Ins, Outs} = case Open of
+                              true ->
+                                  Wired = toroco_wiring:ports_of(Name),
+                                  {lists:usort(Ins0 ++ maps:get(inputs, Wired, [])),
+                                   lists:usort(Outs0 ++ maps:get(outputs, Wired, [])
+                                               ++ maps:keys(Planned))};
+                              false -> {Ins0, Outs0}
+                          end,
             Subs = maps:from_list([{O, [toroco_wire:address(R) || R <- maps:get(O, Planned, [])]}
                                    || O <- Outs]),
             E = #e{name = Name, kind = Kind, module = M, layer = Layer, args = Args,
-                   outputs = Subs, inputs = Ins,
+                   outputs = Subs, inputs = Ins, open = Open,
                    user_events = erlang:function_exported(M, handle_event, 4),
                    tap = tap(toroco_tap:current(), Name), idle = toroco_wire:idle_arm()},
             toroco_tap:lifecycle(E#e.tap, Name, toroco_restarts:started(Name)),
@@ -253,6 +271,11 @@ parent() ->
         [Parent | _] -> Parent;
         _ -> undefined
     end.
+
+%% The inputs: declared, and for open ports those the wiring names now.
+inputs(#e{inputs = Ins, open = false}) -> Ins;
+inputs(#e{inputs = Ins, name = Name}) ->
+    lists:usort(Ins ++ maps:get(inputs, toroco_wiring:ports_of(Name), [])).
 
 receiver_up(Name, Inputs) ->
     [toroco_wire:send(toroco_wire:address(toroco_names:router(Name, I)), ?WIRE_RX(I, self()))
@@ -295,6 +318,11 @@ handle_event(Type, Content, S, E) ->
 %% it inserts are handled too.
 event(info, ?WIRE_STEP(Token, Msg), S, E) ->
     toroco_wire:step_done(Token, step(Msg, S, E));
+%% A step whose work is still out of the process (a Lua behavior's
+%% activation, answered by a message): done once the callback module
+%% leaves state `step_pending' (gen_statem retries a postponed event then).
+event(internal, ?WIRE_STEP_DONE(_), step_pending, _E) ->
+    {keep_state_and_data, [postpone]};
 event(internal, ?WIRE_STEP_DONE(Token), _S, _E) ->
     toroco_lockstep:done(Token),
     keep_state_and_data;
@@ -324,6 +352,9 @@ event(info, ?WIRE_IN(Input, _V, Router), _S, _E) ->
     toroco_wire:send(Router, ?WIRE_ACK(Input)),
     keep_state_and_data;
 %% Wiring: consumers attach and detach (see toroco_wire).
+event(info, ?WIRE_SUB({_, Out} = Src, Consumer), S, E = #e{outputs = Outs, open = true})
+  when not is_map_key(Out, Outs) ->
+    event(info, ?WIRE_SUB(Src, Consumer), S, E#e{outputs = Outs#{Out => []}});
 event(info, ?WIRE_SUB({_, Out} = Src, Consumer), _S, E = #e{outputs = Outs}) ->
     case Outs of
         #{Out := Consumers} ->
@@ -354,6 +385,9 @@ event({timeout, '$toroco_alive'}, beat, _S, E = #e{outputs = Outs, name = Name})
         true -> {keep_state_and_data, [alive_timer()]};
         false -> keep_state_and_data
     end;
+event({call, From}, {'$toroco_inject', Out, Op}, S, E = #e{outputs = Outs, open = true})
+  when not is_map_key(Out, Outs), is_atom(Out) ->
+    event({call, From}, {'$toroco_inject', Out, Op}, S, E#e{outputs = Outs#{Out => []}});
 event({call, From}, {'$toroco_inject', Out, Op}, _S, E = #e{outputs = Outs, name = N}) ->
     case Outs of
         #{Out := _} -> {keep_state, emit(Out, Op, E), [{reply, From, ok}]};
@@ -370,10 +404,10 @@ event({call, From}, '$toroco_suspend', _S, E) ->
     {keep_state, lifecycle(suspended, E#e{suspended = true}), [{reply, From, ok}]};
 event({call, From}, '$toroco_resume', _S, E = #e{suspended = false}) ->
     {keep_state, E, [{reply, From, ok}]};
-event({call, From}, '$toroco_resume', _S, E = #e{name = Name, inputs = Ins, queued = Q}) ->
+event({call, From}, '$toroco_resume', _S, E = #e{name = Name, queued = Q}) ->
     %% Routers forget the last value and re-deliver each input's winner; the
     %% callbacks held back while suspended run now, in order.
-    receiver_up(Name, Ins),
+    receiver_up(Name, inputs(E)),
     {keep_state, lifecycle(resumed, E#e{suspended = false, queued = []}),
      [{reply, From, ok} | [{next_event, T, C} || {T, C} <- lists:reverse(Q)]]};
 %% Everything else belongs to the user module.
@@ -524,7 +558,8 @@ actions([{unset, Outs} | T], E, Acc) when is_list(Outs) ->
 actions([unset | T], E = #e{outputs = Outs}, Acc) ->
     actions(T, lists:foldl(fun(Out, EAcc) -> emit(Out, unset, EAcc) end, E,
                            maps:keys(Outs)), Acc);
-actions([{redeliver, Ins} | T], E = #e{name = Name, inputs = Declared}, Acc) when is_list(Ins) ->
+actions([{redeliver, Ins} | T], E = #e{name = Name}, Acc) when is_list(Ins) ->
+    Declared = inputs(E),
     receiver_up(Name, [I || I <- Ins, lists:member(I, Declared)]),
     actions(T, E, Acc);
 actions([A | T], E, Acc) when element(1, A) =:= send; element(1, A) =:= set;
@@ -624,6 +659,8 @@ emit(Out, Op, E = #e{outputs = Outs, name = Name}) ->
                 #{} ->
                     relatch(Out, Op, E)
             end;
+        #{} when E#e.open, is_atom(Out) ->
+            emit(Out, Op, E#e{outputs = Outs#{Out => []}});
         #{} ->
             undeclared(Out, E)
     end.
@@ -714,11 +751,16 @@ latch(Out, #e{latches = L}) ->
     end.
 
 describe(S, #e{kind = Kind, module = M, layer = L, latches = Latches, suspended = Susp,
-               user = UD}) ->
+               user = UD, open = Open, outputs = Outs}) ->
     {message_queue_len, Q} = erlang:process_info(self(), message_queue_len),
-    Base = #{kind => Kind, module => M, layer => L, latches => Latches,
-             status => case Susp of true -> suspended; false -> running end,
-             state => S, mailbox => Q},
+    Base0 = #{kind => Kind, module => M, layer => L, latches => Latches,
+              status => case Susp of true -> suspended; false -> running end,
+              state => S, mailbox => Q},
+    %% open ports: the outputs it has come to have
+    Base = case Open of
+               true -> Base0#{outputs => maps:keys(Outs)};
+               false -> Base0
+           end,
     case erlang:function_exported(M, info, 2) of
         true -> Base#{Kind => M:info(S, UD)};
         false -> Base

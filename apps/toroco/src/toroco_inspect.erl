@@ -75,13 +75,15 @@ describe(Name) ->
 
 %% The map of one node, from its wiring and from what its engine, routers
 %% and gates tell.
-node_map(Name, #{kind := Kind, module := M, layer := L, inputs := Ins, outputs := Outs,
+node_map(Name, #{kind := Kind, module := M, layer := L, inputs := Ins, outputs := Outs0,
                  inputs_wired := Wired, inhibitors := Inhs, gates := Gates}) ->
     Engine = case toroco_behavior:info(Name) of
                  #{} = I -> I;
                  {error, _} -> #{status => down, latches => #{}}
              end,
     Latches = maps:get(latches, Engine),
+    %% a behavior with open ports has the outputs it emitted on too
+    Outs = lists:usort(Outs0 ++ maps:get(outputs, Engine, [])),
     Base = #{name => Name, kind => Kind, module => M, layer => L, node => node(),
              status => maps:get(status, Engine),
              restarts => toroco_restarts:count(Name),

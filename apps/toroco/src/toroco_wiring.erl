@@ -28,7 +28,8 @@
 -module(toroco_wiring).
 -behaviour(gen_server).
 
--export([start_link/0, call/1, call/2, lookup/1, subs_of/1, known/1, stopping/0, peers/0]).
+-export([start_link/0, call/1, call/2, lookup/1, subs_of/1, ports_of/1, known/1, stopping/0,
+         peers/0]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 
 -record(s, {wiring = toroco_wiring_core:new() :: toroco_wiring_core:wiring(),
@@ -92,6 +93,12 @@ known(Name) ->
 -spec subs_of(atom()) -> #{atom() => [atom()]}.
 subs_of(Name) ->
     toroco_wiring_table:subs_of(Name).
+
+%% @doc The ports of `Name' in the wiring (read from the table): an open
+%% behavior's are those its wiring named so far. `#{}' for an unknown name.
+-spec ports_of(atom()) -> #{inputs => [atom()], outputs => [atom()]}.
+ports_of(Name) ->
+    toroco_wiring_table:ports_of(Name).
 
 %% @doc Called when the application is about to stop: layers going down from
 %% now on are being shut down, not taken out.

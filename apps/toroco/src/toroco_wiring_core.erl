@@ -14,6 +14,10 @@
 %% outputs of one layer that inhibit each other, or a single output), and for
 %% every emitter the consumers each of its outputs must be sent to.
 %%
+%% Open ports: a node whose info has `open => true' (a Lua behavior, as in
+%% the original Torocó) has every input a change names and every output a
+%% source names; the change adds them to its declared ones.
+%%
 %% Several nodes (SPEC §13): a wiring holds the behaviors and devices of its
 %% own node (`nodes') and what it was told of the other nodes' (`remote',
 %% each with its `node' and the gates of its outputs, `gated'). Remote names
@@ -35,7 +39,7 @@
 -type source() :: {name(), atom()}.
 -type default() :: non_neg_integer() | infinity.
 -type node_info() :: #{kind := behavior | device, module := module(), layer := non_neg_integer(),
-                       inputs := [atom()], outputs := [atom()]}.
+                       inputs := [atom()], outputs := [atom()], open => boolean()}.
 -type input_spec() :: #{sources := [{source(), default()}], buffer := all | latest,
                         idle := toroco_router_core:latch()}.
 -type remote_info() :: #{kind := behavior | device, module := module(), layer := non_neg_integer(),
@@ -183,7 +187,9 @@ inhibitors_of(#{inhibitors := Inhs}, Src) -> maps:get(Src, Inhs, []).
 
 %% @doc Replaces the listed inputs of `R'; `[]' unwires an input.
 -spec set_inputs(wiring(), name(), term()) -> {ok, wiring()} | {error, term()}.
-set_inputs(W, R, Map) when is_map(Map) ->
+set_inputs(W0, R, Map) when is_map(Map) ->
+    W = open_ports(W0, [{R, inputs, maps:keys(Map)}
+                        | [{E, outputs, [O]} || Spec <- maps:values(Map), {E, O} <- named(Spec)]]),
     maybe_all(W, R, fun(Info) ->
         fold_ok(fun({Input, Spec}, Acc) ->
                         case lists:member(Input, maps:get(inputs, Info)) of
@@ -197,7 +203,9 @@ set_inputs(_W, R, Other) ->
 
 %% @doc Replaces the inhibitor lists of the listed outputs of `E'.
 -spec set_inhibitors(wiring(), name(), term()) -> {ok, wiring()} | {error, term()}.
-set_inhibitors(W, E, Map) when is_map(Map) ->
+set_inhibitors(W0, E, Map) when is_map(Map) ->
+    W = open_ports(W0, [{E, outputs, maps:keys(Map)}
+                        | [{I, outputs, [O]} || Spec <- maps:values(Map), {I, O} <- named(Spec)]]),
     maybe_all(W, E, fun(Info) ->
         Changed = fold_ok(
                     fun({Out, Spec}, Acc = #{inhibitors := Inhs}) ->
@@ -230,12 +238,38 @@ set_inhibitors(_W, E, Other) ->
 
 %% @doc Brooks' reset: each event on one of `Srcs' restarts behavior `B'.
 -spec set_reset(wiring(), name(), term()) -> {ok, wiring()} | {error, term()}.
-set_reset(W, B, Srcs) when is_list(Srcs) ->
+set_reset(W0, B, Srcs) when is_list(Srcs) ->
+    W = open_ports(W0, [{E, outputs, [O]} || {E, O} <- named(Srcs)]),
     maybe_all(W, B, fun(#{kind := behavior}) -> wire_input(W, B, ?RESET, Srcs);
                        (#{kind := device}) -> {error, {not_a_behavior, B}}
                     end);
 set_reset(_W, B, Other) ->
     {error, {bad_reset, {B, Other}}}.
+
+%% The ports a change names, added to the open nodes that lack them (other
+%% nodes are left to the checks that follow).
+open_ports(W = #{nodes := Nodes}, Named) ->
+    Nodes1 = lists:foldl(
+               fun({Name, Kind, Ports}, Acc) ->
+                       case Acc of
+                           #{Name := Info = #{open := true}} ->
+                               Have = maps:get(Kind, Info),
+                               New = [P || P <- Ports, is_atom(P), not lists:member(P, Have)],
+                               Acc#{Name := Info#{Kind := Have ++ lists:usort(New)}};
+                           #{} -> Acc
+                       end
+               end, Nodes, Named),
+    W#{nodes := Nodes1}.
+
+%% The sources an input or inhibitor spec names, well formed or not.
+named(#{sources := Srcs}) -> named(Srcs);
+named(Srcs) when is_list(Srcs) ->
+    [{E, O} || S <- Srcs, {E, O} <- [source_name(S)]];
+named(_) -> [].
+
+source_name({E, O}) when is_atom(E), is_atom(O) -> {E, O};
+source_name({E, O, _}) when is_atom(E), is_atom(O) -> {E, O};
+source_name(_) -> none.
 
 maybe_all(W, Name, Fun) ->
     case node(W, Name) of

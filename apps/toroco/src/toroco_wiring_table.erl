@@ -11,14 +11,15 @@
 %% <tr><td>`{{gate, Source}, Cfg}'</td><td>the gate</td><td>the same</td></tr>
 %% <tr><td>`{{subs, Emitter}, #{Output => [Reg]}}'</td><td>the emitter</td>
 %%     <td>it (re)starts</td></tr>
-%% <tr><td>`{{nodes, Name}, {Kind, Module, Layer, Inputs, Outputs}}'</td>
+%% <tr><td>`{{nodes, Name}, {Kind, Module, Layer, Inputs, Outputs}}' (and
+%%     `open' a sixth element for a node with open ports)</td>
 %%     <td>`toroco:inject/3' (a name known, not running); the wiring server</td>
 %%     <td>it restarts</td></tr>
 %% <tr><td>``{'$meta', Meta}''</td><td>the wiring server</td><td>it restarts</td></tr>
 %% </table>
 -module(toroco_wiring_table).
 
--export([claim/0, lookup/1, known/1, subs_of/1, row/2, plan_changed/2, forget/2,
+-export([claim/0, lookup/1, known/1, subs_of/1, ports_of/1, row/2, plan_changed/2, forget/2,
          nodes_changed/2, write_meta/1, restore/1]).
 
 -define(TABLE, toroco_wiring).
@@ -42,6 +43,16 @@ lookup(Key) ->
 known(Name) ->
     try ets:member(?TABLE, {nodes, Name})
     catch error:badarg -> false
+    end.
+
+%% @doc The inputs and outputs of `Name' in the wiring (an open behavior's
+%% grow as the wiring names them), `#{}' if it has no node of that name.
+-spec ports_of(atom()) -> #{inputs => [atom()], outputs => [atom()]}.
+ports_of(Name) ->
+    try ets:lookup(?TABLE, {nodes, Name}) of
+        [{_, Row}] -> maps:with([inputs, outputs], node_info(Row));
+        [] -> #{}
+    catch error:badarg -> #{}
     end.
 
 %% @doc The consumers each output of emitter `Name' is planned to feed.
@@ -87,7 +98,8 @@ nodes_changed(Old, New) ->
     maps:foreach(fun(K, V = #{kind := Kind, module := M, layer := L, inputs := Ins, outputs := Outs}) ->
                          case Old of
                              #{K := V} -> ok;
-                             #{} -> ets:insert(?TABLE, {{nodes, K}, {Kind, M, L, Ins, Outs}})
+                             #{} -> ets:insert(?TABLE, {{nodes, K},
+                                                        node_row(V, {Kind, M, L, Ins, Outs})})
                          end
                  end, New),
     maps:foreach(fun(K, _) ->
@@ -96,6 +108,14 @@ nodes_changed(Old, New) ->
                              #{} -> ets:delete(?TABLE, {nodes, K})
                          end
                  end, Old).
+
+node_row(#{open := true}, Row) -> erlang:append_element(Row, open);
+node_row(#{}, Row) -> Row.
+
+node_info({Kind, M, L, Ins, Outs}) ->
+    #{kind => Kind, module => M, layer => L, inputs => Ins, outputs => Outs};
+node_info({Kind, M, L, Ins, Outs, open}) ->
+    (node_info({Kind, M, L, Ins, Outs}))#{open => true}.
 
 %% @doc Writes the wiring server's own state.
 -spec write_meta(#{network := term(), atom() => term()}) -> ok.
@@ -115,9 +135,7 @@ restore(Network) ->
     case ets:lookup(?TABLE, '$meta') of
         [{_, Meta = #{network := Network}}] ->
             Part = fun(P) -> ets:select(?TABLE, [{{{P, '$1'}, '$2'}, [], [{{'$1', '$2'}}]}]) end,
-            Nodes = maps:from_list([{N, #{kind => Kind, module => M, layer => L,
-                                          inputs => Ins, outputs => Outs}}
-                                     || {N, {Kind, M, L, Ins, Outs}} <- Part(nodes)]),
+            Nodes = maps:from_list([{N, node_info(Row)} || {N, Row} <- Part(nodes)]),
             {ok, Meta, Nodes, Part(router), [G || {_, G} <- Part(gate)]};
         _ ->
             true = ets:delete_all_objects(?TABLE),

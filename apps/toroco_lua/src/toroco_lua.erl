@@ -16,16 +16,15 @@
 %% run in lockstep too.
 %%
 %% The behavior ends with `{lua_error, File, Line, Message}' or `{lua_limit,
-%% File, budget | memory}' and its layer restarts it. If the program dies,
-%% every Lua behavior of the node starts its Lua code again in the new
-%% program without a supervisor restart (see {@link reattach/2}: a program
+%% File, budget | memory}' and its layer restarts it. If the program dies
+%% (or its owner, with it), every Lua behavior of the node starts its Lua
+%% code again in the new program without a supervisor restart (see {@link reattach/2}: a program
 %% crash is one fault, not one per behavior, so a layer of any number of Lua
 %% behaviors outlives it), while Erlang behaviors go on.
 %%
 %% <b>Adding</b>: `toroco:add_behavior(Name, toroco_lua, #{file => Path,
-%% params => P, layer => L})' as SPEC §16 writes it (this module declares its
-%% ports from its options: {@link interface/1}, the inputs and outputs the
-%% file uses); {@link add_behavior/2} is the same with the name passed on for
+%% params => P, layer => L})' as SPEC §16 writes it (its ports are open:
+%% {@link interface/1}); {@link add_behavior/2} is the same with the name passed on for
 %% the log; {@link load_main/2} for a whole program. <b>Looking</b>: {@link
 %% waits/1}, {@link memory/1}.
 %% <b>Changing</b>: {@link reload/1}.
@@ -47,10 +46,16 @@
 %% flight at most (env `window', default 32; 1: one at a time);
 %% `inputs'/`outputs' ports added to those found in the file (for names
 %% built at run time).
+%% `host' (set by a Lua behavior's `add_behavior' with inline functions,
+%% or its `configure_polling' with a converter): the behavior's code is slot
+%% `Slot' of the Lua state opened as `Id', and `file' and `root' are its
+%% creator's; `layers' the layer of each behavior a program adds, by name.
 -type opts() :: #{file := file:filename_all(), root => file:filename_all(), name => atom(),
                   params => map(), layer => non_neg_integer(),
                   budget => pos_integer(), memory => pos_integer(), window => pos_integer(),
-                  inputs => [atom()], outputs => [atom()]}.
+                  inputs => [atom()], outputs => [atom()],
+                  host => {toroco_lua_port:id(), pos_integer()},
+                  layers => #{atom() => non_neg_integer()}}.
 
 %% `layers' the layer of each behavior main.lua loads (default 0: the
 %% original has no layers, only priorities); `params' the main file's
@@ -65,6 +70,11 @@
 %% dies again and again is left to the layers' supervision.
 -define(REATTACH_MAX, 3).
 -define(REATTACH_WINDOW_MS, 10000).
+%% How long inspect waits for the program to say what the state waits for.
+-define(INFO_MS, 100).
+%% After its owner died, how long a behavior looks for the new one.
+-define(OWNER_POLL_MS, 10).
+-define(OWNER_WAIT_MS, 5000).
 
 %%====================================================================
 %% API
@@ -98,10 +108,16 @@ load_main(Path, Opts) ->
     case toroco_lua_port:open(filename:basename(Abs), filename:dirname(Abs),
                               maps:get(params, Opts, #{}), Limits, toroco_clock:now_ms()) of
         {ok, Id, _Port, Actions} ->
-            _ = toroco_lua_port:close(Id),
             _ = [print(Text, D) || {print, Text} <- Actions],
-            Ctx = #{root => filename:dirname(Path), opts => Opts},
-            apply_main([{Op, Line, Args} || {main, Op, Line, Args} <- Actions], Path, Ctx, []);
+            Ctx = #{root => filename:dirname(Path), opts => Opts, host => Id, file => Path},
+            Calls = [{Op, Line, Args} || {main, Op, Line, Args} <- Actions],
+            %% converters first, so that the wiring names what they emit
+            {Polling, Others} = lists:partition(
+                                  fun({Op, _, _}) -> Op =:= <<"configure_polling">> end, Calls),
+            Result = apply_main(Polling ++ Others, Path, Ctx, []),
+            %% the state lives on while a behavior it hosts does
+            _ = toroco_lua_port:close(Id),
+            Result;
         {stopped, {lua_error, _, Line, Msg} = R, _} ->
             {error, {path(element(2, R), D), Line, Msg}};
         {stopped, {lua_limit, Src, What}, _} ->
@@ -124,9 +140,18 @@ apply_main([{Op, Line, Args} | Rest], Path, Ctx, Loaded) ->
 main_call(<<"load_behavior">>, [Name, File, Params], #{root := Root, opts := Opts}) ->
     B = binary_to_atom(Name),
     Layer = maps:get(B, maps:get(layers, Opts, #{}), 0),
-    Limits = maps:with([budget, memory], Opts),
+    Limits = maps:with([budget, memory, layers], Opts),
     case toroco_lua:add_behavior(B, Limits#{file => lua_file(Root, File), root => Root,
                                             layer => Layer, params => table(Params)}) of
+        ok -> {loaded, B};
+        Error -> Error
+    end;
+main_call(<<"add_behavior">>, [Name, Slot], Ctx = #{root := Root, opts := Opts, host := Host}) ->
+    B = binary_to_atom(Name),
+    Layer = maps:get(B, maps:get(layers, Opts, #{}), 0),
+    Limits = maps:with([budget, memory, layers], Opts),
+    case toroco_lua:add_behavior(B, Limits#{file => maps:get(file, Ctx), root => Root,
+                                            layer => Layer, host => {Host, Slot}}) of
         ok -> {loaded, B};
         Error -> Error
     end;
@@ -141,12 +166,47 @@ main_call(<<"set_inhibitors">>, [E, Outputs], _Ctx) ->
 main_call(<<"suspend_behavior">>, [B], _Ctx) -> toroco:suspend_behavior(binary_to_atom(B));
 main_call(<<"resume_behavior">>, [B], _Ctx) -> toroco:resume_behavior(binary_to_atom(B));
 main_call(<<"remove_behavior">>, [B], _Ctx) -> toroco:remove_behavior(binary_to_atom(B));
-main_call(<<"configure_polling">>, [D, E, Ms], _Ctx) ->
+main_call(<<"configure_polling">>, [D, E, Ms, false], _Ctx) ->
     configure_polling(D, E, Ms);
+main_call(<<"configure_polling">>, [D, E, Ms, Slot], Ctx) ->
+    case configure_polling(D, E, Ms) of
+        ok -> converter(binary_to_atom(D), binary_to_atom(E), Slot, Ctx);
+        Error -> Error
+    end;
 main_call(<<"run">>, _, _Ctx) -> ok;
 main_call(Op, Args, _Ctx) -> {error, {bad_main_call, {Op, Args}}}.
 
-sources(Ss) -> [{binary_to_atom(E), binary_to_atom(O)} || [E, O] <- Ss].
+sources(Ss) -> [converted({binary_to_atom(E), binary_to_atom(O)}) || [E, O] <- Ss].
+
+%% The behavior named `'D.E'', when there is one, stands for source `{D,
+%% E}': a converter (below), or a device's output under the name the
+%% original gave it (torobot's `camera.update').
+converted({D, E} = Src) ->
+    Conv = converter_name(D, E),
+    case toroco:inspect(Conv) of
+        #{kind := behavior} -> {Conv, E};
+        _ -> Src
+    end.
+
+%% The behavior that runs the converter of source `{D, E}': `'D.E'', in the
+%% Lua state of the code that configured it, between the device and those
+%% wired to `device.D.E' by Lua code, in layer 0.
+converter_name(D, E) ->
+    binary_to_atom(<<(atom_to_binary(D))/binary, ".", (atom_to_binary(E))/binary>>).
+
+converter(D, E, Slot, Ctx = #{root := Root, opts := Opts, host := Host}) ->
+    Conv = converter_name(D, E),
+    _ = case toroco:inspect(Conv) of
+            #{kind := behavior, module := ?MODULE} -> toroco:remove_behavior(Conv);
+            _ -> ok
+        end,
+    Limits = maps:with([budget, memory], Opts),
+    case toroco_lua:add_behavior(Conv, Limits#{file => maps:get(file, Ctx), root => Root,
+                                               layer => 0, host => {Host, Slot},
+                                               inputs => [E], outputs => [E]}) of
+        ok -> toroco:set_inputs(Conv, #{E => [{D, E}]});
+        Error -> Error
+    end.
 
 %% configure_polling(device.D.E, seconds): D must be a device on the node
 %% with output E; one that can be polled (toroco_poll_sensor) is asked to
@@ -181,32 +241,16 @@ lua_file(Dir, File) ->
     end.
 
 %% @doc The ports of a Lua behavior (the `toroco_behavior' callback, given
-%% the options of `add_behavior' but the layer): every `input.NAME' (or
-%% `input["NAME"]') its file uses, every key of its `send_output{...}' /
-%% `set_output{...}' tables and every `output.NAME', plus the options
-%% `inputs' / `outputs'. Raises `{lua_file, {File, Why}}' for a file it
-%% cannot read.
--spec interface(map()) -> #{inputs := [atom()], outputs := [atom()]}.
-interface(#{file := _} = Args) ->
-    case ports(Args) of
-        {ok, Ports} -> Ports;
-        {error, Why} -> error(Why)
-    end;
-interface(Args) ->
-    error({no_file, Args}).
-
-ports(Args = #{file := File}) ->
-    case file:read_file(File) of
-        {ok, Src} ->
-            Code = strip_comments(Src),
-            Ins = names(Code, "\\binput\\s*\\.\\s*([A-Za-z_][A-Za-z0-9_]*)")
-                ++ names(Code, "\\binput\\s*\\[\\s*['\"]([^'\"]+)['\"]\\s*\\]"),
-            Outs = output_keys(Code) ++ names(Code, "\\boutput\\s*\\.\\s*([A-Za-z_][A-Za-z0-9_]*)"),
-            {ok, #{inputs => lists:usort([binary_to_atom(I) || I <- Ins] ++ maps:get(inputs, Args, [])),
-                   outputs => lists:usort([binary_to_atom(O) || O <- Outs] ++ maps:get(outputs, Args, []))}};
-        {error, Why} ->
-            {error, {lua_file, {File, Why}}}
-    end.
+%% the options of `add_behavior' but the layer): open, as in the original
+%% Torocó. Its inputs are every input its wiring names, read or not, and its
+%% outputs every output its code emits on or its wiring names; nothing is
+%% read from the file. The options `inputs' / `outputs' declare some
+%% beforehand (they show in `toroco:inspect/1' before any wiring).
+-spec interface(map()) -> #{inputs := [atom()], outputs := [atom()], open := true}.
+interface(Args) when is_map(Args) ->
+    #{inputs => lists:usort(maps:get(inputs, Args, [])),
+      outputs => lists:usort(maps:get(outputs, Args, [])),
+      open => true}.
 
 %% @doc What the tasks of Lua behavior `Name' wait for: `[#{task => T, kind =>
 %% file | coroutine | trigger, input => I | none, timer => boolean()}]'.
@@ -245,15 +289,26 @@ init(Args = #{file := File}) ->
         undefined ->
             {error, {lua_port_not_running, Name}};
         Owner ->
-            %% a reset runs init/1 again in this process: its last state goes
-            ok = toroco_lua_port:close_all(),
+            %% a reset runs init/1 again in this process: its last state
+            %% goes (a slot's behavior attaches again instead, which takes
+            %% its place: closing it could end the state it lives in)
+            ok = case Args of
+                     #{host := _} -> ok;
+                     #{} -> toroco_lua_port:close_all()
+                 end,
             D = #{name => Name, file => File, args => Args,
                   owner => erlang:monitor(process, Owner), id => none, port => none,
-                  reattached => [], out => queue:new(), seq => 1, batch => [],
+                  host => maps:get(host, Args, none),
+                  %% which of this process's states it is (1, 2, ...): its
+                  %% timers carry it, so the old state's do nothing, and a
+                  %% run's trace does not depend on the program's ids
+                  gen => 0,
+                  reattached => [], out => queue:new(), seq => 1, batch => queue:new(),
                   watched => false, stuck_ms => toroco_lua_port:stuck_ms(),
                   window => window(maps:get(window, Args, env(window)))},
             case open(D) of
                 {ok, D1, Actions} -> {ok, running, D1, actions(Actions, D1)};
+                {error, {unknown_state, _}} -> {ok, running, orphan(host_gone, D)};
                 {error, _} = Error -> Error
             end
     end.
@@ -270,29 +325,51 @@ registered_name() ->
         _ -> self()
     end.
 
--spec handle_input(atom(), term(), running, map()) -> toroco_behavior:result().
+%% `step_pending': in lockstep, an activation is out (see activate/2).
+-type state() :: running | step_pending.
+
+-spec handle_input(atom(), term(), state(), map()) -> toroco_behavior:result().
+handle_input(_Input, _Value, _S, #{id := none}) ->
+    keep_state_and_data;                      % an orphan, leaving (orphan/2)
 handle_input(Input, Value, _S, D) ->
     activate({input, toroco_clock:now_ms(), Input, Value}, D).
 
 %% @doc What `toroco:inspect(Name)' shows under `behavior': `waits' as
 %% {@link waits/1} gives them, `memory' the bytes of the Lua state.
--spec info(running, map()) -> #{waits := [map()] | {error, term()},
-                                memory := non_neg_integer() | {error, term()}}.
-info(_S, D) ->
-    #{waits => case waits_of(D) of {ok, Ws} -> Ws; Error -> Error end,
-      memory => case toroco_lua_port:memory(conn(D)) of {ok, M} -> M; Error -> Error end}.
+%% While activations are out, the program would answer after them: then
+%% `waits' is `{busy, N}' (N requests out) and nothing is asked, so that
+%% inspect is answered at once.
+-spec info(state(), map()) -> #{waits := [map()] | {busy, pos_integer()} | {error, term()},
+                                memory := non_neg_integer() | unknown | {error, term()}}.
+info(_S, #{id := none}) ->
+    #{waits => [], memory => 0};
+info(_S, D = #{out := Out, batch := Batch}) ->
+    case queue:len(Out) + queue:len(Batch) of
+        0 ->
+            %% bounded: a program busy with other behaviors' work (or
+            %% hung) does not hold inspect up
+            #{waits => case waits_of(D, ?INFO_MS) of {ok, Ws} -> Ws; Error -> Error end,
+              memory => case toroco_lua_port:memory(conn(D), ?INFO_MS) of
+                            {ok, M} -> M;
+                            Error -> Error
+                        end};
+        Busy ->
+            #{waits => {busy, Busy}, memory => unknown}
+    end.
 
--spec handle_event(gen_statem:event_type(), term(), running, map()) -> toroco_behavior:result().
-handle_event({timeout, {lua, Task}}, {lua_timer, Id, Task, Seq}, _S, D = #{id := Id}) ->
+-spec handle_event(gen_statem:event_type(), term(), state(), map()) -> toroco_behavior:result().
+handle_event({timeout, {lua, _}}, _, _S, #{id := none}) ->
+    keep_state_and_data;                      % no state now: see owner_down/2
+handle_event({timeout, {lua, Task}}, {lua_timer, Gen, Task, Seq}, _S, D = #{gen := Gen}) ->
     activate({timer, toroco_clock:now_ms(), Task, Seq}, D);
-handle_event({timeout, {lua, _}}, {lua_timer, _OldId, _, _}, _S, _D) ->
+handle_event({timeout, {lua, _}}, {lua_timer, _OldGen, _, _}, _S, _D) ->
     keep_state_and_data;                      % a timer of the state before a reload
-handle_event(info, {toroco_lua_port, replies, Replies}, _S, D) ->
-    replies(Replies, D);
+handle_event(info, {toroco_lua_port, replies, Replies}, S, D) ->
+    settle(S, replies(Replies, D));
 handle_event(info, {toroco_lua_port, reply, _Ref, _Bin}, _S, _D) ->
     keep_state_and_data;                      % a call's, after its caller gave up
-handle_event(info, {?MODULE, flush, Id}, _S, D = #{id := Id}) ->
-    flushed(D);
+handle_event(info, {?MODULE, flush, Id}, S, D = #{id := Id}) ->
+    settle(S, flushed(D));
 handle_event(info, {?MODULE, flush, _OldId}, _S, _D) ->
     keep_state_and_data;
 handle_event(info, {timeout, _, lua_stuck}, _S, D = #{out := Out, port := Port}) ->
@@ -309,19 +386,36 @@ handle_event(info, {timeout, _, lua_stuck}, _S, D = #{out := Out, port := Port})
         empty ->
             {keep_state, D#{watched := false}}
     end;
-handle_event(info, {'DOWN', MRef, process, _, Why}, _S, #{owner := MRef}) ->
-    {stop, {lua_port_down, Why}};
-handle_event(info, ?LUA_PORT_DOWN(Ids, Why), _S, D = #{id := Id}) ->
+handle_event(info, {'DOWN', MRef, process, _, Why}, S, D = #{owner := MRef}) ->
+    settle(S, owner_down(Why, D));
+handle_event(info, {timeout, _, {lua_owner, Why, Tries}}, S, D) ->
+    settle(S, owner_back(Why, Tries, D));
+handle_event(info, ?LUA_PORT_DOWN(Ids, Why), S, D = #{id := Id}) ->
     case lists:member(Id, Ids) of
-        true -> reattach(Why, D);
+        true -> settle(S, reattach(Why, D));
         false -> keep_state_and_data          % a state it already re-opened
     end;
+handle_event({call, From}, {?MODULE, _}, _S, #{id := none, name := Name}) ->
+    %% no Lua state now (its owner is being restarted, or it is leaving)
+    {keep_state_and_data, [{reply, From, {error, {no_lua_state, Name}}}]};
 handle_event({call, From}, {?MODULE, waits}, _S, D) ->
     {keep_state_and_data, [{reply, From, waits_of(D)}]};
 handle_event({call, From}, {?MODULE, memory}, _S, D) ->
     {keep_state_and_data, [{reply, From, toroco_lua_port:memory(conn(D))}]};
-handle_event({call, From}, {?MODULE, reload}, _S, D0) ->
+handle_event({call, From}, {?MODULE, reload}, S, D0) ->
     %% the events sent to the old code are answered by it first
+    settle(S, reload(From, D0));
+%% The engine's default for what nobody handles: this module's handle_event
+%% is called through each behavior's own callback module, so it cannot fall
+%% through to the engine by a function_clause.
+handle_event({call, From}, Request, _S, #{name := Name}) ->
+    {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
+handle_event(Type, Content, _S, #{name := Name}) ->
+    logger:warning("toroco_lua: ~p ignored ~p event ~p", [Name, Type, Content],
+                   ?LOG#{name => Name}),
+    keep_state_and_data.
+
+reload(From, D0) ->
     case drain(D0) of
         {keep_state, D = #{id := Old, name := Name}, Drained} ->
             case open(D) of
@@ -335,28 +429,29 @@ handle_event({call, From}, {?MODULE, reload}, _S, D0) ->
             end;
         Stop ->
             Stop
-    end;
-%% The engine's default for what nobody handles: this module's handle_event
-%% is called through each behavior's own callback module, so it cannot fall
-%% through to the engine by a function_clause.
-handle_event({call, From}, Request, _S, #{name := Name}) ->
-    {keep_state_and_data, [{reply, From, {error, {unknown_call, {Name, Request}}}}]};
-handle_event(Type, Content, _S, #{name := Name}) ->
-    logger:warning("toroco_lua: ~p ignored ~p event ~p", [Name, Type, Content],
-                   ?LOG#{name => Name}),
-    keep_state_and_data.
+    end.
 
 %%====================================================================
 %% Activations
 %%====================================================================
 
+open(D = #{host := {Host, Slot}}) ->
+    case toroco_lua_port:attach(Host, Slot, toroco_clock:now_ms()) of
+        {ok, Id, Port, Actions} ->
+            {ok, D#{id := Id, port := Port, gen := maps:get(gen, D) + 1}, Actions};
+        {stopped, Reason, Actions} ->
+            _ = actions(Actions, D),
+            {error, reason(Reason, D)};
+        {error, _} = Error -> Error
+    end;
 open(D = #{file := File, args := Args}) ->
     {Root, Rel} = root(File, Args),
     Limits = #{budget => maps:get(budget, Args, env(budget)),
                memory => maps:get(memory, Args, env(memory))},
     case toroco_lua_port:open(Rel, Root, maps:get(params, Args, #{}), Limits,
                               toroco_clock:now_ms()) of
-        {ok, Id, Port, Actions} -> {ok, D#{id := Id, port := Port}, Actions};
+        {ok, Id, Port, Actions} ->
+            {ok, D#{id := Id, port := Port, gen := maps:get(gen, D) + 1}, Actions};
         {stopped, Reason, Actions} ->
             _ = actions(Actions, D),
             {error, reason(Reason, D)};
@@ -367,52 +462,57 @@ env(Key) ->
     {ok, V} = application:get_env(toroco_lua, Key),
     V.
 
-%% An activation. In real time up to `window' (app env, default 32) of a
-%% behavior's activations are in flight: the request is written to the
-%% program and the callback returns, the answer comes as a message and its
-%% emissions are the actions of that event, in the order the inputs came
-%% (the program answers in order). The program then reads the requests
-%% that queued up in one go and the answers come back in one go, instead of
-%% one round trip through the pipe each: an event stream is not paced by the
-%% round trip. At the window's end the oldest answer is awaited. In
-%% lockstep, one at a time and inside the callback, so that a step holds
-%% its emissions.
+%% An activation. Up to `window' (app env, default 32) of a behavior's
+%% activations are in flight: the request is written to the program and the
+%% callback returns, the answer comes as a message and its emissions are
+%% the actions of that event, in the order the inputs came (the program
+%% answers in order). The program then reads the requests that queued up in
+%% one go and the answers come back in one go, instead of one round trip
+%% through the pipe each: an event stream is not paced by the round trip.
+%% Past the window, requests wait here and go out as answers come: the
+%% callback never waits, so inspect, suspend and the tap are answered at
+%% once whatever the program is doing.
+%%
+%% In lockstep the behavior enters state `step_pending' until every answer
+%% is in: the engine holds the lockstep step until it leaves that state
+%% (toroco_behavior), so that a step still holds its emissions.
 activate(Req, D) ->
     case toroco_clock:lockstep_server() of
         none -> pipeline(Req, D);
         _ ->
-            case drain(D) of
-                {keep_state, D1, Drained} ->
-                    then(Drained, activation(call(D1, Req), D1));
-                Stop -> Stop
+            case queue(Req, D) of
+                {ok, D1} ->
+                    case flush(D1) of
+                        {ok, D2} -> {next_state, step_pending, D2, []};
+                        {Error, D2} -> settle(step_pending, activation(Error, D2))
+                    end;
+                Error -> activation(Error, D)
             end
     end.
 
-call(D, Req) ->
-    case toroco_lua_port:request(conn(D), 0, Req) of
-        {ok, Ref} -> toroco_lua_port:await(conn(D), Ref);
+%% A request kept, to be written by flush/1.
+queue(Req, D = #{seq := Seq, batch := Batch}) ->
+    case toroco_lua_port:encode(conn(D), Seq, Req) of
+        {ok, Ref, Frame} ->
+            {ok, D#{seq := Seq rem 65535 + 1, batch := queue:in({Ref, Frame}, Batch)}};
         Error -> Error
     end.
 
 %% While more messages wait in the mailbox, the requests are kept and
 %% written together when the `flush' this sends itself comes, after them:
 %% one write for a burst of inputs.
-pipeline(Req, D0 = #{id := Id, out := Out, seq := Seq, window := Window, batch := Batch}) ->
-    case toroco_lua_port:encode(conn(D0), Seq, Req) of
-        {ok, Ref, Frame} ->
-            D = watchdog(D0),
-            Out1 = queue:in({Ref, erlang:monotonic_time(millisecond) + maps:get(stuck_ms, D)}, Out),
-            D1 = D#{out := Out1, seq := Seq rem 65535 + 1, batch := [Frame | Batch]},
-            case {queue:len(Out1) >= Window, Batch =:= [] andalso queue:is_empty(Out)} of
-                {true, _} -> oldest(D1);
-                {false, false} ->
+pipeline(Req, D0 = #{id := Id, out := Out, batch := Batch}) ->
+    case queue(Req, D0) of
+        {ok, D1} ->
+            case queue:is_empty(Batch) andalso queue:is_empty(Out) of
+                false ->
                     %% its flush is on its way, or requests written are in
                     %% flight: this one is written, with whatever else
                     %% comes meanwhile, when their answers come (the
                     %% program would take it after them anyway): one write
                     %% instead of one per input
                     {keep_state, D1, []};
-                {false, true} ->
+                true ->
                     case process_info(self(), message_queue_len) of
                         {message_queue_len, 0} -> flushed(D1);
                         _ ->
@@ -424,13 +524,22 @@ pipeline(Req, D0 = #{id := Id, out := Out, seq := Seq, window := Window, batch :
             activation(Error, D0)
     end.
 
-%% The requests kept, written.
-flush(D = #{batch := []}) ->
-    {ok, D};
-flush(D = #{batch := Batch}) ->
-    case toroco_lua_port:write(conn(D), lists:reverse(Batch)) of
-        ok -> {ok, D#{batch := []}};
-        Error -> {Error, D#{batch := []}}
+%% The requests kept, written, as many as the window has room for; the
+%% watchdog counts from now for them.
+flush(D = #{batch := Batch, out := Out, window := Window}) ->
+    case min(Window - queue:len(Out), queue:len(Batch)) of
+        N when N =< 0 -> {ok, D};
+        N ->
+            {Now, Later} = queue:split(N, Batch),
+            Items = queue:to_list(Now),
+            D1 = watchdog(D),
+            Due = erlang:monotonic_time(millisecond) + maps:get(stuck_ms, D1),
+            D2 = D1#{batch := Later,
+                     out := queue:join(Out, queue:from_list([{Ref, Due} || {Ref, _} <- Items]))},
+            case toroco_lua_port:write(conn(D2), [Frame || {_, Frame} <- Items]) of
+                ok -> {ok, D2};
+                Error -> {Error, D2}
+            end
     end.
 
 flushed(D) ->
@@ -438,6 +547,15 @@ flushed(D) ->
         {ok, D1} -> {keep_state, D1, []};
         {Error, D1} -> activation(Error, D1)
     end.
+
+%% In lockstep, the step is over once no request is out any more.
+settle(step_pending, {keep_state, D = #{out := Out, batch := Batch}, Actions}) ->
+    case queue:is_empty(Out) andalso queue:is_empty(Batch) of
+        true -> {next_state, running, D, Actions};
+        false -> {keep_state, D, Actions}
+    end;
+settle(_S, Result) ->
+    Result.
 
 %% The answers to pipelined activations that came together, in order: the
 %% actions of all of them, one event. One that ends the behavior (or fails)
@@ -476,30 +594,22 @@ replies([{Ref, Bin} | More] = Replies, D = #{out := Out}, Acc) ->
             replies(More, D, Acc)             % of a state it no longer has
     end.
 
-%% The window is full: the oldest answer, awaited, with those that came
-%% with it.
-oldest(D) ->
-    case flush(D) of
-        {ok, D1 = #{out := Out}} ->
-            {value, {Oldest, _}} = queue:peek(Out),
-            case toroco_lua_port:await_replies(conn(D1), Oldest) of
-                {replies, Replies} -> replies(Replies, D1);
-                Error -> activation(Error, D1)
-            end;
-        {Error, D1} ->
-            activation(Error, D1)
-    end.
-
-%% The answers in flight, awaited in order: their actions, or the end.
+%% The answers to every request kept or in flight, awaited in order (a
+%% reload's: the events sent to the old code are answered by it first).
 drain(D) ->
-    case flush(D) of
-        {ok, D1} -> drain(D1, []);
-        {Error, D1} -> activation(Error, D1)
-    end.
+    drain(D, []).
 
-drain(D = #{out := Out}, Acc) ->
+drain(D = #{out := Out, batch := Batch}, Acc) ->
     case queue:peek(Out) of
-        empty -> {keep_state, D, lists:append(lists:reverse(Acc))};
+        empty ->
+            case queue:is_empty(Batch) of
+                true -> {keep_state, D, lists:append(lists:reverse(Acc))};
+                false ->
+                    case flush(D) of
+                        {ok, D1} -> drain(D1, Acc);
+                        {Error, D1} -> then(lists:append(lists:reverse(Acc)), activation(Error, D1))
+                    end
+            end;
         {value, {Ref, _}} ->
             case toroco_lua_port:await_replies(conn(D), Ref) of
                 {replies, Replies} -> drained(Replies, D, Acc);
@@ -564,6 +674,8 @@ activation({error, Why}, _D) ->
 %% it, so one program death is not one restart per Lua behavior of a layer.
 %% A program that dies more than ?REATTACH_MAX times in ?REATTACH_WINDOW_MS
 %% stops the behavior with `{lua_port_down, Why}'.
+reattach(Why, D = #{host := {_, _}}) ->
+    {keep_state, orphan({lua_port_down, Why}, D), [unset]};
 reattach(Why, D = #{name := Name, reattached := Times}) ->
     Now = erlang:monotonic_time(millisecond),
     Recent = [T || T <- Times, Now - T < ?REATTACH_WINDOW_MS],
@@ -577,12 +689,51 @@ reattach(Why, D = #{name := Name, reattached := Times}) ->
                 {ok, D1, Actions} ->
                     logger:warning("toroco_lua: ~p: lua_port died (~p); its Lua code starts "
                                    "again in the new program", [Name, Why], ?LOG#{name => Name}),
-                    D2 = D1#{reattached := [Now | Recent], out := queue:new(), batch := []},
+                    D2 = D1#{reattached := [Now | Recent], out := queue:new(),
+                             batch := queue:new()},
                     {keep_state, D2, [unset | actions(Actions, D2)]};
                 {error, Reason} ->
                     {stop, Reason}
             end
     end.
+
+%% The owner died, and the program with it: its supervisor starts another.
+%% The behavior drops its inputs until then (real time: the world does not
+%% wait) and starts its Lua code again in the new program, as when the
+%% program alone dies, so that a layer of any number of Lua behaviors
+%% outlives this too. No owner within ?OWNER_WAIT_MS: it stops.
+owner_down(Why, D = #{host := {_, _}}) ->
+    {keep_state, orphan({lua_port_owner_down, Why}, D#{owner := none}), [unset]};
+owner_down(Why, D) ->
+    Tries = ?OWNER_WAIT_MS div ?OWNER_POLL_MS,
+    _ = erlang:start_timer(?OWNER_POLL_MS, self(), {lua_owner, Why, Tries}),
+    {keep_state, D#{owner := none, id := none, out := queue:new(), batch := queue:new()}, [unset]}.
+
+owner_back(Why, Tries, D) ->
+    case whereis(toroco_lua_port) of
+        Owner when is_pid(Owner) ->
+            reattach({lua_port_owner_down, Why}, D#{owner := erlang:monitor(process, Owner)});
+        undefined when Tries > 0 ->
+            _ = erlang:start_timer(?OWNER_POLL_MS, self(), {lua_owner, Why, Tries - 1}),
+            keep_state_and_data;
+        undefined ->
+            {stop, {lua_port_down, Why}}
+    end.
+
+%% A behavior whose code was made in a Lua state that is gone (with the
+%% program that held it): nothing can run it again, so it leaves the
+%% network (a call its own callback cannot make: done once it returns) and
+%% meanwhile answers inspect with no state.
+orphan(Why, D = #{name := Name}) ->
+    logger:error("toroco_lua: ~p: the Lua state its code was made in is gone (~p); "
+                 "removing it", [Name, Why], ?LOG#{name => Name}),
+    _ = spawn(fun() -> toroco:remove_behavior(Name) end),
+    D#{id := none, out := queue:new(), batch := queue:new()}.
+
+%% The Lua state a behavior's code runs in, as its slots' behaviors name it
+%% (`host'): the one it opened, or the one it was made in.
+state_id(#{host := {Host, _}}) -> Host;
+state_id(#{id := Id}) -> Id.
 
 %% {lua_error, File, Line, Message}: File as the user named it for the
 %% behavior's own file, else the module's path in the program's folder.
@@ -615,7 +766,10 @@ conn(#{id := Id, port := Port, owner := Owner}) ->
     {Id, Port, Owner}.
 
 waits_of(D) ->
-    case toroco_lua_port:waits(conn(D)) of
+    waits_of(D, toroco_lua_port:stuck_ms()).
+
+waits_of(D, Ms) ->
+    case toroco_lua_port:waits(conn(D), Ms) of
         {ok, Ws} -> {ok, [#{task => T, kind => binary_to_atom(K), input => waited(I), timer => Timer}
                           || [T, K, I, Timer] <- Ws]};
         Error -> Error
@@ -624,9 +778,38 @@ waits_of(D) ->
 waited(false) -> none;
 waited(I) -> binary_to_atom(I).
 
-%% The port's actions as the engine's: emissions and timers.
+%% The port's actions as the engine's: emissions and timers. A behavior
+%% removing, suspending or resuming itself would wait on itself from its
+%% own callback: that is done once the callback is over, after the calls
+%% it made next (the thesis' level2 removes itself, then adds level3).
 actions(Actions, D) ->
-    lists:filtermap(fun(A) -> action(A, D) end, Actions).
+    case lists:keymember(main, 1, Actions) of
+        false -> lists:filtermap(fun(A) -> action(A, D) end, Actions);
+        true -> wiring_actions(Actions, D)
+    end.
+
+wiring_actions(Actions, D = #{name := Name}) ->
+    Self = atom_to_binary(Name),
+    {Later, Now} = lists:partition(
+                     fun({main, Op, _, [B]}) ->
+                             B =:= Self andalso lists:member(Op, [<<"remove_behavior">>,
+                                                                  <<"suspend_behavior">>,
+                                                                  <<"resume_behavior">>]);
+                        (_) -> false
+                     end, Actions),
+    Result = lists:filtermap(fun(A) -> action(A, D) end, Now),
+    _ = case Later of
+            [] -> ok;
+            _ ->
+                Ctx = main_ctx(D),
+                spawn(fun() -> [main_call_logged(Op, Args, Ctx, Name)
+                                || {main, Op, _, Args} <- Later] end)
+        end,
+    Result.
+
+main_ctx(D = #{file := File, args := Args0}) ->
+    #{root => element(1, root(File, Args0)), file => File, host => state_id(D),
+      opts => maps:with([budget, memory, layers], Args0)}.
 
 action({send, Out, V, Hold}, D) ->
     with_output(Out, D, fun(O) -> case Hold of
@@ -640,24 +823,19 @@ action({unset, all}, _D) ->
     {true, unset};
 action({unset, Out}, D) ->
     with_output(Out, D, fun(O) -> {unset, [O]} end);
-action({timer, Task, Seq, Ms}, #{id := Id}) ->
-    {true, {{timeout, {lua, Task}}, Ms, {lua_timer, Id, Task, Seq}}};
+action({timer, Task, Seq, Ms}, #{gen := Gen}) ->
+    {true, {{timeout, {lua, Task}}, Ms, {lua_timer, Gen, Task, Seq}}};
 action({cancel, Task}, _D) ->
     {true, {{timeout, {lua, Task}}, cancel}};
 action({print, Text}, D) ->
     print(Text, D),
     false;
-action({main, Op, _Line, Args}, #{name := Name, file := File, args := Args0}) ->
+action({warning, Text}, #{name := Name}) ->
+    logger:warning("toroco_lua: ~p: ~ts", [Name, Text], ?LOG#{name => Name}),
+    false;
+action({main, Op, _Line, Args}, D = #{name := Name}) ->
     %% a behavior changing the network (the thesis' suspender, add/remove)
-    Ctx = #{root => element(1, root(File, Args0)), opts => maps:with([budget, memory], Args0)},
-    Self = atom_to_binary(Name),
-    case Op =/= <<"load_behavior">> andalso Args =:= [Self] of
-        true ->
-            %% from its own callback it would wait on itself
-            logger:warning("toroco_lua: ~p cannot ~ts itself; ignored", [Name, Op],
-                           ?LOG#{name => Name});
-        false -> main_call_logged(Op, Args, Ctx, Name)
-    end,
+    _ = main_call_logged(Op, Args, main_ctx(D), Name),
     false.
 
 main_call_logged(Op, Args, Ctx, Name) ->
@@ -670,61 +848,21 @@ main_call_logged(Op, Args, Ctx, Name) ->
 print(Text, #{name := Name}) ->
     logger:notice("~p: ~ts", [Name, Text], ?LOG#{name => Name}).
 
-%% Output names are atoms the interface made when the behavior was added;
-%% a name made at run time that no atom has is dropped here, as the engine
-%% drops an undeclared output.
+%% Ports are open: an output exists once the code emits on it. Names are
+%% atoms, so a name that no atom has yet is made one while the atom table
+%% is less than 90 % full (a program that makes names without end would
+%% fill it and take the node down); past that such emissions are dropped
+%% with a warning.
 with_output(Out, #{name := Name}, Fun) ->
     try binary_to_existing_atom(Out) of
         O -> {true, Fun(O)}
     catch error:badarg ->
-            logger:warning("toroco_lua: ~p emitted on undeclared output ~ts; dropped",
-                           [Name, Out], ?LOG#{name => Name}),
-            false
-    end.
-
-%%====================================================================
-%% The file's interface
-%%====================================================================
-
-strip_comments(Src) ->
-    NoBlocks = re:replace(Src, "--\\[(=*)\\[.*?\\]\\1\\]", "", [global, dotall, {return, binary}]),
-    re:replace(NoBlocks, "--[^\\n]*", "", [global, {return, binary}]).
-
-names(Code, Re) ->
-    case re:run(Code, Re, [global, {capture, all_but_first, binary}]) of
-        {match, Ms} -> [N || [N] <- Ms];
-        nomatch -> []
-    end.
-
-%% The top-level keys of each send_output{...} / set_output{...} table.
-output_keys(Code) ->
-    case re:run(Code, "\\b(?:send|set)_output\\s*\\(?\\s*\\{", [global, {capture, first, index}]) of
-        {match, Ms} ->
-            lists:append([keys(Code, Start + Len) || [{Start, Len}] <- Ms]);
-        nomatch -> []
-    end.
-
-%% Walks the table after its opening brace: keys at depth 1 only.
-keys(Code, Pos) ->
-    keys(Code, Pos, 1, []).
-
-keys(Code, Pos, _Depth, Acc) when Pos >= byte_size(Code) -> Acc;
-keys(_Code, _Pos, 0, Acc) -> Acc;
-keys(Code, Pos, Depth, Acc) ->
-    case binary:at(Code, Pos) of
-        ${ -> keys(Code, Pos + 1, Depth + 1, Acc);
-        $} -> keys(Code, Pos + 1, Depth - 1, Acc);
-        _ when Depth =:= 1 ->
-            Rest = binary:part(Code, Pos, byte_size(Code) - Pos),
-            case re:run(Rest, "^(?:([A-Za-z_][A-Za-z0-9_]*)|\\[\\s*['\"]([^'\"]+)['\"]\\s*\\])\\s*=(?!=)",
-                        [{capture, all_but_first, binary}]) of
-                {match, [K]} -> keys(Code, Pos + byte_size(K), Depth, [K | Acc]);
-                {match, [<<>>, K]} -> keys(Code, Pos + byte_size(K), Depth, [K | Acc]);
-                nomatch ->
-                    case re:run(Rest, "^[A-Za-z0-9_]+", [{capture, first, index}]) of
-                        {match, [{0, L}]} -> keys(Code, Pos + L, Depth, Acc);
-                        nomatch -> keys(Code, Pos + 1, Depth, Acc)
-                    end
-            end;
-        _ -> keys(Code, Pos + 1, Depth, Acc)
+            case erlang:system_info(atom_count) < erlang:system_info(atom_limit) * 9 div 10
+                andalso byte_size(Out) =< 255 of
+                true -> {true, Fun(binary_to_atom(Out))};
+                false ->
+                    logger:warning("toroco_lua: ~p emitted on new output ~ts with the atom "
+                                   "table nearly full; dropped", [Name, Out], ?LOG#{name => Name}),
+                    false
+            end
     end.

@@ -38,8 +38,9 @@
 %%
 %% <table>
 %% <tr><th>message</th><th>from → to</th><th>when</th><th>answer</th></tr>
-%% <tr><td>call `{request, Req}', `{open, ...}'</td><td>a Lua behavior → owner</td>
-%%     <td>`open', `close', `ping'</td>
+%% <tr><td>call `{request, Req}', `{open, ...}', `{attach, ...}'</td>
+%%     <td>a Lua behavior → owner</td>
+%%     <td>`open', `attach', `close', `ping'</td>
 %%     <td>the program's result for that request</td></tr>
 %% <tr><td>frame `{Op, Id, Id, ...}'</td><td>a Lua behavior → the program</td>
 %%     <td>`input', `timer', `waits', `memory'</td>
@@ -55,7 +56,7 @@
 %% </table>
 %%
 %% Functions: life `start_link/0', `os_pid/0', `states/0'; through the owner
-%% `open/5', `close/1', `close_all/0', `ping/0'; straight to the program,
+%% `open/5', `attach/3', `close/1', `close_all/0', `ping/0'; straight to the program,
 %% from the state's process, `input/4', `timer/4', `waits/1', `memory/1';
 %% tests `raw/1'.
 -module(toroco_lua_port).
@@ -64,7 +65,8 @@
 -include("toroco_lua_port.hrl").
 
 -export([start_link/0, os_pid/0, ping/0, raw/1, states/0,
-         open/5, input/4, timer/4, waits/1, memory/1, close/1, close_all/0, crossable/1,
+         open/5, attach/3, input/4, timer/4, waits/1, waits/2, memory/1, memory/2, close/1,
+         close_all/0, crossable/1,
          request/3, encode/3, write/2, answer/2, await/2, await_replies/2, stuck/1, stuck_ms/0]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3]).
 -export_type([id/0, conn/0, ref/0, request/0, action/0, result/0, limits/0]).
@@ -84,6 +86,7 @@
                 | {timer, pos_integer(), pos_integer(), non_neg_integer()}
                 | {cancel, pos_integer()}
                 | {print, binary()}
+                | {warning, binary()}
                 | {main, binary(), non_neg_integer(), term()}.
 -type stop_reason() :: {lua_error, binary(), non_neg_integer(), binary()}
                      | {lua_limit, binary(), budget | memory}.
@@ -144,6 +147,16 @@ open(File, Dir, Params, #{budget := B, memory := M}, Now) ->
                                              unicode:characters_to_binary(Dir),
                                              Params, B, M}, Now}, ?CALL_TIMEOUT).
 
+%% @doc A new id for the calling process in the Lua state opened as `Host',
+%% running that state's slot `Slot' (a behavior its code added with inline
+%% functions, or a converter): its tasks start, and the answer is as
+%% `open/5''s. `{error, {unknown_state, Host}}' when that state is gone,
+%% `{error, {unknown_slot, Slot}}' when it made no such slot.
+-spec attach(id(), pos_integer(), integer()) ->
+          {ok, id(), port(), [action()]} | {stopped, stop_reason(), [action()]} | {error, term()}.
+attach(Host, Slot, Now) ->
+    gen_statem:call(?MODULE, {attach, self(), Host, Slot, Now}, ?CALL_TIMEOUT).
+
 %% @doc An activation: `Input' arrived with `Value'. In the state's process,
 %% which waits for the answer.
 -spec input(conn(), atom(), term(), integer()) -> result().
@@ -163,6 +176,19 @@ waits(C) ->
 -spec memory(conn()) -> {ok, non_neg_integer()} | {error, term()}.
 memory(C) ->
     call(C, memory).
+
+%% @doc As `waits/1', giving up after `Ms' (the program is busy with other
+%% states' work, or hung): `{error, {lua_port_timeout, Ref}}', and the late
+%% answer comes to the caller as a `{toroco_lua_port, reply, Ref, Bytes}'
+%% to drop. For `toroco:inspect/1', which must answer at once.
+-spec waits(conn(), non_neg_integer()) -> {ok, list()} | {error, term()}.
+waits(C, Ms) ->
+    call(C, waits, Ms).
+
+%% @doc As `memory/1', giving up after `Ms' (see `waits/2').
+-spec memory(conn(), non_neg_integer()) -> {ok, non_neg_integer()} | {error, term()}.
+memory(C, Ms) ->
+    call(C, memory, Ms).
 
 %% @doc Writes a request of the state to the program without waiting:
 %% `{ok, Ref}', and its answer comes to the calling process: for `Seq' 0
@@ -231,6 +257,12 @@ call(C, Req) ->
         {error, _} = Error -> Error
     end.
 
+call(C = {Id, Port, OwnerMon}, Req, Ms) ->
+    case request(C, 0, Req) of
+        {ok, Ref} -> await(Id, Ref, one, Port, OwnerMon, {bounded, Ms});
+        {error, _} = Error -> Error
+    end.
+
 frame({input, Now, Input, Value}, Ref, Id) ->
     case crossable(Value) of
         true -> sized(term_to_binary({input, Ref, Id, Now, Input, Value}), Id);
@@ -277,14 +309,18 @@ await(Id, Ref, Kind, Port, OwnerMon, Wait) ->
             end;
         {'DOWN', OwnerMon, process, _, Why} ->
             {error, {lua_port_owner_down, Why}}
-    after Wait ->
+    after wait_ms(Wait) ->
             case Wait of
+                {bounded, _} -> {error, {lua_port_timeout, Ref}};
                 ?CALL_TIMEOUT -> {error, {lua_port_timeout, Ref}};
                 _ ->
                     stuck(Port),
                     await(Id, Ref, Kind, Port, OwnerMon, ?CALL_TIMEOUT)
             end
     end.
+
+wait_ms({bounded, Ms}) -> Ms;
+wait_ms(Ms) -> Ms.
 
 %% @doc A state's request written to `Port' had no answer in stuck_ms: the
 %% owner kills the program if it is still the one running.
@@ -364,6 +400,9 @@ handle_event({call, From}, {open, Pid, {File, Dir, Params, B, M}, Now}, _S,
              D = #d{next_id = Id}) ->
     D1 = add_client(Pid, Id, D#d{next_id = Id + 1}),
     keep(D, send({open, Id, Now, File, Dir, Params, B, M}, From, D1));
+handle_event({call, From}, {attach, Pid, Host, Slot, Now}, _S, D = #d{next_id = Id}) ->
+    D1 = add_client(Pid, Id, D#d{next_id = Id + 1}),
+    keep(D, send({attach, Id, Host, Slot, Now}, From, D1));
 handle_event({call, From}, {raw, Bin}, _S, D = #d{port = Port, pending = Q, next_ref = Ref}) ->
     true = port_command(Port, [<<(byte_size(Bin)):32>>, Bin]),
     keep(D, D#d{pending = queue:in({Ref, From, raw}, Q), next_ref = Ref - 1});
@@ -532,6 +571,8 @@ answered(Answer, D = #d{pending = Q}) ->
 
 result({reply, Ref, {ok, Actions}}, Ref, {open, Id, _, _, _, _, _, _}, Port) ->
     {ok, Id, Port, Actions};
+result({reply, Ref, {ok, Actions}}, Ref, {attach, Id, _, _, _}, Port) ->
+    {ok, Id, Port, Actions};
 result({reply, Ref, Result}, Ref, _Req, _Port) -> Result;
 result({reply, _, Result}, _Ref, raw, _Port) -> Result;
 result({bad_frame, Why}, _Ref, raw, _Port) -> {bad_frame, Why};
@@ -543,6 +584,8 @@ forget({reply, _, {stopped, _, _}}, Req, D) -> drop_id(element(2, Req), D);
 forget(_, {close, Id}, D) -> drop_id(Id, D);
 forget({reply, _, {error, _}}, {open, Id, _, _, _, _, _, _}, D) -> drop_id(Id, D);
 forget({bad_frame, _}, {open, Id, _, _, _, _, _, _}, D) -> drop_id(Id, D);
+forget({reply, _, {error, _}}, {attach, Id, _, _, _}, D) -> drop_id(Id, D);
+forget({bad_frame, _}, {attach, Id, _, _, _}, D) -> drop_id(Id, D);
 forget(_, _, D) -> D.
 
 reply(none, _) -> ok;

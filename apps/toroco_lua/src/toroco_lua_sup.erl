@@ -2,8 +2,10 @@
 %% the owner of the `lua_port' program that hosts every Lua behavior's state.
 %%
 %% The Lua behaviors themselves are not here: they are behaviors like any
-%% other, in their layers' supervisors under `toroco'. They watch the owner
-%% and stop when the program they live in goes, so their layers restart them.
+%% other, in their layers' supervisors under `toroco'. They watch the owner:
+%% when the program they live in goes (or the owner with it), each starts
+%% its Lua code again in the next one, in its own process, so that their
+%% layers see no failure (toroco_lua).
 -module(toroco_lua_sup).
 -behaviour(supervisor).
 

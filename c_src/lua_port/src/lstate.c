@@ -143,16 +143,27 @@ static int l_main(lua_State *L)
     return 0;
 }
 
-static int l_print(lua_State *L)
+static int text_action(lua_State *L, const char *what)
 {
     struct lstate *s = of(L);
     size_t n;
     const char *text = luaL_checklstring(L, 1, &n);
     ei_x_buff *x = action(s, 2);
 
-    ei_x_encode_atom(x, "print");
+    ei_x_encode_atom(x, what);
     ei_x_encode_binary(x, text, (long)n);
     return 0;
+}
+
+static int l_print(lua_State *L)
+{
+    return text_action(L, "print");
+}
+
+/* C.warn(text): {warning, Text}, something the owner should hear of */
+static int l_warn(lua_State *L)
+{
+    return text_action(L, "warning");
 }
 
 /* C.timer(task, seq, ms) */
@@ -270,12 +281,12 @@ static int l_loadmodule(lua_State *L)
 static const luaL_Reg port_functions[] = {
     {"emit", l_emit}, {"unset", l_unset}, {"print", l_print}, {"timer", l_timer},
     {"cancel", l_cancel}, {"now", l_now}, {"fail", l_fail}, {"loadmodule", l_loadmodule},
-    {"main", l_main},
+    {"main", l_main}, {"warn", l_warn},
     {NULL, NULL}};
 
 /* ---- activations ------------------------------------------------------- */
 
-enum activation_kind { ACT_BOOT, ACT_INPUT, ACT_TIMER };
+enum activation_kind { ACT_BOOT, ACT_INPUT, ACT_TIMER, ACT_ATTACH, ACT_DETACH };
 
 struct activation {
     struct lstate *s;
@@ -283,7 +294,9 @@ struct activation {
     struct term_reader *terms;   /* params (boot) or the event's value (input) */
     const char *input;
     long long task, seq;
+    int slot;
     bool bad_term;
+    bool ok;                     /* attach: the slot exists */
 };
 
 static void push_entry(lua_State *L, struct lstate *s, const char *name)
@@ -345,13 +358,21 @@ static int dispatch(lua_State *L)
     switch (a->kind) {
     case ACT_INPUT:
         push_entry(L, s, "input");
+        lua_pushnumber(L, a->slot);
         lua_pushstring(L, a->input);
         n = term_push_values(L, a->terms);
         if (n < 0) {
             a->bad_term = true;
             return 0;
         }
-        lua_call(L, n + 1, 0);
+        lua_call(L, n + 2, 0);
+        return 0;
+    case ACT_ATTACH:
+    case ACT_DETACH:
+        push_entry(L, s, a->kind == ACT_ATTACH ? "attach" : "detach");
+        lua_pushnumber(L, a->slot);
+        lua_call(L, 1, 1);
+        a->ok = lua_toboolean(L, -1);
         return 0;
     case ACT_TIMER:
         push_entry(L, s, "timer");
@@ -418,6 +439,27 @@ static void activate(struct activation *a, long long now_ms)
         s->failed = true;
 }
 
+/* Slot `slot' held; false only when out of host memory. */
+static bool hold(struct lstate *s, int slot)
+{
+    if (slot < 0)
+        return false;
+    if (slot >= s->held_cap) {
+        int cap = slot + 16;
+        unsigned char *grown = realloc(s->held, (size_t)cap);
+        if (grown == NULL)
+            return false;
+        memset(grown + s->held_cap, 0, (size_t)(cap - s->held_cap));
+        s->held = grown;
+        s->held_cap = cap;
+    }
+    if (!s->held[slot]) {
+        s->held[slot] = 1;
+        s->refs++;
+    }
+    return true;
+}
+
 struct lstate *lstate_open(long long id, const struct lstate_opts *opts,
                            struct term_reader *params, long long now_ms)
 {
@@ -432,7 +474,8 @@ struct lstate *lstate_open(long long id, const struct lstate_opts *opts,
     s->entry_ref = LUA_NOREF;
     snprintf(s->file, sizeof s->file, "%s", opts->file);
     snprintf(s->dir, sizeof s->dir, "%s", opts->dir);
-    if (ei_x_new(&s->actions) != 0 || ei_x_new(&s->scratch) != 0) {
+    if (ei_x_new(&s->actions) != 0 || ei_x_new(&s->scratch) != 0 || !hold(s, 0)) {
+        free(s->held);
         free(s);
         return NULL;
     }
@@ -457,9 +500,64 @@ struct lstate *lstate_open(long long id, const struct lstate_opts *opts,
 bool lstate_input(struct lstate *s, const char *input, struct term_reader *value,
                   long long now_ms)
 {
-    struct activation a = {.s = s, .kind = ACT_INPUT, .terms = value, .input = input};
+    return lstate_input_slot(s, 0, input, value, now_ms);
+}
+
+bool lstate_input_slot(struct lstate *s, int slot, const char *input, struct term_reader *value,
+                       long long now_ms)
+{
+    struct activation a = {.s = s, .kind = ACT_INPUT, .terms = value, .input = input,
+                           .slot = slot};
     activate(&a, now_ms);
     return !a.bad_term;
+}
+
+bool lstate_attach(struct lstate *s, int slot, long long now_ms)
+{
+    struct activation a = {.s = s, .kind = ACT_ATTACH, .slot = slot};
+
+    if (slot <= 0)
+        return false;
+    activate(&a, now_ms);
+    if (!a.ok && !s->failed)
+        return false;
+    if (!hold(s, slot)) {
+        s->limit = LIMIT_MEMORY;
+        s->failed = true;
+    }
+    return true;
+}
+
+int lstate_detach(struct lstate *s, int slot, bool release)
+{
+    struct activation a = {.s = s, .kind = ACT_DETACH, .slot = slot};
+
+    if (!s->failed && !s->dead && s->L != NULL) {
+        activate(&a, s->now_ms);
+        s->actions.index = 0;        /* a closing behavior's actions go nowhere */
+        s->n_actions = 0;
+        if (s->failed && !lstate_recover(s))
+            s->dead = true;
+    }
+    if (release && slot >= 0 && slot < s->held_cap && s->held[slot]) {
+        s->held[slot] = 0;
+        s->refs--;
+    }
+    return s->refs;
+}
+
+bool lstate_recover(struct lstate *s)
+{
+    if (s->L == NULL || !s->ready || s->limit == LIMIT_MEMORY)
+        return false;
+    s->failed = false;
+    s->limit = LIMIT_NONE;
+    s->fail_file[0] = '\0';
+    s->fail_line = 0;
+    s->fail_msg[0] = '\0';
+    lua_settop(s->L, 0);
+    lua_sethook(s->L, budget_hook, LUA_MASKCOUNT, HOOK_EVERY);
+    return true;
 }
 
 void lstate_timer(struct lstate *s, long long task, long long seq, long long now_ms)
@@ -468,12 +566,22 @@ void lstate_timer(struct lstate *s, long long task, long long seq, long long now
     activate(&a, now_ms);
 }
 
+struct waits_of {
+    struct lstate *s;
+    int slot;                    /* -1: every slot's */
+};
+
 static int waits(lua_State *L)
 {
-    struct lstate *s = lua_touserdata(L, 1);
+    struct waits_of *w = lua_touserdata(L, 1);
+    struct lstate *s = w->s;
 
     push_entry(L, s, "waits");
-    lua_call(L, 0, 1);
+    if (w->slot >= 0)
+        lua_pushnumber(L, w->slot);
+    else
+        lua_pushnil(L);
+    lua_call(L, 1, 1);
     s->scratch.index = 0;
     term_encode(L, -1, &s->scratch);
     return 0;
@@ -481,7 +589,14 @@ static int waits(lua_State *L)
 
 void lstate_waits(struct lstate *s, ei_x_buff *x)
 {
-    if (s->failed || s->L == NULL || lua_cpcall(s->L, waits, s) != 0) {
+    lstate_waits_slot(s, -1, x);
+}
+
+void lstate_waits_slot(struct lstate *s, int slot, ei_x_buff *x)
+{
+    struct waits_of w = {.s = s, .slot = slot};
+
+    if (s->failed || s->dead || s->L == NULL || lua_cpcall(s->L, waits, &w) != 0) {
         if (s->L != NULL && lua_gettop(s->L) > 0)
             lua_settop(s->L, 0);
         ei_x_encode_empty_list(x);
@@ -524,5 +639,6 @@ void lstate_close(struct lstate *s)
     }
     ei_x_free(&s->actions);
     ei_x_free(&s->scratch);
+    free(s->held);
     free(s);
 }

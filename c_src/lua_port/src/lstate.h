@@ -1,5 +1,8 @@
 /*
- * One Lua behavior's state: a lua_State with its own allocator (the memory
+ * One Lua state, hosting one or more Lua behaviors (slots): slot 0 runs
+ * the behavior's file; the others are the behaviors its code added with
+ * inline functions (toroco.add_behavior) or its converters
+ * (toroco.configure_polling). One Lua state is a lua_State with its own allocator (the memory
  * cap), a count hook (the instruction budget of one activation), the
  * sandboxed Torocó API of prelude.lua, and the actions its last activation
  * produced. Nothing here reads a clock or touches a file descriptor but the
@@ -27,7 +30,11 @@ struct lstate_opts {
 };
 
 struct lstate {
-    long long id;
+    long long id;                /* the id it was opened with: attach finds it by this */
+    int refs;                    /* slots held: the state lives while any is */
+    unsigned char *held;         /* slot -> held */
+    int held_cap;
+    bool dead;                   /* out of memory: every slot's next request stops */
     lua_State *L;
     size_t mem, mem_cap;
     unsigned long budget, used;
@@ -56,10 +63,25 @@ struct lstate *lstate_open(long long id, const struct lstate_opts *opts,
  * TERM_MAX_VALUES values). */
 bool lstate_input(struct lstate *s, const char *input, struct term_reader *value,
                   long long now_ms);
+/* As lstate_input, for the behavior of slot `slot'. */
+bool lstate_input_slot(struct lstate *s, int slot, const char *input, struct term_reader *value,
+                       long long now_ms);
 /* A timer the state asked for fired. */
 void lstate_timer(struct lstate *s, long long task, long long seq, long long now_ms);
+/* Starts the tasks of slot `slot' (a behavior the state's code added):
+ * false, and nothing ran, if the state made no such slot. */
+bool lstate_attach(struct lstate *s, int slot, long long now_ms);
+/* Ends the tasks of slot `slot'; with `release', the slot is no longer
+ * held (its behavior is gone for good). Returns the slots still held. */
+int lstate_detach(struct lstate *s, int slot, bool release);
+/* After a failure that ended one slot's behavior (an error, the budget):
+ * the state goes on for its other slots. False if the state cannot (its
+ * memory cap). */
+bool lstate_recover(struct lstate *s);
 /* Encodes what the tasks wait for: [{Task, Input | false, TimerPending}]. */
 void lstate_waits(struct lstate *s, ei_x_buff *x);
+/* As lstate_waits, the tasks of one slot. */
+void lstate_waits_slot(struct lstate *s, int slot, ei_x_buff *x);
 /* The actions since the last take, as a list term appended to x; clears them. */
 void lstate_take_actions(struct lstate *s, ei_x_buff *x);
 /* {lua_error, File, Line, Msg} or {lua_limit, File, budget | memory}. */

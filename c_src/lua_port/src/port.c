@@ -2,6 +2,7 @@
 #include "port.h"
 
 #include <errno.h>
+#include <limits.h>
 #include <poll.h>
 #include <signal.h>
 #include <time.h>
@@ -14,9 +15,18 @@
 #include "lstate.h"
 #include "term.h"
 
+/* A request's Id: one Lua behavior, the slot it is of a Lua state. */
+struct entry {
+    long long id;
+    struct lstate *s;
+    int slot;
+};
+
 struct port {
-    struct lstate **states;
+    struct entry *entries;
     int n, cap;
+    struct lstate **states;      /* every state, each once */
+    int n_states, cap_states;
 };
 
 struct port *port_new(void)
@@ -28,9 +38,10 @@ void port_free(struct port *p)
 {
     if (p == NULL)
         return;
-    for (int k = 0; k < p->n; k++)
+    for (int k = 0; k < p->n_states; k++)
         lstate_close(p->states[k]);
     free(p->states);
+    free(p->entries);
     free(p);
 }
 
@@ -42,29 +53,76 @@ int port_states(const struct port *p)
 static int find(const struct port *p, long long id)
 {
     for (int k = 0; k < p->n; k++)
-        if (p->states[k]->id == id)
+        if (p->entries[k].id == id)
             return k;
     return -1;
 }
 
-static void drop(struct port *p, int k)
+/* The state opened as `id' (its first behavior's id), whoever holds it now. */
+static struct lstate *find_state(const struct port *p, long long id)
 {
-    lstate_close(p->states[k]);
-    p->states[k] = p->states[--p->n];
+    for (int k = 0; k < p->n_states; k++)
+        if (p->states[k]->id == id)
+            return p->states[k];
+    return NULL;
 }
 
-static bool add(struct port *p, struct lstate *s)
+static bool grow(void **arr, int *cap, int n, size_t size)
 {
-    if (p->n == p->cap) {
-        int cap = p->cap ? 2 * p->cap : 16;
-        struct lstate **grown = realloc(p->states, (size_t)cap * sizeof *grown);
-        if (grown == NULL)
-            return false;
-        p->states = grown;
-        p->cap = cap;
-    }
-    p->states[p->n++] = s;
+    if (n < *cap)
+        return true;
+    int c = *cap ? 2 * *cap : 16;
+    void *grown = realloc(*arr, (size_t)c * size);
+    if (grown == NULL)
+        return false;
+    *arr = grown;
+    *cap = c;
     return true;
+}
+
+static bool add_entry(struct port *p, long long id, struct lstate *s, int slot)
+{
+    if (!grow((void **)&p->entries, &p->cap, p->n, sizeof *p->entries))
+        return false;
+    p->entries[p->n++] = (struct entry){.id = id, .s = s, .slot = slot};
+    return true;
+}
+
+static bool add_state(struct port *p, struct lstate *s)
+{
+    if (!grow((void **)&p->states, &p->cap_states, p->n_states, sizeof *p->states))
+        return false;
+    p->states[p->n_states++] = s;
+    return true;
+}
+
+/* A state no slot holds any more and no entry names is closed. */
+static void collect(struct port *p, struct lstate *s)
+{
+    if (s->refs > 0)
+        return;
+    for (int k = 0; k < p->n; k++)
+        if (p->entries[k].s == s)
+            return;
+    for (int k = 0; k < p->n_states; k++)
+        if (p->states[k] == s) {
+            p->states[k] = p->states[--p->n_states];
+            break;
+        }
+    lstate_close(s);
+}
+
+/* Entry k goes. `release': its behavior is gone for good (closed, or slot
+ * 0 stopped: a file's behavior starts again in a new state); otherwise its
+ * slot stays held for the behavior's restart. */
+static void drop(struct port *p, int k, bool release)
+{
+    struct lstate *s = p->entries[k].s;
+    int slot = p->entries[k].slot;
+
+    p->entries[k] = p->entries[--p->n];
+    (void)lstate_detach(s, slot, release);
+    collect(p, s);
 }
 
 /* ---- replies ----------------------------------------------------------- */
@@ -107,15 +165,20 @@ void port_too_big(ei_x_buff *x, size_t len)
  * state is gone. */
 static void activation_reply(struct port *p, int k, ei_x_buff *x, long long ref)
 {
-    struct lstate *s = p->states[k];
+    struct lstate *s = p->entries[k].s;
+    int slot = p->entries[k].slot;
 
     reply_head(x, ref);
-    if (s->failed) {
+    if (s->failed || s->dead) {
         ei_x_encode_tuple_header(x, 3);
         ei_x_encode_atom(x, "stopped");
         lstate_encode_failure(s, x);
         lstate_take_actions(s, x);
-        drop(p, k);
+        /* an error or the budget ends this slot's behavior only; the memory
+         * cap ends the state, and each of its behaviors at its next request */
+        if (!s->dead && !lstate_recover(s))
+            s->dead = true;
+        drop(p, k, slot == 0 || s->dead);
     } else {
         ei_x_encode_tuple_header(x, 2);
         ei_x_encode_atom(x, "ok");
@@ -171,16 +234,54 @@ static void do_open(struct port *p, struct term_reader *r, size_t arity, long lo
     if (!term_skip(r) || !term_integer(r, &budget) || !term_integer(r, &mem) ||
         budget <= 0 || mem <= 0)
         { reply_error(x, ref, "bad_request", ref); return; }
-    if (find(p, id) >= 0)
+    if (find(p, id) >= 0 || find_state(p, id) != NULL)
         { reply_error(x, ref, "duplicate_state", id); return; }
-    if (p->n >= MAX_STATES)
+    if (p->n_states >= MAX_STATES || p->n >= MAX_STATES)
         { reply_error(x, ref, "too_many_states", id); return; }
     struct lstate_opts o = {.file = file, .dir = dir, .budget = (unsigned long)budget,
                             .mem_cap = (size_t)mem};
     s = lstate_open(id, &o, &params, now);
-    if (s == NULL || !add(p, s)) {
+    if (s == NULL || !add_state(p, s)) {
         lstate_close(s);
         { reply_error(x, ref, "out_of_memory", id); return; }
+    }
+    if (!add_entry(p, id, s, 0)) {
+        p->n_states--;
+        lstate_close(s);
+        { reply_error(x, ref, "out_of_memory", id); return; }
+    }
+    activation_reply(p, p->n - 1, x, ref);
+}
+
+static void do_attach(struct port *p, struct term_reader *r, size_t arity, long long ref,
+                      ei_x_buff *x)
+{
+    long long id, host, slot, now;
+    struct lstate *s;
+
+    /* {attach, Ref, Id, Host, Slot, Now} */
+    if (arity != 6 || !term_integer(r, &id) || !term_integer(r, &host) ||
+        !term_integer(r, &slot) || !term_integer(r, &now) || slot <= 0 || slot > INT_MAX / 2)
+        { reply_error(x, ref, "bad_request", ref); return; }
+    if (find(p, id) >= 0 || find_state(p, id) != NULL)
+        { reply_error(x, ref, "duplicate_state", id); return; }
+    if ((s = find_state(p, host)) == NULL || s->dead)
+        { reply_error(x, ref, "unknown_state", host); return; }
+    if (p->n >= MAX_STATES)
+        { reply_error(x, ref, "too_many_states", id); return; }
+    /* the slot's behavior starting again in its process (a Brooks reset):
+     * the entry it had goes, the slot stays held, its tasks start anew */
+    for (int k = 0; k < p->n; k++)
+        if (p->entries[k].s == s && p->entries[k].slot == (int)slot) {
+            p->entries[k] = p->entries[--p->n];
+            (void)lstate_detach(s, (int)slot, false);
+            break;
+        }
+    if (!add_entry(p, id, s, (int)slot))
+        { reply_error(x, ref, "out_of_memory", id); return; }
+    if (!lstate_attach(s, (int)slot, now)) {
+        p->n--;
+        { reply_error(x, ref, "unknown_slot", slot); return; }
     }
     activation_reply(p, p->n - 1, x, ref);
 }
@@ -197,7 +298,7 @@ static void do_input(struct port *p, struct term_reader *r, size_t arity, long l
         { reply_error(x, ref, "bad_request", ref); return; }
     if ((k = find(p, id)) < 0)
         { reply_error(x, ref, "unknown_state", id); return; }
-    if (!lstate_input(p->states[k], input, r, now))
+    if (!lstate_input_slot(p->entries[k].s, p->entries[k].slot, input, r, now))
         { reply_error(x, ref, "bad_value", id); return; }
     activation_reply(p, k, x, ref);
 }
@@ -214,7 +315,7 @@ static void do_timer(struct port *p, struct term_reader *r, size_t arity, long l
         { reply_error(x, ref, "bad_request", ref); return; }
     if ((k = find(p, id)) < 0)
         { reply_error(x, ref, "unknown_state", id); return; }
-    lstate_timer(p->states[k], task, seq, now);
+    lstate_timer(p->entries[k].s, task, seq, now);
     activation_reply(p, k, x, ref);
 }
 
@@ -231,16 +332,16 @@ static void do_on_state(struct port *p, const char *op, struct term_reader *r, s
         { reply_error(x, ref, "unknown_state", id); return; }
     reply_head(x, ref);
     if (strcmp(op, "close") == 0) {
-        drop(p, k);
+        drop(p, k, true);
         ei_x_encode_atom(x, "ok");
         return;
     }
     ei_x_encode_tuple_header(x, 2);
     ei_x_encode_atom(x, "ok");
     if (strcmp(op, "waits") == 0)
-        lstate_waits(p->states[k], x);
+        lstate_waits_slot(p->entries[k].s, p->entries[k].slot, x);
     else
-        ei_x_encode_ulonglong(x, p->states[k]->mem);
+        ei_x_encode_ulonglong(x, p->entries[k].s->mem);
 }
 
 void port_handle(struct port *p, const unsigned char *frame, size_t len, ei_x_buff *x)
@@ -266,6 +367,8 @@ void port_handle(struct port *p, const unsigned char *frame, size_t len, ei_x_bu
         ei_x_encode_long(x, PROTOCOL_VERSION);
     } else if (strcmp(op, "open") == 0) {
         do_open(p, &r, arity, ref, x);
+    } else if (strcmp(op, "attach") == 0) {
+        do_attach(p, &r, arity, ref, x);
     } else if (strcmp(op, "input") == 0) {
         do_input(p, &r, arity, ref, x);
     } else if (strcmp(op, "timer") == 0) {

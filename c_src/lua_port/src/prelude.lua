@@ -4,7 +4,14 @@
 -- functions (C), the file's path and the behavior's params. Every task
 -- (a coroutine the file returned, a trigger, the file's own body) is a Lua
 -- coroutine; a task waits by yielding, and the port resumes it when its
--- input arrives or its timer fires. Timers are not kept here: each one is an
+-- input arrives or its timer fires.
+--
+-- A state hosts behaviors in slots: slot 0 is the file's; each
+-- add_behavior with inline functions, and each configure_polling with a
+-- converter, makes another, whose tasks start when its own behavior (a
+-- process of its own on the Erlang side) attaches to it, and start again
+-- when that behavior restarts. Each request names its slot; a task
+-- belongs to the slot it started in. Timers are not kept here: each one is an
 -- action for the Erlang side, which sets a gen_statem timeout and sends the
 -- firing back, so a Lua behavior runs on the runtime's clock.
 local C, file, params = ...
@@ -16,9 +23,13 @@ local pairs, ipairs, type, select, unpack, tostring, error, setmetatable, rawset
   pairs, ipairs, type, select, unpack, tostring, error, setmetatable, rawset
 local floor, huge, concat, sort = math.floor, math.huge, table.concat, table.sort
 
-local tasks = {}            -- task id -> {co, input, order, seq, timer}
+local tasks = {}            -- task id -> {co, input, order, seq, timer, slot}
 local next_task, order = 0, 0
 local current = nil         -- the task running now
+local slot = 0              -- the slot of the request being run
+local slots = {}            -- slot -> {items = {...}, params = {...}} (not 0)
+local next_slot = 0
+local made = {}             -- triggers made in this request, not started yet
 local STOP = {}             -- the error that ends a dispatch after a failure
 
 -- ---- failures ------------------------------------------------------------
@@ -72,7 +83,7 @@ end
 local function spawn(kind, fn, ...)
   next_task = next_task + 1
   local args = {n = select('#', ...), ...}
-  local t = {id = next_task, seq = 0, kind = kind}
+  local t = {id = next_task, seq = 0, kind = kind, slot = slot}
   t.co = co_create(function() return fn(unpack(args, 1, args.n)) end)
   tasks[t.id] = t
   run(t)
@@ -138,16 +149,41 @@ function M.wait_for_input(input, timeout)
   return nil
 end
 
-function M.trigger(input, handler)
-  local name = input_name(input)
-  if type(handler) ~= 'function' then error('trigger: handler must be a function', 2) end
+local function start_trigger(tr)
+  tr.started = true
+  local name, handler = tr.input, tr.handler
   local t = spawn('trigger', function()
     while true do
       local vals = wait(name, nil, 'trigger')
       handler(name, unpack(vals, 1, vals.n))     -- the input's name, as the original
     end
   end)
-  return {kind = 'trigger', input = name, task = t.id}
+  tr.task = t.id
+end
+
+-- A trigger starts at the end of the request that made it, in the slot
+-- that made it, unless add_behavior took it for the behavior it adds.
+function M.trigger(input, handler)
+  local name = input_name(input)
+  if type(handler) ~= 'function' then error('trigger: handler must be a function', 2) end
+  local tr = {kind = 'trigger', input = name, handler = handler, slot = slot}
+  made[#made + 1] = tr
+  return tr
+end
+
+local function start_made()
+  while #made > 0 do
+    local now = made
+    made = {}
+    for _, tr in ipairs(now) do
+      if not tr.started and not tr.taken then
+        local prev = slot
+        slot = tr.slot
+        start_trigger(tr)
+        slot = prev
+      end
+    end
+  end
 end
 
 -- As the original: {v1, v2, timeout = s} holds the output's suppressions
@@ -201,7 +237,9 @@ local function sources_of(v, what)
   return out
 end
 
+local wired = false         -- a wiring call was made (a main file)
 local function main(op, args)
+  wired = true
   local info = getinfo(3, 'l')
   C.main(op, info and info.currentline or 0, args)
 end
@@ -228,12 +266,43 @@ for _, f in ipairs {'suspend_behavior', 'resume_behavior', 'remove_behavior'} do
   M[f] = function(b) main(f, {name_of(b, f)}) end
 end
 function M.run() main('run', {}) end
-function M.add_behavior()
-  error('add_behavior: functions cannot cross to Erlang; put them in a file and use load_behavior', 2)
+-- A new slot running `items' (functions and triggers, alone or in
+-- tables): its tasks start when its behavior attaches.
+local function new_slot(items, ps)
+  local list = {}
+  local function take(v)
+    if type(v) == 'function' then list[#list + 1] = v
+    elseif type(v) == 'table' and v.kind == 'trigger' then
+      v.taken = true
+      list[#list + 1] = v
+    elseif type(v) == 'table' then
+      for _, w in ipairs(v) do take(w) end
+    else
+      error('add_behavior: functions and triggers expected, got ' .. tostring(v), 4)
+    end
+  end
+  take(items)
+  next_slot = next_slot + 1
+  slots[next_slot] = {items = list, params = ps or {}}
+  return next_slot
+end
+
+-- add_behavior(behavior.B, {coroutines and triggers}, params): B's code
+-- stays in this state, which lives while any behavior it hosts does.
+function M.add_behavior(b, items, ps)
+  local name = name_of(b, 'add_behavior')
+  if type(items) == 'string' then
+    main('load_behavior', {name, items, ps or {}})
+    return
+  end
+  if ps ~= nil and type(ps) ~= 'table' then error('add_behavior: a table of params expected', 2) end
+  main('add_behavior', {name, new_slot(items, ps)})
 end
 -- The source's device polled every `seconds' when it can be (Erlang asks
--- it; one that emits by itself is left as it is). A converter would have
--- to run where the device's values are made, in Erlang: refused.
+-- it; one that emits by itself is left as it is). A converter runs here, on
+-- each reading, in a slot of its own (a behavior of its own on the Erlang
+-- side, between the device and those wired to it): its return values are
+-- the event's values.
 function M.configure_polling(s, seconds, converter)
   if type(s) ~= 'table' or s.kind ~= 'source' or s.emitter_kind ~= 'device' then
     error('configure_polling: device.D.E expected, got ' .. tostring(s), 2)
@@ -241,10 +310,23 @@ function M.configure_polling(s, seconds, converter)
   if type(seconds) ~= 'number' or seconds <= 0 then
     error('configure_polling: a period in seconds expected, got ' .. tostring(seconds), 2)
   end
-  if converter ~= nil then
-    error('configure_polling: converters are not supported (convert in the behavior)', 2)
+  if converter ~= nil and type(converter) ~= 'function' then
+    error('configure_polling: a converter function expected, got ' .. tostring(converter), 2)
   end
-  main('configure_polling', {s.emitter, s.name, math.max(1, math.floor(seconds * 1000 + 0.5))})
+  local conv = false
+  if converter then
+    local out = s.name
+    conv = new_slot(function()
+      while true do
+        local vals = wait(out, nil, 'configure_polling')
+        local r = {n = 0}
+        local function pack(...) r = {n = select('#', ...), ...} end
+        pack(converter(unpack(vals, 1, vals.n)))
+        C.emit('send', out, {unpack(r, 1, r.n)}, nil)
+      end
+    end)
+  end
+  main('configure_polling', {s.emitter, s.name, math.max(1, math.floor(seconds * 1000 + 0.5)), conv})
 end
 
 local sched = {}
@@ -271,6 +353,29 @@ os = {
   date = function(f, t) return os_date(f, t or floor(C.now() / 1000)) end,
   difftime = os_difftime,
 }
+
+-- math.random from a generator of this state's own (Park and Miller's),
+-- not the C library's, which every state of the program shares: a seed
+-- (math.randomseed(os.time()) on the runtime's clock) gives the same
+-- numbers every run, whatever the other behaviors draw.
+local rand_state = 1
+local function rand_next()
+  rand_state = (rand_state * 16807) % 2147483647
+  return rand_state / 2147483647
+end
+math.randomseed = function(x)
+  x = floor(tonumber(x) or 0) % 2147483646
+  if x < 0 then x = x + 2147483646 end
+  rand_state = x + 1
+end
+math.random = function(m, n)
+  local r = rand_next()
+  if m == nil then return r end
+  if n == nil then m, n = 1, m end
+  m, n = floor(m), floor(n)
+  if m > n then error('bad argument to \'random\' (interval is empty)', 2) end
+  return m + floor(r * (n - m + 1))
+end
 
 local loadstring_ = loadstring
 loadstring = function(s, name)
@@ -305,31 +410,53 @@ params = M.params
 -- ---- entry points (called by the port) -----------------------------------
 
 local entry = {}
+local file_params = M.params
+
+-- Each request runs one slot's tasks, with that slot's params.
+local function enter(n)
+  if #made > 0 then made = {} end   -- those of a request that failed never start
+  if n ~= slot or n ~= 0 then
+    slot = n
+    local sl = slots[n]
+    M.params = sl and sl.params or file_params
+    params = M.params
+  end
+end
 
 -- The behavior's file: its body runs as a task; the functions it returns
--- (alone or in tables) start as tasks; triggers started when made.
+-- (alone or in tables) and the triggers start as tasks. A file that
+-- returns nothing and starts nothing is a behavior with no tasks.
 function entry.boot(chunk)
+  enter(0)
   local function start(v)
     if type(v) == 'function' then spawn('coroutine', v)
-    elseif type(v) == 'table' and v.kind ~= 'trigger' then
+    elseif type(v) == 'table' and v.kind == 'trigger' then
+      if not v.started and not v.taken then start_trigger(v) end
+    elseif type(v) == 'table' then
       for _, w in ipairs(v) do start(w) end
     end
   end
   spawn('file', function()
+    local first = next_task
     local rets = {n = 0}
     local function pack(...) rets = {n = select('#', ...), ...} end
     pack(chunk())
     for k = 1, rets.n do start(rets[k]) end
+    if rets.n == 0 and #made == 0 and next_task == first and not wired then
+      C.warn(file .. ' returns nothing: a behavior with no tasks')
+    end
   end)
+  start_made()
 end
 
 local function by_order(a, b) return a.order < b.order end
 
-function entry.input(name, ...)
+function entry.input(n, name, ...)
+  enter(n)
   local vals = {n = select('#', ...), ...}
   local ready = {}
   for _, t in pairs(tasks) do
-    if t.input == name then ready[#ready + 1] = t end
+    if t.input == name and t.slot == n then ready[#ready + 1] = t end
   end
   if #ready > 1 then sort(ready, by_order) end
   for _, t in ipairs(ready) do
@@ -339,21 +466,48 @@ function entry.input(name, ...)
       run(t, 'input', vals)
     end
   end
+  start_made()
 end
 
 function entry.timer(id, seq)
   local t = tasks[id]
   if t and t.timer and t.seq == seq then
+    enter(t.slot)
     t.timer, t.input = nil, nil
     run(t, 'timeout')
+    start_made()
   end
 end
 
--- What the tasks wait for, for inspect: {{task, kind, input or false, timer}}.
-function entry.waits()
+-- A slot's behavior attached: its tasks start (again, after a restart).
+function entry.attach(n)
+  local sl = slots[n]
+  if not sl then return false end
+  enter(n)
+  for _, v in ipairs(sl.items) do
+    if type(v) == 'function' then spawn('coroutine', v)
+    else start_trigger({input = v.input, handler = v.handler}) end
+  end
+  start_made()
+  return true
+end
+
+-- A slot's behavior stopped: its tasks end (timers they set do nothing).
+function entry.detach(n)
+  for id, t in pairs(tasks) do
+    if t.slot == n then tasks[id] = nil end
+  end
+  return true
+end
+
+-- What the tasks wait for, for inspect: {{task, kind, input or false, timer}}
+-- (one slot's, or all).
+function entry.waits(n)
   local out = {}
   for id, t in pairs(tasks) do
-    out[#out + 1] = {id, t.kind, t.input or false, t.timer or false}
+    if n == nil or t.slot == n then
+      out[#out + 1] = {id, t.kind, t.input or false, t.timer or false}
+    end
   end
   sort(out, function(a, b) return a[1] < b[1] end)
   return out

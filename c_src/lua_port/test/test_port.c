@@ -284,7 +284,75 @@ static void holds_unsets_and_prints_cross_as_actions(void)
     port_free(p);
 }
 
+static const char *attach(struct port *p, long id, long host, long slot)
+{
+    ei_x_buff x;
+
+    head(&x, "attach", 6, 4);
+    ei_x_encode_long(&x, id);
+    ei_x_encode_long(&x, host);
+    ei_x_encode_long(&x, slot);
+    ei_x_encode_long(&x, 0);
+    return handle(p, &x);
+}
+
+static const char *close_state(struct port *p, long id)
+{
+    ei_x_buff x;
+
+    head(&x, "close", 3, 5);
+    ei_x_encode_long(&x, id);
+    return handle(p, &x);
+}
+
+static void an_inline_behavior_outlives_its_creator_and_fails_alone(void)
+{
+    struct port *p = port_new();
+
+    CHECK_STR(open_file(p, 20, "host.lua", BUDGET, MEM), "{reply,1,{ok,[]}}");
+    CHECK_STR(input_atom(p, 20, "make", "now"),
+              "{reply,3,{ok,[{main,<<\"add_behavior\">>,7,[<<\"child\">>,1]}]}}");
+    CHECK_STR(attach(p, 21, 20, 2), "{reply,4,{error,{unknown_slot,2}}}");
+    CHECK_STR(attach(p, 21, 20, 1), "{reply,4,{ok,[]}}");
+    /* the creator's input does not reach the child's tasks, nor the reverse */
+    CHECK_STR(input_atom(p, 20, "x", "a"), "{reply,3,{ok,[]}}");
+    CHECK_STR(input_atom(p, 21, "x", "a"),
+              "{reply,3,{ok,[{send,<<\"out\">>,{<<\"a\">>,1,<<\"kid\">>},default}]}}");
+    /* the creator goes, its state stays for the child */
+    CHECK_STR(close_state(p, 20), "{reply,5,ok}");
+    CHECK_STR(input_atom(p, 21, "x", "b"),
+              "{reply,3,{ok,[{send,<<\"out\">>,{<<\"b\">>,2,<<\"kid\">>},default}]}}");
+    /* a failure ends the child alone; attached again, it starts anew in the
+     * same state (its upvalue goes on counting) */
+    CHECK(strstr(input_atom(p, 21, "x", "boom"), "{stopped,{lua_error,") != NULL);
+    CHECK_LL(port_states(p), 0);
+    CHECK_STR(attach(p, 22, 20, 1), "{reply,4,{ok,[]}}");
+    CHECK_STR(input_atom(p, 22, "x", "c"),
+              "{reply,3,{ok,[{send,<<\"out\">>,{<<\"c\">>,3,<<\"kid\">>},default}]}}");
+    /* attached again (a reset): the new id takes the slot's place */
+    CHECK_STR(attach(p, 24, 20, 1), "{reply,4,{ok,[]}}");
+    CHECK_STR(input_atom(p, 22, "x", "d"), "{reply,3,{error,{unknown_state,22}}}");
+    CHECK_STR(input_atom(p, 24, "x", "d"),
+              "{reply,3,{ok,[{send,<<\"out\">>,{<<\"d\">>,4,<<\"kid\">>},default}]}}");
+    /* the last behavior closed: the state goes */
+    CHECK_STR(close_state(p, 24), "{reply,5,ok}");
+    CHECK_STR(attach(p, 23, 20, 1), "{reply,4,{error,{unknown_state,20}}}");
+    port_free(p);
+}
+
+static void an_empty_file_is_a_behavior_with_no_tasks(void)
+{
+    struct port *p = port_new();
+
+    CHECK_STR(open_file(p, 30, "empty.lua", BUDGET, MEM),
+              "{reply,1,{ok,[{warning,<<\"empty.lua returns nothing: a behavior with no tasks\">>}]}}");
+    CHECK_LL(port_states(p), 1);
+    port_free(p);
+}
+
 const struct test_case port_tests[] = {
+    TEST_CASE(an_inline_behavior_outlives_its_creator_and_fails_alone),
+    TEST_CASE(an_empty_file_is_a_behavior_with_no_tasks),
     TEST_CASE(ping_answers_the_protocol_version),
     TEST_CASE(a_trigger_latches_and_waits_with_a_timeout),
     TEST_CASE(a_coroutine_sleeps_on_a_timer_and_reads_params),
