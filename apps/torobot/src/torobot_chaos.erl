@@ -435,7 +435,9 @@ names(Wiring) ->
 
 world_terms(Terms) when is_list(Terms), Terms =/= [], is_tuple(hd(Terms)) ->
     case torobot_world:from_terms_all(Terms) of
-        {ok, _} -> {ok, Terms};
+        {ok, [_]} -> {ok, Terms};
+        %% the properties judge one robot's run
+        {ok, _} -> {error, {world, several_robots}};
         {error, Reason} -> {error, {world, Reason}}
     end;
 world_terms(File) when is_list(File); is_binary(File) ->

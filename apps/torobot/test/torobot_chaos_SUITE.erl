@@ -193,7 +193,9 @@ bad_schedules_refused(Config) ->
     ?assertMatch({error, {unknown_sensor, _}}, Run([{at, 5, {dropout, sonar, 10}}])),
     ?assertMatch({error, {bad_rate, _}}, Run([{rate, fast, {kill, any}}])),
     ?assertMatch({error, {unsupported_fault, _}}, Run([{at, 5, {disconnect, 'laptop@h', 100}}])),
-    ?assertMatch({error, {world, _}}, torobot_chaos:run(#{world => "no/such.world"})).
+    ?assertMatch({error, {world, _}}, torobot_chaos:run(#{world => "no/such.world"})),
+    HeadOn = filename:join([?config(root, Config), "test", "worlds", "head_on.world"]),
+    ?assertEqual({error, {world, several_robots}}, torobot_chaos:run(#{world => HeadOn})).
 
 bad_properties_refused() ->
     [{doc, "An unknown condition or a malformed property is refused before anything runs."}].
