@@ -20,7 +20,7 @@
 %% `{error, {Reason, Detail}}' (with `File:Line' for files).
 -module(torobot_chaos).
 
--export([run/1, explore/1, replay/1, shrink/2, terms/1, names/1]).
+-export([run/1, explore/1, replay/1, shrink/2, names/1]).
 -export([run_job/1, main/1, replay_main/1]).
 -export_type([run_opts/0, explore_opts/0, report/0]).
 
@@ -360,7 +360,7 @@ printable(P) -> P.
 %% violation as when it was written (`expected' has them).
 -spec replay(file:name_all()) -> {ok, map()} | {error, term()}.
 replay(File) ->
-    case terms(File) of
+    case torobot_terms:read(File) of
         {ok, Located} ->
             T = maps:from_list([{K, V} || {_, {K, V}} <- Located]),
             case [K || K <- [world, wiring, faults, seed, property], not is_map_key(K, T)] of
@@ -385,39 +385,6 @@ replay(File) ->
 %%====================================================================
 %% Reading
 %%====================================================================
-
-%% @doc The terms of a file with where each is (`"File:Line"'), or
-%% `{error, {Reason, "File:Line"}}'.
--spec terms(file:name_all()) -> {ok, [{string(), term()}]} | {error, {atom(), term()}}.
-terms(File) ->
-    case file:open(File, [read, {encoding, utf8}]) of
-        {ok, Fd} ->
-            try read_terms(Fd, File, 1, [])
-            after file:close(Fd)
-            end;
-        {error, Reason} ->
-            {error, {Reason, lists:flatten(io_lib:format("~ts", [File]))}}
-    end.
-
-read_terms(Fd, File, Line, Acc) ->
-    case io:request(Fd, {get_until, unicode, '', erl_scan, tokens, [Line]}) of
-        {ok, Tokens = [First | _], End} ->
-            case erl_parse:parse_term(Tokens) of
-                {ok, Term} ->
-                    read_terms(Fd, File, End, [{loc(File, erl_scan:line(First)), Term} | Acc]);
-                {error, {L, Mod, Why}} ->
-                    {error, {malformed, {loc(File, L), lists:flatten(Mod:format_error(Why))}}}
-            end;
-        {eof, _} ->
-            {ok, lists:reverse(Acc)};
-        {error, {L, Mod, Why}, _} ->
-            {error, {malformed, {loc(File, L), lists:flatten(Mod:format_error(Why))}}};
-        {error, Why} ->
-            {error, {malformed, {loc(File, Line), Why}}}
-    end.
-
-loc(File, {L, _}) -> loc(File, L);
-loc(File, L) -> lists:flatten(io_lib:format("~ts:~b", [File, L])).
 
 %% @doc What a schedule may name in a wiring file: its behaviors, its
 %% devices (and the simulated world's) and its wired inputs.

@@ -73,7 +73,7 @@ check_all([{Line, Entry} | Rest], Names) ->
 %% errors name `File:Line'.
 -spec read(file:name_all(), names()) -> {ok, schedule()} | {error, {atom(), term()}}.
 read(File, Names) ->
-    case torobot_chaos:terms(File) of
+    case torobot_terms:read(File) of
         {ok, Located} ->
             case check_all([{Loc, T} || {Loc, T} <- Located], Names) of
                 ok -> {ok, [T || {_, T} <- Located]};

@@ -81,7 +81,7 @@ condition(C) -> {error, {unknown_condition, C}}.
 %% @doc A file of property terms, checked; errors name `File:Line'.
 -spec read(file:name_all()) -> {ok, property()} | {error, {atom(), term()}}.
 read(File) ->
-    case torobot_chaos:terms(File) of
+    case torobot_terms:read(File) of
         {ok, []} ->
             {error, {bad_property, {File, empty}}};
         {ok, Located} ->

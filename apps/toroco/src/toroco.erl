@@ -53,7 +53,7 @@
 
 %% Whether the caller is the process of behavior or device `Name': a
 %% callback that injects into its own output would wait on itself.
--define(IS_SELF(Name), (whereis(toroco_names:process(Name)) =:= self())).
+-define(IS_SELF(Name), (erlang:whereis(toroco_names:process(Name)) =:= self())).
 -type source() :: {Emitter :: name(), Output :: atom()}.
 -type hold() :: non_neg_integer() | infinity.
 -type source_spec() :: source() | {Emitter :: name(), Output :: atom(), #{hold => hold()}}.
@@ -259,7 +259,7 @@ inject(Src, Value) ->
 -spec inject(source(), term(), #{latch => boolean(), hold => hold()}) ->
           ok | {error, error_reason()}.
 inject({E, _} = Src, Value, Opts) when is_atom(E), is_map(Opts) ->
-    case whereis(toroco_names:process(E)) =:= undefined andalso where(E) of
+    case erlang:whereis(toroco_names:process(E)) =:= undefined andalso where(E) of
         {ok, Node} when Node =/= node() ->
             on(E, fun() -> {error, {unknown_name, E}} end,
                fun() -> inject(Src, Value, Opts) end);
