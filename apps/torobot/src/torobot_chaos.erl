@@ -27,7 +27,8 @@
 -type run_opts() :: #{world := file:name_all() | [tuple()], wiring => file:name_all(),
                       faults => torobot_faults:schedule() | file:name_all(),
                       property => torobot_props:property() | file:name_all(),
-                      seed => integer(), trace => file:name_all()}.
+                      seed => integer(), trace => file:name_all(),
+                      marks => [#{t_ms := non_neg_integer(), kind := atom(), text := iodata()}]}.
 -type explore_opts() :: #{worlds := [file:name_all()] | {generated, pos_integer(), integer()},
                           wiring => file:name_all(),
                           faults := torobot_faults:schedule() | file:name_all(),
@@ -78,7 +79,8 @@ prepare(Opts) ->
                 {{ok, World}, {ok, Schedule}, {ok, Prop}} ->
                     {ok, #{world => World, wiring => Wiring, schedule => Schedule,
                            property => Prop, seed => Seed, names => Names,
-                           trace => maps:get(trace, Opts, undefined)}}
+                           trace => maps:get(trace, Opts, undefined),
+                           marks => maps:get(marks, Opts, [])}}
             end;
         Error ->
             Error
@@ -99,7 +101,8 @@ run_job(Job = #{world := World, wiring := Wiring, schedule := Schedule, property
                false -> #{}
            end,
     try torobot_sim:observe(World, Stop#{time => lockstep, wiring => Wiring, trace => Trace,
-                                         faults => Faults, seed => Seed}) of
+                                         faults => Faults, seed => Seed,
+                                         marks => maps:get(marks, Job, [])}) of
         {ok, Final, Obs} ->
             {ok, Bin} = file:read_file(Trace),
             Context = #{faults => Faults, reference => reference(Prop, Job)},
@@ -369,9 +372,15 @@ replay(File) ->
                                fun_property -> fun(_) -> true end;
                                P -> P
                            end,
+                    %% the violation it had, marked on the dashboard's timeline
+                    Marks = case maps:get(violation, T, none) of
+                                {Clause, At} -> [#{t_ms => At, kind => violation,
+                                                   text => io_lib:format("~0tp", [Clause])}];
+                                _ -> []
+                            end,
                     case run(#{world => maps:get(world, T), wiring => maps:get(wiring, T),
                                faults => maps:get(faults, T), seed => maps:get(seed, T),
-                               property => Prop}) of
+                               property => Prop, marks => Marks}) of
                         {ok, R} -> {ok, R#{expected => maps:with([sha256, violation], T)}};
                         Error -> Error
                     end;
@@ -498,18 +507,28 @@ to_number(S) ->
 
 %% @doc `make run REPLAY=file': runs it, prints the SHA-256 and the
 %% violation; halts 0 when both are as the file says, 1 when not, 2 on a
-%% bad file.
+%% bad file. With `[File, "1"]' the node stays up afterwards, so the
+%% dashboard shows the run with its faults and violation on the timeline.
 -spec replay_main([string()]) -> no_return().
 replay_main([File]) ->
+    replay_main([File, "0"]);
+replay_main([File, Serve]) ->
     ok = logger:set_primary_config(level, critical),
     case replay(File) of
         {ok, #{sha256 := Sha, violation := V, summary := Sum, expected := Exp, faults := Fs}} ->
             [io:format("~ts~n", [line(F)]) || F <- Fs],
             io:format("sha256: ~ts~nviolation: ~0tp~n~ts~n",
                       [Sha, V, torobot_sim:summary_json(Sum)]),
-            case Exp of
-                #{sha256 := Sha, violation := V} -> halt(0);
-                _ -> io:format("replay: differs from the file (~0tp)~n", [Exp]), halt(1)
+            Code = case Exp of
+                       #{sha256 := Sha, violation := V} -> 0;
+                       _ -> io:format("replay: differs from the file (~0tp)~n", [Exp]), 1
+                   end,
+            %% the dashboard keeps showing the run, its faults and its
+            %% violation on the timeline, until the user ends it
+            case Serve of
+                "1" -> io:format("dashboard: serving the replay; Ctrl-C to end~n"),
+                       receive after infinity -> ok end;
+                _ -> halt(Code)
             end;
         {error, Reason} ->
             io:format(standard_error, "replay: ~0tp~n", [{error, Reason}]),

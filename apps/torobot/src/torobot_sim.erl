@@ -80,6 +80,7 @@
                   speed => number(), nodes => local | peer, time => realtime | lockstep,
                   trace => file:name_all(), faults => torobot_faults:concrete(),
                   seed => integer(), stop => fun(([map()]) -> boolean()),
+                  marks => [#{t_ms := non_neg_integer(), kind := atom(), text := iodata()}],
                   lua => file:name_all()}.
 %% A world file, or the terms of one (as `torobot_worlds:generate/2' makes).
 -type world_spec() :: file:name_all() | [tuple()].
@@ -118,11 +119,14 @@
               %% robot's events not applied yet, the seed; observations
               faults = [] :: torobot_faults:concrete(),
               stop = none :: none | fun(([torobot_props:observation()]) -> boolean()),
+              %% what the dashboard marks on the run's timeline: the faults,
+              %% and what the caller adds (a replay's violation)
+              marks = [] :: [map()],
               robot_events = [] :: [{non_neg_integer(), term()}],
               seed = 0 :: integer(),
               obs = [] :: [torobot_props:observation()]}).
 
--define(OPTIONS, [svg, wiring, status, speed, nodes, time, trace, faults, seed, stop, lua]).
+-define(OPTIONS, [svg, wiring, status, speed, nodes, time, trace, faults, seed, stop, marks, lua]).
 
 %%====================================================================
 %% API
@@ -257,7 +261,8 @@ with_robots(Worlds, Nodes, Opts) ->
     {ok, Sim} = gen_server:start(?MODULE, {self(), maps:get(status, Opts, false), Speed,
                                            torobot_world:tick_ms(hd(Worlds)), Time, Trace,
                                            maps:get(faults, Opts, []), maps:get(seed, Opts, 0),
-                                           maps:get(stop, Opts, none)},
+                                           maps:get(stop, Opts, none),
+                                           maps:get(marks, Opts, [])},
                                  []),
     MRef = monitor(process, Sim),
     RobotOpts0 = #{wiring => WiringFile, speed => Speed, time => Time,
@@ -334,12 +339,16 @@ svg(_Worlds, #{}) ->
 
 -spec init({pid(), status(), number(), pos_integer(), realtime | lockstep,
             file:name_all() | undefined, torobot_faults:concrete(), integer(),
-            none | fun()}) ->
+            none | fun(), [map()]}) ->
           {ok, #sim{}} | {stop, term()}.
-init({Caller, Status, Speed, Tick, Time, TracePath, Faults, Seed, Stop}) ->
+init({Caller, Status, Speed, Tick, Time, TracePath, Faults, Seed, Stop, Marks}) ->
     monitor(process, Caller),
     S = #sim{caller = Caller, status = Status, speed = Speed, tick = Tick, time = Time,
-             faults = Faults, seed = Seed, robot_events = robot_events(Faults), stop = Stop},
+             faults = Faults, seed = Seed, robot_events = robot_events(Faults), stop = Stop,
+             marks = [#{t_ms => Ms, kind => fault,
+                        text => iolist_to_binary(torobot_faults:describe(F))}
+                      || {at, Ms, F} <- Faults]
+                 ++ [M#{text := iolist_to_binary(T)} || M = #{text := T} <- Marks]},
     case TracePath of
         undefined ->
             {ok, S};
@@ -620,7 +629,7 @@ trace(Fd, Name, T, Lines, Motors, Before) ->
 %% The dashboard's view of the world (toroco_live_world's message, written
 %% down there): a plain send, and only when toroco_live runs in this node.
 %% A robot of the one-robot form is named `torobot'.
-publish(#sim{bots = Bots, t0 = T0, time = Time}) ->
+publish(#sim{bots = Bots, t0 = T0, time = Time, marks = Marks}) ->
     case whereis(toroco_live_world) of
         undefined ->
             ok;
@@ -640,6 +649,8 @@ publish(#sim{bots = Bots, t0 = T0, time = Time}) ->
                       #{run => {self(), T0},
                         t_ms => lists:max([torobot_world:time_ms(B#bot.world) || B <- Bots]),
                         lockstep => Time =:= lockstep,
+                        timeline => #{duration_ms => torobot_world:duration_ms(W),
+                                      marks => Marks},
                         arena => torobot_world:arena(W), walls => torobot_world:walls(W),
                         objects => torobot_world:objects(W), robots => Robots}},
             ok

@@ -33,6 +33,9 @@
 %% <tr><th>key</th><th>value</th></tr>
 %% <tr><td>`run'</td><td>any term naming this run; a new one starts new trajectories</td></tr>
 %% <tr><td>`lockstep'</td><td>optional, `true' when the world is the clock</td></tr>
+%% <tr><td>`timeline'</td><td>optional, `#{duration_ms => D, marks => [#{t_ms,
+%%   kind, text}]}': what the page marks on the run's timeline (a fault of
+%%   the robustness lab, a violation of its property)</td></tr>
 %% <tr><td>`t_ms'</td><td>world time of the step</td></tr>
 %% <tr><td>`arena'</td><td>`{Width, Height}'; walls all around, origin bottom-left</td></tr>
 %% <tr><td>`walls'</td><td>`[{{X1, Y1}, {X2, Y2}}]', inside the arena</td></tr>

@@ -15,7 +15,18 @@ frame(Snap = #{arena := {W, H}, walls := Walls, objects := Objects, robots := Ro
       <<"walls">> => [[pt(A), pt(B)] || {A, B} <- Walls],
       <<"objects">> => [#{<<"color">> => toroco_live_json:value(C), <<"at">> => pt(P),
                           <<"r">> => R} || {C, P, R} <- Objects],
-      <<"robots">> => [robot(Rb, Trajectories) || Rb <- Robots]}.
+      <<"robots">> => [robot(Rb, Trajectories) || Rb <- Robots],
+      <<"timeline">> => timeline(maps:get(timeline, Snap, none))}.
+
+%% The run's length and what to mark on it (a fault, a violation), if the
+%% simulator says.
+timeline(#{duration_ms := D, marks := Marks}) ->
+    #{<<"duration_ms">> => D,
+      <<"marks">> => [#{<<"t_ms">> => T, <<"kind">> => toroco_live_json:value(K),
+                        <<"text">> => toroco_live_json:value(Text)}
+                      || #{t_ms := T, kind := K, text := Text} <- Marks]};
+timeline(_) ->
+    null.
 
 robot(Rb = #{name := Name, pose := {X, Y, Heading}}, Trajectories) ->
     #{<<"name">> => toroco_live_json:value(Name),

@@ -9,7 +9,7 @@
 all() ->
     [ws_frames_split_anywhere, ws_fragments_and_control, ws_faults, ws_client_frames,
      mcap_round_trip, mcap_every_truncation_refused, topics_round_trip, json_text_as_jiffy,
-     ros_definitions_parse, ros_cdr_as_reference, ros_cdr_errors].
+     ros_definitions_parse, ros_cdr_as_reference, ros_cdr_errors, world_timeline].
 
 ws_frames_split_anywhere() ->
     [{doc, "Masked client frames of every length class decode whole, however the bytes are split"}].
@@ -300,3 +300,20 @@ decode_in_pieces(Bytes, Cut, D, Acc) ->
 flip(Bin, K) ->
     <<H:K/binary, B, T/binary>> = Bin,
     <<H/binary, (B bxor 16#5A), T/binary>>.
+
+world_timeline() ->
+    [{doc, "A world snapshot's timeline (the robustness lab's faults and violation) reaches "
+      "the page's world frame with each mark's time, kind and text; none gives null."}].
+world_timeline(_Config) ->
+    Snap = #{run => r, t_ms => 2000, arena => {2.0, 1.0}, walls => [], objects => [],
+             robots => [],
+             timeline => #{duration_ms => 15000,
+                           marks => [#{t_ms => 1300, kind => fault, text => <<"kill avoid_left">>},
+                                     #{t_ms => 1650, kind => violation,
+                                       text => <<"{never,wall_contact}">>}]}},
+    #{<<"timeline">> := #{<<"duration_ms">> := 15000,
+                          <<"marks">> := [#{<<"t_ms">> := 1300, <<"kind">> := <<"fault">>,
+                                            <<"text">> := <<"kill avoid_left">>},
+                                          #{<<"t_ms">> := 1650, <<"kind">> := <<"violation">>}]}} =
+        toroco_live_world_json:frame(Snap),
+    #{<<"timeline">> := null} = toroco_live_world_json:frame(maps:remove(timeline, Snap)).

@@ -360,8 +360,37 @@ function onWorld(w) {
     caption.push(`${r.name} at (${x.toFixed(2)}, ${y.toFixed(2)}) ${Math.round(hd)}° · motors: ${r.winner}`);
   }
   $('#arena-caption').textContent = `t ${(w.t_ms / 1000).toFixed(1)} s · ` + caption.join(' · ');
+  drawTimeline(w);
   $('#arena-legend').innerHTML = [...colours].filter(([k]) => k !== 'start')
     .map(([k, c]) => `<span><i style="background:${c}"></i>${esc(k)}</span>`).join('');
+}
+
+// The run's timeline: its length, now, and each mark the simulator sent
+// (a fault of the robustness lab in orange, a violation of its property
+// in red), each with its text as a tooltip and a label.
+function drawTimeline(w) {
+  const svg = $('#timeline');
+  const tl = w.timeline;
+  if (!tl || !tl.duration_ms) { svg.hidden = true; return; }
+  svg.hidden = false;
+  svg.innerHTML = '';
+  const D = tl.duration_ms, X = (t) => 10 + 980 * Math.min(t, D) / D;
+  svg.setAttribute('viewBox', '0 0 1000 70');
+  el('line', { x1: 10, y1: 40, x2: 990, y2: 40, stroke: '#90a4ae', 'stroke-width': 2 }, svg);
+  el('rect', { x: 10, y: 36, width: X(w.t_ms) - 10, height: 8, fill: '#cfd8dc' }, svg);
+  for (let s = 0; s <= D; s += 10000) {
+    el('line', { x1: X(s), y1: 36, x2: X(s), y2: 44, stroke: '#607d8b' }, svg);
+    el('text', { x: X(s), y: 62, 'text-anchor': 'middle', 'font-size': 11, fill: '#455a64' }, svg).textContent = `${s / 1000} s`;
+  }
+  for (const m of tl.marks) {
+    const x = X(m.t_ms), bad = m.kind === 'violation';
+    const g = el('g', { class: `mark ${m.kind}`, 'data-t': m.t_ms }, svg);
+    el('title', {}, g).textContent = `${(m.t_ms / 1000).toFixed(3)} s ${m.text}`;
+    if (bad) el('path', { d: `M${x},38 l-7,-14 l14,0 z`, fill: '#d50000' }, g);
+    else el('line', { x1: x, y1: 28, x2: x, y2: 46, stroke: '#ef6c00', 'stroke-width': 3 }, g);
+    el('text', { x, y: bad ? 18 : 24, 'text-anchor': 'middle', 'font-size': 10, fill: bad ? '#d50000' : '#e65100' }, g)
+      .textContent = bad ? m.text : m.text.split(' ').slice(0, 2).join(' ');
+  }
 }
 
 connect();
