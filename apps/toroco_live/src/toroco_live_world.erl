@@ -63,7 +63,8 @@
 
 -type snapshot() :: #{run := term(), t_ms := non_neg_integer(),
                       arena := {number(), number()}, walls := list(), objects := list(),
-                      robots := [map()], trajectories => map()}.
+                      robots := [map()], trajectories => map(), lockstep => boolean(),
+                      timeline => #{duration_ms := pos_integer(), marks := [map()]}}.
 
 %% Points kept per robot's trajectory.
 -define(TRAIL, 4000).
