@@ -559,7 +559,7 @@ robot_events(Faults) ->
 observed([#bot{world = W, motors = Motors, lines = Lines}], S = #sim{obs = Obs})
   when Motors =/= none ->
     {Wheels, Winner} = Motors,
-    #{wall_contacts := Wall, blue_contacts := Blue, red_touched_ms := Red} =
+    #{wall_contacts := Wall, blue_contacts := Blue, red_touched_ms := Red} = Summary =
         torobot_world:summary(W),
     {Wall0, Blue0} = case Obs of
                          [#{walls := W0, blues := B0} | _] -> {W0, B0};
@@ -567,7 +567,8 @@ observed([#bot{world = W, motors = Motors, lines = Lines}], S = #sim{obs = Obs})
                      end,
     O = #{t => torobot_world:time_ms(W), wall => Wall > Wall0, blue => Blue > Blue0,
           red => Red =/= none, dist => distance_to_wall(W), winner => Winner,
-          motors => Wheels, events => events(Lines), walls => Wall, blues => Blue},
+          motors => Wheels, events => events(Lines), walls => Wall, blues => Blue,
+          figures => Summary},
     S#sim{obs = [O | Obs]};
 observed(_Bots, S) ->
     S.

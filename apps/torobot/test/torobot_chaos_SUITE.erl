@@ -25,7 +25,7 @@ groups() ->
                    stuck_repeats_the_reading, every_kind_changes_the_run, kill_restarts_in_place,
                    runs_repeat_under_faults]},
      {bad_input, [], [bad_schedules_refused, bad_properties_refused, bad_files_name_the_line,
-                      crashing_property_fails_its_run]},
+                      crashing_property_fails_its_run, properties_judge_observations]},
      {explore, [], [planted_weakness_found_shrunk_replayed, robust_wiring_passes]}].
 
 init_per_suite(Config) ->
@@ -231,6 +231,26 @@ crashing_property_fails_its_run(Config) ->
     ?assertMatch({ok, #{violation := {{crash, {error, badarith}}, 0}}},
                  torobot_chaos:run(#{world => ?config(default, Config),
                                      property => fun(Obs) -> length(Obs) / 0 end})).
+
+properties_judge_observations() ->
+    [{doc, "The property clauses on a hand-made run: never, within (with a figure of the "
+      "summary), always_after and and, each violated where it should be."}].
+properties_judge_observations(_Config) ->
+    Obs = [#{t => T, wall => T =:= 300, blue => false, red => false, dist => 0.5,
+             winner => case T >= 200 of true -> escape; false -> forward end,
+             motors => {0, 0}, events => [],
+             figures => #{docked_ms => case T >= 250 of true -> 250; false -> none end}}
+           || T <- [0, 50, 100, 150, 200, 250, 300, 350, 400]],
+    V = fun(P) -> torobot_props:violation(P, Obs, #{}) end,
+    ?assertEqual({{never, wall_contact}, 300}, V({never, wall_contact})),
+    ?assertEqual(none, V({within, 300, {figure, docked_ms}})),
+    ?assertEqual({{within, 200, {figure, docked_ms}}, 200}, V({within, 200, {figure, docked_ms}})),
+    ?assertEqual(none, V({always_after, wall_contact, 50, {winner, motors, escape}})),
+    ?assertEqual({{always_after, wall_contact, 50, {winner, motors, forward}}, 350},
+                 V({always_after, wall_contact, 50, {winner, motors, forward}})),
+    ?assertEqual({{never, wall_contact}, 300},
+                 V({'and', [{within, 400, red_touched}, {never, wall_contact}]})),
+    ?assertEqual(ok, torobot_props:check({within, 1, {figure, docked_ms}})).
 
 %%====================================================================
 %% Exploring
