@@ -31,7 +31,10 @@ main([_Dir, Root, Runs]) ->
         _ ->
             {ok, Peer, Node} = peer:start(#{name => peer:random_name(chaos_bench),
                                             host => "127.0.0.1", longnames => true,
-                                            args => ["-pa" | code:get_path() -- lib_paths()]}),
+                                            %% the same code and configuration as this
+                                            %% node: a run must not depend on where it goes
+                                            args => ["-config", filename:join(Root, "config/sim")
+                                                     | ["-pa" | code:get_path() -- lib_paths()]]}),
             try row("2 nodes", N, fun() -> torobot_chaos:explore(Opts#{nodes => [node(), Node]}) end)
             after peer:stop(Peer)
             end
