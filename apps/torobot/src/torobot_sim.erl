@@ -543,17 +543,16 @@ robot_faults(H, T, S = #sim{robot_events = Events}) ->
     Lines = lists:append([torobot_sim_robot:fault(H, Ms, Event) || {Ms, Event} <- Due]),
     {Lines, S#sim{robot_events = Later}}.
 
-%% The world's faults are written down as they start (the robot's are
-%% the robot's own lines); the robot's are events at their instants.
+%% The robot's faults as events at their instants (a suspend is two); the
+%% world's act on the readings alone (torobot_faults), so one that changes
+%% nothing (noise of sigma 0) leaves the trace as it is.
 robot_events(Faults) ->
     lists:keysort(1, lists:append(
                        [case F of
                             {suspend, Name, D} -> [{Ms, {suspend, Name}},
                                                    {Ms + round(D), {resume, Name}}];
-                            {kill, _} -> [{Ms, F}];
-                            {kill, router, _} -> [{Ms, F}];
-                            _ -> [{Ms, {note, F}}]
-                        end || {at, Ms, F} <- Faults])).
+                            _ -> [{Ms, F}]
+                        end || {at, Ms, F} <- torobot_faults:robot_faults(Faults)])).
 
 %% What the properties judge (SPEC §17): each robot's tick, after it moved.
 observed([#bot{world = W, motors = Motors, lines = Lines}], S = #sim{obs = Obs})

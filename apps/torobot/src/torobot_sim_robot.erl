@@ -160,8 +160,7 @@ step(Robot, T, Ir, Readings, Datagrams) ->
 %% @doc Lockstep: moves the robot's clock to `Ms' (timers due on the way
 %% fire) and applies a fault of the robustness lab there (SPEC §17):
 %% `{kill, Name}', `{kill, router, {Receiver, Input}}' (the exit is a step
-%% and settles: restart, handover), `{suspend, Name}', `{resume, Name}',
-%% or `{note, Fault}' (a fault of the world's: nothing to do here).
+%% and settles: restart, handover), `{suspend, Name}' or `{resume, Name}'.
 %% Answers the trace lines, the fault's own first.
 -spec fault(handle(), non_neg_integer(), term()) -> [iodata()].
 fault(Robot, Ms, Fault) ->
@@ -269,13 +268,8 @@ handle_call({step, T, Ir, Readings, Datagrams}, _From, S = #robot{wheels = W0}) 
             {stop, {lockstep, Reason}, {error, Reason}, S}
     end;
 handle_call({fault, Ms, Fault}, _From, S = #robot{wheels = W0}) ->
-    %% a fault of the world's leaves its mark on the readings alone, so
-    %% one that changes nothing (noise of sigma 0) leaves the trace as is
-    Lines = case Fault of
-                {note, _} -> [];
-                _ -> [io_lib:format("~b fault ~ts~n", [Ms, torobot_faults:describe(Fault)])
-                      | apply_fault(Ms, Fault)]
-            end,
+    Lines = [io_lib:format("~b fault ~ts~n", [Ms, torobot_faults:describe(Fault)])
+             | apply_fault(Ms, Fault)],
     {reply, Lines, S#robot{wheels = applied(W0)}};
 handle_call(go, _From, S = #robot{clock = lockstep, wheels = W0}) ->
     %% the press and the release, at time 0, each to quiescence

@@ -241,15 +241,18 @@ init(#{kind := Kind, name := Name, module := M, layer := Layer, args := Args}) -
                    user_events = erlang:function_exported(M, handle_event, 4),
                    tap = tap(toroco_tap:current(), Name), idle = toroco_wire:idle_arm()},
             toroco_tap:lifecycle(E#e.tap, Name, toroco_restarts:started(Name)),
-            ok = toroco_lockstep:up(Name, parent(), case Kind of
-                                                        behavior -> Layer;
-                                                        device -> none
-                                                    end),
+            ok = toroco_lockstep:up(Name, case Kind of
+                                              behavior -> Layer;
+                                              device -> none
+                                          end),
             announce(E),
-            Up = fun() -> toroco_lockstep:ready(Name) end,
             case start_user(E) of
-                {ok, S, E1} -> Up(), {ok, S, E1#e{batch = toroco_tap:flush(E1#e.batch)}};
-                {ok, S, E1, A} -> Up(), {ok, S, E1#e{batch = toroco_tap:flush(E1#e.batch)}, A};
+                {ok, S, E1} ->
+                    toroco_lockstep:ready(Name),
+                    {ok, S, E1#e{batch = toroco_tap:flush(E1#e.batch)}};
+                {ok, S, E1, A} ->
+                    toroco_lockstep:ready(Name),
+                    {ok, S, E1#e{batch = toroco_tap:flush(E1#e.batch)}, A};
                 Stop -> Stop
             end;
         {error, Reason} ->
@@ -264,13 +267,6 @@ announce(#e{name = Name, outputs = Outs, inputs = Ins, kind = Kind}) ->
                           || C <- Consumers]
                  end, Outs),
     receiver_up(Name, case Kind of behavior -> [?RESET | Ins]; device -> Ins end).
-
-%% The supervisor that started this process (proc_lib's first ancestor).
-parent() ->
-    case get('$ancestors') of
-        [Parent | _] -> Parent;
-        _ -> undefined
-    end.
 
 %% The inputs: declared, and for open ports those the wiring names now.
 inputs(#e{inputs = Ins, open = false}) -> Ins;

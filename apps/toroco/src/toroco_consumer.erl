@@ -139,10 +139,7 @@ init({Mod, Key, Caller}) ->
     process_flag(trap_exit, true),
     case toroco_wiring:lookup({Mod:kind(), Key}) of
         {ok, Cfg} ->
-            ok = toroco_lockstep:up(Mod:reg(Key), case get('$ancestors') of
-                                                      [Parent | _] -> Parent;
-                                                      _ -> undefined
-                                                  end, consumer),
+            ok = toroco_lockstep:up(Mod:reg(Key), consumer),
             C = #c{mod = Mod, key = Key, data = Mod:init(Key, Cfg), idle = toroco_wire:idle_arm()},
             {St, C1, Actions} = start_sync(Cfg, Caller, none, C),
             toroco_lockstep:ready(Mod:reg(Key)),

@@ -27,13 +27,14 @@
 %% writes.
 %%
 %% Exits are steps (SPEC §17): every process of the event path (behavior,
-%% device, router, gate) says `up' once its `init' is done, with its name,
-%% its supervisor and its layer, and this process monitors it. When one
-%% dies (a crash while handling its step, a kill from a fault schedule,
-%% {@link kill/2}) the node settles before anything else goes: nothing is
-%% delivered and no timer fires until the dead process's restart is `up'
-%% (its `init', its hellos, re-subscriptions and latch handover queued as
-%% steps), or its layer is out; the consumers that monitored it hand their
+%% device, router, gate) says `up' as its `init' starts, with its name,
+%% its supervisor and its layer, and `ready' as it ends; this process
+%% monitors it. When one dies (a crash while handling its step, or the
+%% `{exit, Pid, Reason}' stimulus of a fault schedule) the node settles
+%% before anything else goes: nothing is delivered and no timer fires until
+%% the dead process's restart is `ready' (its `init', its hellos,
+%% re-subscriptions and latch handover queued as steps), or its layer is
+%% out; the consumers that monitored it hand their
 %% `DOWN' over instead of acting on it (`down/1'); then a barrier asks
 %% every process of the path to answer once what it had before is handled,
 %% and what the settle gathered is queued in a fixed order: the `DOWN's by
@@ -64,8 +65,11 @@
 %%     <td>sets (or replaces) the owner's timer `Kind'</td></tr>
 %% <tr><td>`{Tag, cancel, Pid, Kind}'</td><td>the owner</td><td>cancels it</td></tr>
 %% <tr><td>`{Tag, done, Token}'</td><td>the receiver of a step</td><td>the next step goes</td></tr>
-%% <tr><td>`{Tag, up, Pid, Name, Sup, Layer}'</td><td>a process of the path,
-%%     at the end of its `init'</td><td>monitored; a restart awaited is done</td></tr>
+%% <tr><td>call `{up, Pid, Name, Sup, Layer}'</td><td>a process of the path,
+%%     as its `init' starts</td><td>its predecessor's exit settled first,
+%%     then monitored; answered `ok'</td></tr>
+%% <tr><td>`{Tag, ready, Pid, Name}'</td><td>the same, as its `init' ends</td>
+%%     <td>a restart awaited is done</td></tr>
 %% <tr><td>`{Tag, down, Pid, Down}'</td><td>a consumer given a `DOWN'</td>
 %%     <td>the `DOWN' comes back to it as a step once the exit settles</td></tr>
 %% <tr><td>`WIRE_BARRIER(Ref)' / `{Tag, synced, Ref, Pid}'</td><td>this
@@ -76,7 +80,7 @@
 
 -include("toroco_wire.hrl").
 
--export([start_link/0, send/3, timer/4, cancel/2, done/1, up/3, ready/1, down/1, synced/1]).
+-export([start_link/0, send/3, timer/4, cancel/2, done/1, up/2, ready/1, down/1, synced/1]).
 -export([start/1, stop/0, tick/3, settle/0, info/0]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 -export_type([stimulus/0]).
@@ -178,19 +182,19 @@ done(Token) ->
     end.
 
 %% @doc The calling process of the event path (a behavior's, device's,
-%% router's or gate's) starts as `Name' under supervisor `Sup', in `Layer'
-%% (`none' outside the layers; `consumer' for a router or a gate, which
-%% hand their `DOWN's over): at the start of its `init', in lockstep only;
-%% {@link ready/1} at its end.
--spec up(atom(), pid() | atom() | undefined, non_neg_integer() | none | consumer) -> ok.
-up(Name, Sup, Layer) ->
+%% router's or gate's) starts as `Name' in `Layer' (`none' outside the
+%% layers; `consumer' for a router or a gate, which hand their `DOWN's
+%% over), under the supervisor that started it: at the start of its
+%% `init', in lockstep only; {@link ready/1} at its end.
+-spec up(atom(), non_neg_integer() | none | consumer) -> ok.
+up(Name, Layer) ->
     case persistent_term:get(?MODULE, none) of
         none ->
             ok;
         Server ->
             %% before the process sends anything: a new incarnation's
             %% messages wait for its predecessor's exit to be settled
-            try gen_server:call(Server, {up, self(), Name, sup_pid(Sup), Layer}, ?CALL_MS)
+            try gen_server:call(Server, {up, self(), Name, supervisor(), Layer}, ?CALL_MS)
             catch exit:_ -> ok
             end
     end.
@@ -221,9 +225,13 @@ synced(Ref) ->
         Server -> Server ! {?TAG, synced, Ref, self()}, ok
     end.
 
-sup_pid(Pid) when is_pid(Pid) -> Pid;
-sup_pid(Name) when is_atom(Name) -> whereis(Name);
-sup_pid(_) -> undefined.
+%% The calling process's supervisor: proc_lib's first ancestor.
+supervisor() ->
+    case get('$ancestors') of
+        [Pid | _] when is_pid(Pid) -> Pid;
+        [Name | _] when is_atom(Name) -> whereis(Name);
+        _ -> undefined
+    end.
 
 %%====================================================================
 %% The world's side (through toroco_clock)
@@ -448,20 +456,19 @@ exited(Pid, Reason, S = #s{procs = Procs, inflight = Inflight}) ->
     #settle{awaiting = Awaiting, takeout = Out, barrier = Barrier} = S2#s.settle,
     Restarts = not final(Reason) andalso is_pid(Sup) andalso is_map_key(Sup, S2#s.sups)
         andalso not is_map_key(Sup, Out),
-    S3 = S2,
     Barrier1 = case Barrier of
                    {Ref, Waiting} -> {Ref, maps:remove(Pid, Waiting)};
                    none -> none
                end,
     %% the consumers that monitored it hand its DOWN over (those already
     %% gone or that already did are not waited for), and it will hand none
-    Handed = [C || {_, C, {'DOWN', _, process, D, _}} <- S3#s.downs, D =:= Pid],
-    Expect0 = maps:filter(fun({C, _}, _) -> C =/= Pid end, (S3#s.settle)#settle.expect),
+    Handed = [C || {_, C, {'DOWN', _, process, D, _}} <- S2#s.downs, D =:= Pid],
+    Expect0 = maps:filter(fun({C, _}, _) -> C =/= Pid end, (S2#s.settle)#settle.expect),
     Expect = lists:foldl(fun(C, E) -> E#{{C, Pid} => true} end, Expect0,
-                         [C || C <- maps:get(Pid, S3#s.watch, []), is_map_key(C, S3#s.procs),
+                         [C || C <- maps:get(Pid, S2#s.watch, []), is_map_key(C, S2#s.procs),
                                not lists:member(C, Handed)]),
-    S3#s{watch = maps:remove(Pid, S3#s.watch),
-         settle = (S3#s.settle)#settle{barrier = Barrier1, expect = Expect,
+    S2#s{watch = maps:remove(Pid, S2#s.watch),
+         settle = (S2#s.settle)#settle{barrier = Barrier1, expect = Expect,
                             awaiting = case Restarts of
                                            true -> Awaiting#{Name => Sup};
                                            false -> Awaiting
@@ -527,10 +534,9 @@ progress_barrier(S) ->
 flush(S = #s{downs = Downs, held = Held, queue = Q}) ->
     Q1 = lists:foldl(fun({_, _, Pid, Down}, Acc) -> queue:in({Pid, Pid, Down}, Acc) end,
                      Q, lists:sort([{pname(Pid), A, Pid, Down} || {A, Pid, Down} <- Downs])),
-    S1 = lists:foldl(fun({_, _, H}, Acc) -> apply_held(H, Acc) end,
-                     S#s{queue = Q1, downs = [], held = [], settle = none},
-                     lists:sort([{pname(From), A, H} || {A, From, H} <- Held])),
-    S1.
+    lists:foldl(fun({_, _, H}, Acc) -> apply_held(H, Acc) end,
+                S#s{queue = Q1, downs = [], held = [], settle = none},
+                lists:sort([{pname(From), A, H} || {A, From, H} <- Held])).
 
 apply_held({send, To, Pid, Msg}, S = #s{queue = Q}) ->
     S#s{queue = queue:in({To, Pid, Msg}, Q)};

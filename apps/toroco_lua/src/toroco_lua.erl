@@ -436,27 +436,22 @@ reload(From, D0) ->
 %%====================================================================
 
 open(D = #{host := {Host, Slot}}) ->
-    case toroco_lua_port:attach(Host, Slot, toroco_clock:now_ms()) of
-        {ok, Id, Port, Actions} ->
-            {ok, D#{id := Id, port := Port, gen := maps:get(gen, D) + 1}, Actions};
-        {stopped, Reason, Actions} ->
-            _ = actions(Actions, D),
-            {error, reason(Reason, D)};
-        {error, _} = Error -> Error
-    end;
+    opened(toroco_lua_port:attach(Host, Slot, toroco_clock:now_ms()), D);
 open(D = #{file := File, args := Args}) ->
     {Root, Rel} = root(File, Args),
     Limits = #{budget => maps:get(budget, Args, env(budget)),
                memory => maps:get(memory, Args, env(memory))},
-    case toroco_lua_port:open(Rel, Root, maps:get(params, Args, #{}), Limits,
-                              toroco_clock:now_ms()) of
-        {ok, Id, Port, Actions} ->
-            {ok, D#{id := Id, port := Port, gen := maps:get(gen, D) + 1}, Actions};
-        {stopped, Reason, Actions} ->
-            _ = actions(Actions, D),
-            {error, reason(Reason, D)};
-        {error, _} = Error -> Error
-    end.
+    opened(toroco_lua_port:open(Rel, Root, maps:get(params, Args, #{}), Limits,
+                                toroco_clock:now_ms()), D).
+
+%% The behavior's code is in the program now (opened or attached), or not.
+opened({ok, Id, Port, Actions}, D) ->
+    {ok, D#{id := Id, port := Port, gen := maps:get(gen, D) + 1}, Actions};
+opened({stopped, Reason, Actions}, D) ->
+    _ = actions(Actions, D),
+    {error, reason(Reason, D)};
+opened({error, _} = Error, _D) ->
+    Error.
 
 env(Key) ->
     {ok, V} = application:get_env(toroco_lua, Key),
