@@ -1,7 +1,7 @@
 %% The robustness lab's speed (a section of `make bench',
 %% TOROCO_BENCH_ONLY=chaos): N runs of the default world with the Torobot's
-%% wiring under `mixed.faults' at 0.5 faults per simulated second (every
-%% generated rate set to 0.5), on this node's worker peers and then on
+%% wiring under `mixed.faults' at 0.5 faults per simulated second (in all,
+%% the file's mix kept: `torobot_chaos:at_rate/2'), on this node's worker peers and then on
 %% this node and a second one on loopback; then the shrinking of a failing
 %% schedule of 20 faults to its minimum. One table row per measure.
 %%
@@ -19,7 +19,7 @@ main([_Dir, Root, Runs]) ->
     Props = filename:join([Root, "config", "props", "torobot.props"]),
     {ok, Names} = torobot_chaos:names(Wiring),
     {ok, Mixed} = torobot_faults:read(filename:join([Root, "config", "faults", "mixed.faults"]), Names),
-    Schedule = [case E of {rate, _, S} -> {rate, 0.5, S}; _ -> E end || E <- Mixed],
+    Schedule = torobot_chaos:at_rate(Mixed, 0.5),
     Opts = #{worlds => [World], wiring => Wiring, faults => Schedule, property => Props,
              runs => N, seed => 1, shrink => 0},
     io:format("~n## Chaos~n~n| measure | runs | wall (s) | runs/s | failed | nondeterministic |~n"

@@ -20,7 +20,7 @@
 %% `{error, {Reason, Detail}}' (with `File:Line' for files).
 -module(torobot_chaos).
 
--export([run/1, explore/1, replay/1, shrink/2, names/1]).
+-export([run/1, explore/1, replay/1, shrink/2, names/1, at_rate/2]).
 -export([run_job/1, main/1, replay_main/1]).
 -export_type([run_opts/0, explore_opts/0, report/0]).
 
@@ -404,7 +404,8 @@ names(Wiring) ->
             {ok, #{behaviors => lists:sort([N || {behavior, N, _, _} <- Terms]),
                    devices => lists:usort([N || {device, N, _, _} <- Terms] ++ ?SIM_DEVICES),
                    inputs => lists:sort([{R, I} || {inputs, R, M} <- Terms, is_map(M),
-                                                   I <- maps:keys(M)])}};
+                                                   I <- maps:keys(M)]),
+                   ports => [pru_port | [lua_port || lists:keymember(toroco_lua, 3, Terms)]]}};
         {error, Reason} ->
             {error, {wiring, {Wiring, Reason}}}
     end.
@@ -498,9 +499,20 @@ main([Wiring, World, Faults, Props, N, Rates, Nodes, Seed, Dir, Shrink]) ->
             end
     end.
 
-at_rate(Schedule, none) -> Schedule;
-at_rate(Schedule, Rate) -> [case E of {rate, _, Spec} -> {rate, Rate, Spec}; _ -> E end
-                            || E <- Schedule].
+%% @doc `Schedule' with its generated faults drawn at `Rate' per simulated
+%% second in all, the file's mix kept in proportion (a schedule whose
+%% rates are all 0 gets `Rate' shared equally); explicit faults as they
+%% are. `none' leaves it as it is.
+-spec at_rate(torobot_faults:schedule(), number() | none) -> torobot_faults:schedule().
+at_rate(Schedule, none) ->
+    Schedule;
+at_rate(Schedule, Rate) ->
+    Rates = [R || {rate, R, _} <- Schedule],
+    Total = lists:sum(Rates),
+    Scale = fun(R) when Total > 0 -> Rate * R / Total;
+               (_) -> Rate / length(Rates)
+            end,
+    [case E of {rate, R, Spec} -> {rate, Scale(R), Spec}; _ -> E end || E <- Schedule].
 
 to_number(S) ->
     try list_to_float(S) catch error:badarg -> list_to_integer(S) end.

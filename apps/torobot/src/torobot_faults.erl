@@ -12,6 +12,10 @@
 %% <tr><th>fault</th><th>what it does</th><th>where</th></tr>
 %% <tr><td>`{kill, Name}'</td><td>behavior or device `Name' killed</td><td>robot</td></tr>
 %% <tr><td>`{kill, router, {Receiver, Input}}'</td><td>that input's router killed</td><td>robot</td></tr>
+%% <tr><td>`{kill, port, pru_port | lua_port}'</td><td>the C program's OS
+%%   process killed (every `pru_port' program of the robot's devices, or the
+%%   node's `lua_port'); its owner starts the next one and tells the devices
+%%   or Lua behaviors, all at that instant</td><td>robot</td></tr>
 %% <tr><td>`{suspend, Name, Ms}'</td><td>behavior suspended for Ms</td><td>robot</td></tr>
 %% <tr><td>`{dropout, Sensor, Ms}'</td><td>no readings</td><td>world</td></tr>
 %% <tr><td>`{stuck, Sensor, Ms}'</td><td>the reading at its start, repeated</td><td>world</td></tr>
@@ -26,8 +30,9 @@
 %% `any' sensor: `{ir, left}', `{ir, right}', `camera', `range'), `{one_of,
 %% [Name]}' for a behavior drawn from those, and
 %% `{Min, Max}' for a duration, a sigma, a probability or a factor.
-%% `{kill, port, pru_port | lua_port}' and `{disconnect, Node, Ms}' are
-%% refused as `unsupported_fault' for now (see doc/lab.md).
+%% `lua_port' is known only to a wiring with Lua behaviors (`names()'
+%% `ports'). `{disconnect, Node, Ms}' is refused as `unsupported_fault'
+%% for now (see doc/lab.md).
 -module(torobot_faults).
 
 -export([check/2, read/2, concrete/4, describe/1, ends/1, world_faults/2, robot_faults/1]).
@@ -39,7 +44,10 @@
 -type concrete() :: [{at, non_neg_integer(), fault()}].
 %% what a schedule may name: the wiring's behaviors and devices, and its
 %% routers' inputs
--type names() :: #{behaviors := [atom()], devices := [atom()], inputs := [{atom(), atom()}]}.
+%% `ports': the port programs the robot runs (default `[pru_port]'; a
+%% wiring with Lua behaviors adds `lua_port').
+-type names() :: #{behaviors := [atom()], devices := [atom()], inputs := [{atom(), atom()}],
+                   ports => [pru_port | lua_port]}.
 
 -define(SENSORS, [{ir, left}, {ir, right}, ir, camera, range, bumper, light, odometry, beacon]).
 -define(ANY_SENSORS, [{ir, left}, {ir, right}, camera, range]).
@@ -101,8 +109,13 @@ fault({kill, router, {R, I}}, Names, _Spec, E) ->
         true -> ok;
         false -> {error, {unknown_input, {{R, I}, E}}}
     end;
-fault({kill, port, P}, _Names, _Spec, E) when P =:= pru_port; P =:= lua_port ->
-    {error, {unsupported_fault, E}};
+fault({kill, port, P}, Names, _Spec, E) when P =:= pru_port; P =:= lua_port ->
+    case lists:member(P, maps:get(ports, Names, [pru_port])) of
+        true -> ok;
+        false -> {error, {unknown_port, {P, E}}}
+    end;
+fault({kill, port, _}, _Names, _Spec, E) ->
+    {error, {unknown_port, E}};
 fault({kill, Name}, Names, Spec, E) ->
     name(Name, Names, Spec, E, [behaviors, devices]);
 fault({suspend, Name, Ms}, Names, Spec, E) ->
@@ -236,6 +249,7 @@ pick(E, _Spec, _Names, R) ->
 %% @doc A fault as one line of text (`kill avoid_left', `dropout {ir,left} 500 ms').
 -spec describe(fault()) -> iolist().
 describe({kill, router, {R, I}}) -> io_lib:format("kill router ~s.~s", [R, I]);
+describe({kill, port, P}) -> io_lib:format("kill port ~s", [P]);
 describe({kill, Name}) -> io_lib:format("kill ~s", [Name]);
 describe(F) ->
     [Kind | Args] = tuple_to_list(F),

@@ -575,7 +575,8 @@ observed(_Bots, S) ->
 %% The events of a tick's trace lines that conditions name.
 events(Lines) ->
     lists:filtermap(fun(Line) ->
-                            case string:lexemes(iolist_to_binary(Line), " \n") of
+                            case binary:split(iolist_to_binary(Line), [<<" ">>, <<"\n">>],
+                                              [global, trim_all]) of
                                 [_, Name, <<"restarted">>] ->
                                     {true, {restarted, binary_to_atom(Name)}};
                                 [_, <<"layer">>, L, <<"out">>] ->

@@ -329,6 +329,9 @@ terminate(_Reason, S) ->
     teardown(S).
 
 %% A robot's fault at simulated `Ms', each part to quiescence.
+apply_fault(Ms, {kill, port, Program}) ->
+    {ok, Before} = toroco_clock:tick(Ms, []),
+    Before ++ lists:append([kill_program(Ms, Program, Owner) || Owner <- owners(Program)]);
 apply_fault(Ms, Fault) ->
     {ok, Before} = toroco_clock:tick(Ms, []),
     Stimuli = case Fault of
@@ -346,6 +349,60 @@ apply_fault(Ms, Fault) ->
 
 exit_of(undefined) -> [];
 exit_of(Pid) -> [{exit, Pid, kill}].
+
+%% The owners of the robot's `pru_port' programs (its devices', each its
+%% own on the sim backend, in the devices' order), or the node's
+%% `lua_port' owner.
+owners(pru_port) ->
+    lists:foldl(fun(Name, Acc) ->
+                        case toroco:inspect(Name) of
+                            #{device := #{port := Owner}} when is_pid(Owner) ->
+                                [Owner || not lists:member(Owner, Acc)] ++ Acc;
+                            _ -> Acc
+                        end
+                end, [], lists:reverse(?DEVICES));
+owners(lua_port) ->
+    [Owner || Owner <- [whereis(toroco_lua_port)], is_pid(Owner)].
+
+%% Kills one program (its OS process, as a crash of the C program would
+%% end it) and waits in real time, the world's clock standing still, for
+%% its owner to have started and configured the next one. The owner tells
+%% the devices or Lua behaviors as notices (toroco_clock:notify/2), steps
+%% at simulated `Ms' that the tick then runs to quiescence, in order.
+kill_program(Ms, pru_port, Owner) ->
+    ok = toroco_pru_port:subscribe(Owner),
+    kill_os(toroco_pru_port:os_pid(Owner)),
+    Restarted = receive
+                    {toroco_pru_port, {port_restarted, _}} -> ok
+                after ?CALL_MS -> {error, {pru_port, not_restarted}}
+                end,
+    _ = toroco_pru_port:unsubscribe(Owner),
+    ok = Restarted,
+    {ok, After} = toroco_clock:tick(Ms, []),
+    After;
+kill_program(Ms, lua_port, _Owner) ->
+    OsPid = toroco_lua_port:os_pid(),
+    kill_os(OsPid),
+    ok = await(fun() -> toroco_lua_port:os_pid() =/= OsPid end,
+               erlang:monotonic_time(millisecond) + ?CALL_MS, {lua_port, not_restarted}),
+    {ok, After} = toroco_clock:tick(Ms, []),
+    After.
+
+kill_os(OsPid) when is_integer(OsPid) ->
+    _ = os:cmd("kill -9 " ++ integer_to_list(OsPid)),
+    ok.
+
+%% A condition of another process met, waited for in real time (a program
+%% is being started), at most until `Deadline'.
+await(Cond, Deadline, Why) ->
+    case Cond() of
+        true -> ok;
+        false ->
+            case erlang:monotonic_time(millisecond) < Deadline of
+                true -> receive after 2 -> await(Cond, Deadline, Why) end;
+                false -> {error, Why}
+            end
+    end.
 
 %%====================================================================
 %% Setting up and tearing down
@@ -383,13 +440,18 @@ camera_port() ->
 
 %% The applications this run started are stopped whole; in a node where
 %% they were already running, only what the run added is removed.
-teardown(#robot{started = [], behaviors = Behaviors, sensors = Sensors, clock = Clock}) ->
-    _ = [toroco:remove_behavior(B) || {behavior, B} <- Behaviors],
-    _ = [toroco:remove_device(D) || {device, D} <- Behaviors],
-    _ = [toroco:remove_device(D) || D <- Sensors],
-    _ = [toroco:remove_device(D) || D <- [wheels | lists:reverse(?DEVICES)]],
-    restore_clock(Clock);
-teardown(#robot{started = Started, clock = Clock}) ->
+%% What the run added goes, unless the run started the runtime itself (a
+%% runtime already running, e.g. with toroco_lua, keeps only what it had).
+teardown(#robot{started = Started, behaviors = Behaviors, sensors = Sensors, clock = Clock}) ->
+    _ = case lists:member(toroco, Started) of
+            true ->
+                ok;
+            false ->
+                _ = [toroco:remove_behavior(B) || {behavior, B} <- Behaviors],
+                _ = [toroco:remove_device(D) || {device, D} <- Behaviors],
+                _ = [toroco:remove_device(D) || D <- Sensors],
+                [toroco:remove_device(D) || D <- [wheels | lists:reverse(?DEVICES)]]
+        end,
     restore_clock(Clock),
     _ = [application:stop(App) || App <- lists:reverse(Started)],
     ok.

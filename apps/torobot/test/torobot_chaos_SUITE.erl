@@ -23,6 +23,7 @@ groups() ->
     [{exits, [], [crashing_follower_is_exact, layer_out_in_simulated_time]},
      {faults, [], [no_fault_keeps_the_plain_trace, dropout_removes_readings,
                    stuck_repeats_the_reading, every_kind_changes_the_run, kill_restarts_in_place,
+                   pru_port_restarts_in_place, lua_port_restarts_in_place,
                    runs_repeat_under_faults]},
      {bad_input, [], [bad_schedules_refused, bad_properties_refused, bad_files_name_the_line,
                       crashing_property_fails_its_run, properties_judge_observations]},
@@ -300,6 +301,55 @@ run_traced(Opts, Tag, Config) ->
 trace_lines(Tag, Config) ->
     {ok, Bin} = file:read_file(filename:join(?config(priv_dir, Config), Tag ++ ".trace")),
     binary:split(Bin, <<"\n">>, [global, trim]).
+
+pru_port_restarts_in_place() ->
+    [{doc, "A killed pru_port program is started again at the simulated instant of the kill: "
+      "its devices are told as steps there, the motors stop and take the latched command "
+      "again, and the run is the same twice."}].
+pru_port_restarts_in_place(Config) ->
+    Faults = [{at, 7321, {kill, port, pru_port}}],
+    {ok, #{sha256 := A}} = run_traced(#{faults => Faults}, "pru", Config),
+    {ok, #{sha256 := B}} = run_traced(#{faults => Faults}, "pru2", Config),
+    ?assertEqual(A, B),
+    ?assertNotEqual(?DEFAULT_SHA, A),
+    At = [L || L <- trace_lines("pru", Config), binary:match(L, <<"7321 ">>) =:= {0, 5}],
+    Restarted = <<"notice {toroco_pru_port,{port_restarted,{exit_status,137}}}">>,
+    ?assertMatch([<<"7321 fault kill port pru_port">>, <<"7321 toroco:ir ", _/binary>> | _], At),
+    ?assertEqual([<<"toroco:ir">>, <<"toroco:motors">>, <<"toroco:push">>],
+                 [hd(binary:split(Rest, <<" ">>)) || <<"7321 ", Rest/binary>> <- At,
+                                                     binary:match(Rest, Restarted) =/= nomatch]),
+    ?assert(lists:member(<<"7321 toroco:wheels deliver applied {0,0}">>, At)),
+    ?assert(lists:member(<<"7321 toroco:wheels deliver applied {80,80}">>, At)).
+
+lua_port_restarts_in_place() ->
+    [{doc, "A killed lua_port program is started again at the simulated instant of the kill: "
+      "the Lua behavior is told as a step there and its new state latches its command "
+      "again; the run is the same twice; lua_port is refused for a wiring without Lua."}].
+lua_port_restarts_in_place(Config) ->
+    {ok, _} = application:ensure_all_started(toroco_lua),
+    Wiring = filename:join(?config(priv_dir, Config), "lua_forward.wiring"),
+    Lua = filename:join(?config(data_dir, Config), "forward.lua"),
+    ok = file:write_file(Wiring, [io_lib:format("~tp.~n", [T]) || T <- lua_forward(Lua)]),
+    Faults = [{at, 7321, {kill, port, lua_port}}],
+    Run = fun(Tag) -> run_traced(#{wiring => Wiring, faults => Faults}, Tag, Config) end,
+    {ok, #{sha256 := A}} = Run("lua"),
+    {ok, #{sha256 := B}} = Run("lua2"),
+    ?assertEqual(A, B),
+    At = [L || L <- trace_lines("lua", Config), binary:match(L, <<"7321 ">>) =:= {0, 5}],
+    ?assertMatch([<<"7321 fault kill port lua_port">>,
+                  <<"7321 toroco:forward notice {toroco_lua_port,down,{exit_status,137}}">> | _], At),
+    ?assert(lists:member(<<"7321 toroco:motors/setvel emit forward.motors unset">>, At)
+            orelse lists:any(fun(L) -> binary:match(L, <<"forward.motors unset">>) =/= nomatch end, At)),
+    ?assert(lists:any(fun(L) -> binary:match(L, <<"forward.motors set {80,80}">>) =/= nomatch end, At)),
+    ?assertMatch({error, {unknown_port, {lua_port, _}}},
+                 torobot_chaos:run(#{world => ?config(default, Config), faults => Faults})).
+
+lua_forward(Lua) ->
+    [{behavior, forward, toroco_lua, #{layer => 0, file => Lua}},
+     {behavior, button, torobot_button, #{layer => 0, params => #{enabled => false}}},
+     {inputs, button, #{press => [{push, button}]}},
+     {inputs, motors, #{setvel => #{sources => [{forward, motors}], idle => {0, 0}},
+                        enable => [{button, enable}]}}].
 
 %% The IR samples handed to the robot: {Time, Side}.
 samples(Tag, Config) ->

@@ -34,7 +34,7 @@
 
 -export([now_ms/0, speed/0, set_speed/1, real_ms/1, real_deadline/1]).
 -export([mode/0, lockstep/1, realtime/0, tick/2, tick/3, settle/0, timestamp_ns/0]).
--export([lockstep_cell/1, lockstep_server/0, set_timer/3, cancel_timer/1]).
+-export([lockstep_cell/1, lockstep_server/0, set_timer/3, cancel_timer/1, notify/2, notify/3]).
 -export_type([speed/0, stimulus/0]).
 
 -type stimulus() :: toroco_lockstep:stimulus().
@@ -172,6 +172,28 @@ lockstep_server() ->
 -spec set_timer(term(), integer(), term()) -> ok.
 set_timer(Kind, Deadline, Msg) ->
     toroco_lockstep:timer(lockstep_server(), Kind, Deadline, Msg).
+
+%% @doc A message from outside the event path (a port program's owner
+%% telling its devices or Lua behaviors that the program died and was
+%% started again) to `Pid', a process of the path. In real time a plain
+%% send; in lockstep a step, traced as `notice Msg', queued in the order
+%% the notices were sent, so what the receivers do about it happens at the
+%% simulated instant and in an order that does not depend on the
+%% schedulers. A `Pid' that is not a process of the path gets it as a
+%% plain send in both.
+-spec notify(pid(), term()) -> ok.
+notify(Pid, Msg) ->
+    notify(Pid, Msg, Msg).
+
+%% @doc As {@link notify/2}, the trace showing `Shown' instead of `Msg'
+%% (what differs from one run to the next, such as a count kept across
+%% runs, left out).
+-spec notify(pid(), term(), term()) -> ok.
+notify(Pid, Msg, Shown) when is_pid(Pid) ->
+    case lockstep_server() of
+        none -> Pid ! Msg, ok;
+        Lockstep -> toroco_lockstep:send(Lockstep, Pid, {notice, Msg, Shown})
+    end.
 
 %% @doc In lockstep: cancels the calling process's timer `Kind'.
 -spec cancel_timer(term()) -> ok.

@@ -61,6 +61,10 @@
 %% <tr><th>message</th><th>from</th><th>effect</th></tr>
 %% <tr><td>`{Tag, send, To, Pid, Msg}'</td><td>`toroco_wire:send/2'</td><td>queued
 %%     for `Pid', the process `To' named then (`undefined' if none)</td></tr>
+%% <tr><td>`{Tag, send, Pid, Pid, {notice, Msg, Shown}}'</td><td>`toroco_clock:notify/3'
+%%     (a port program's owner)</td><td>`Msg' queued as a step for `Pid', a
+%%     process of the path (traced `notice Shown'); to any other process sent
+%%     as is</td></tr>
 %% <tr><td>`{Tag, timer, Pid, Kind, Deadline, Msg}'</td><td>the timer's owner</td>
 %%     <td>sets (or replaces) the owner's timer `Kind'</td></tr>
 %% <tr><td>`{Tag, cancel, Pid, Kind}'</td><td>the owner</td><td>cancels it</td></tr>
@@ -82,6 +86,7 @@
 
 -export([start_link/0, send/3, timer/4, cancel/2, done/1, up/2, ready/1, down/1, synced/1]).
 -export([start/1, stop/0, tick/3, settle/0, info/0]).
+-export([term/1]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 -export_type([stimulus/0]).
 
@@ -337,7 +342,7 @@ handle_info({?TAG, send, To, Pid, Msg, _From}, S = #s{cell = undefined}) ->
     forward(To, Pid, Msg),
     {noreply, S};
 handle_info({?TAG, send, To, Pid, Msg, From}, S = #s{queue = Q, settle = Settle}) ->
-    case is_step(Msg) of
+    case is_step(Msg) orelse is_notice(Msg, Pid, S) of
         true when Settle =/= none -> {noreply, hold(From, {send, To, Pid, Msg}, S)};
         true -> {noreply, run(S#s{queue = queue:in({To, Pid, Msg}, Q)})};
         false -> forward(To, Pid, Msg), {noreply, S}
@@ -645,6 +650,7 @@ deliver(To, Target, Msg, S = #s{steps = N}) ->
             S1 = watch(Pid, S),
             Pid ! ?WIRE_STEP(Token, case Msg of
                                         {stimulus, M} -> M;
+                                        {notice, M, _} -> M;
                                         _ -> Msg
                                     end),
             trace(To, Pid, Msg, S1#s{inflight = {Token, Mon, Pid}, steps = N + 1});
@@ -689,8 +695,13 @@ is_step(?WIRE_UNSUB(_, _)) -> true;
 is_step(?WIRE_RESUBSCRIBE) -> true;
 is_step(_) -> false.
 
+%% A notice (toroco_clock:notify/2) to a process of the path is a step.
+is_notice({notice, _, _}, Pid, #s{procs = Procs}) -> is_map_key(Pid, Procs);
+is_notice(_Msg, _Pid, _S) -> false.
+
 %% Sent as in real time, to the process the address named when it was sent.
 forward(_To, _Pid, {exit, _}) -> ok;
+forward(_To, Pid, {notice, Msg, _}) when is_pid(Pid) -> Pid ! Msg, ok;
 forward(_To, Pid, Msg) when is_pid(Pid) -> Pid ! Msg, ok;
 forward(To, remote, Msg) -> toroco_wire:send(To, Msg);
 forward(_To, undefined, _Msg) -> ok.
@@ -716,8 +727,9 @@ drop_timer(Pid, Kind, S = #s{owned = Owned, timers = Ts}) ->
 trace(_To, _Pid, _Msg, S = #s{trace = off}) ->
     S;
 trace(To, Pid, Msg, S = #s{trace = Lines, now = Now}) ->
-    Line = io_lib:format("~b ~ts ~ts~n", [Now, name(To, Pid), line(Msg)]),
-    S#s{trace = [Line | Lines]}.
+    %% as io_lib:format("~b ~ts ~ts~n") would write it, without its cost
+    %% (a run's steps are most of the lab's work)
+    S#s{trace = [[integer_to_list(Now), $\s, name(To, Pid), $\s, line(Msg), $\n] | Lines]}.
 
 name({Reg, _Node}, _Pid) -> atom_to_list(Reg);
 name(Reg, _Pid) when is_atom(Reg) -> atom_to_list(Reg);
@@ -729,20 +741,35 @@ name(_To, Pid) when is_pid(Pid) ->
 name(_To, _) ->
     "-".
 
-line(?WIRE_EVENT({E, O}, Op)) -> io_lib:format("emit ~s.~s ~ts", [E, O, op(Op)]);
-line(?WIRE_GATED({E, O}, Op)) -> io_lib:format("gated ~s.~s ~ts", [E, O, op(Op)]);
-line(?WIRE_IN(I, V)) -> io_lib:format("deliver ~s ~0tp", [I, V]);
-line(?WIRE_IN(I, V, _)) -> io_lib:format("deliver ~s ~0tp", [I, V]);
-line(?WIRE_ACK(I)) -> io_lib:format("ack ~s", [I]);
-line(?WIRE_TIMER(Kind, Msg)) -> io_lib:format("timer ~0tp ~0tp", [Kind, Msg]);
-line({stimulus, Msg}) -> io_lib:format("stimulus ~0tp", [Msg]);
-line({exit, Reason}) -> io_lib:format("fault exit ~0tp", [strip(Reason)]);
-line({'DOWN', _, process, _, Reason}) -> io_lib:format("down ~ts", [reason(Reason)]);
-line(Msg) -> io_lib:format("~0tp", [strip(Msg)]).
+line(?WIRE_EVENT({E, O}, Op)) -> ["emit ", text(E), $., text(O), $\s, op(Op)];
+line(?WIRE_GATED({E, O}, Op)) -> ["gated ", text(E), $., text(O), $\s, op(Op)];
+line(?WIRE_IN(I, V)) -> ["deliver ", text(I), $\s, term(V)];
+line(?WIRE_IN(I, V, _)) -> ["deliver ", text(I), $\s, term(V)];
+line(?WIRE_ACK(I)) -> ["ack ", text(I)];
+line(?WIRE_TIMER(Kind, Msg)) -> ["timer ", term(Kind), $\s, term(Msg)];
+line({stimulus, Msg}) -> ["stimulus ", term(Msg)];
+line({notice, _, Shown}) -> ["notice ", term(strip(Shown))];
+line({exit, Reason}) -> ["fault exit ", term(strip(Reason))];
+line({'DOWN', _, process, _, Reason}) -> ["down ", reason(Reason)];
+line(Msg) -> term(strip(Msg)).
 
-op({send, V, Hold}) -> io_lib:format("send ~0tp ~0tp", [V, Hold]);
-op({set, V}) -> io_lib:format("set ~0tp", [V]);
+op({send, V, Hold}) -> ["send ", term(V), $\s, term(Hold)];
+op({set, V}) -> ["set ", term(V)];
 op(unset) -> "unset".
+
+%% `~s' of a name
+text(A) when is_atom(A) -> atom_to_list(A);
+text(T) -> io_lib:format("~s", [T]).
+
+%% @private `~0tp' of a term, the common cases (integers, atoms, tuples
+%% of them) written directly: the same characters (toroco_lockstep_SUITE
+%% checks).
+-spec term(term()) -> iolist().
+term(T) when is_integer(T) -> integer_to_list(T);
+term(T) when is_atom(T) -> io_lib:write_atom(T);
+term({}) -> "{}";
+term(T) when is_tuple(T) -> [${, lists:join($,, [term(E) || E <- tuple_to_list(T)]), $}];
+term(T) -> io_lib:format("~0tp", [T]).
 
 %% Pids are not the same from one run to the next: a line names none.
 strip(T) when is_pid(T) -> pid;

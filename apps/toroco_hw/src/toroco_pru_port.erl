@@ -604,7 +604,7 @@ program_failed(Why, State, #data{opts = Opts, pending = Pending, counters = C} =
     D1 = give_up_program(kill, D0),
     Replies = [{reply, From, {error, {port_exit, Why}}} || {From, _} <- maps:values(Pending)],
     {MaxR, WindowMs} = maps:get(max_restarts, Opts, {5, 10000}),
-    Now = erlang:monotonic_time(millisecond),
+    Now = toroco_clock:now_ms(),
     Recent = [T || T <- D1#data.restart_times, Now - T < WindowMs],
     {Failures, DownWhy} = case State of
                               running -> {0, Why};
@@ -702,7 +702,8 @@ event(Other, _D) ->
 
 -spec notify(event(), data()) -> ok.
 notify(Event, #data{subscribers = Subs}) ->
-    maps:foreach(fun(Pid, _) -> Pid ! {toroco_pru_port, Event} end, Subs).
+    %% a notice, so that in lockstep the devices act on it as a step
+    maps:foreach(fun(Pid, _) -> toroco_clock:notify(Pid, {toroco_pru_port, Event}) end, Subs).
 
 %% Accepted configuration requests become the configuration re-applied
 %% after a restart.

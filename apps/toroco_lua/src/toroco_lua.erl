@@ -668,11 +668,11 @@ activation({error, Why}, _D) ->
 %% old state's timers, named with the old id, do nothing. No supervisor sees
 %% it, so one program death is not one restart per Lua behavior of a layer.
 %% A program that dies more than ?REATTACH_MAX times in ?REATTACH_WINDOW_MS
-%% stops the behavior with `{lua_port_down, Why}'.
+%% (of the runtime's clock: simulated time in lockstep) stops the behavior with `{lua_port_down, Why}'.
 reattach(Why, D = #{host := {_, _}}) ->
     {keep_state, orphan({lua_port_down, Why}, D), [unset]};
 reattach(Why, D = #{name := Name, reattached := Times}) ->
-    Now = erlang:monotonic_time(millisecond),
+    Now = toroco_clock:now_ms(),
     Recent = [T || T <- Times, Now - T < ?REATTACH_WINDOW_MS],
     case length(Recent) >= ?REATTACH_MAX of
         true ->

@@ -614,10 +614,13 @@ restart(Why, D = #d{pending = Q, clients = Cs}) ->
     logger:error("toroco_lua_port: lua_port died (~p); ~b Lua behaviors restart",
                  [Why, map_size(Cs)], ?LOG),
     [reply(From, {error, {lua_port_down, Why}}) || {_, From, _} <- queue:to_list(Q)],
-    maps:foreach(fun(Pid, {MRef, Ids}) ->
-                         erlang:demonitor(MRef, [flush]),
-                         Pid ! ?LUA_PORT_DOWN(Ids, Why)
-                 end, Cs),
+    %% told in the order their states were opened, each as a notice: in
+    %% lockstep every behavior opens its new state as a step, in that order
+    _ = [begin
+             erlang:demonitor(MRef, [flush]),
+             toroco_clock:notify(Pid, ?LUA_PORT_DOWN(Ids, Why), {toroco_lua_port, down, Why})
+         end || {_, Pid, MRef, Ids} <- lists:sort([{lists:min(Ids), Pid, MRef, Ids}
+                                                 || {Pid, {MRef, Ids}} <- maps:to_list(Cs)])],
     case start_port() of
         {ok, D1} -> {keep_state, D1#d{next_id = D#d.next_id, next_ref = D#d.next_ref},
                      [{{timeout, stuck}, cancel}]};
