@@ -420,19 +420,22 @@ handle_info(_Info, S) ->
     {noreply, S}.
 
 -spec terminate(term(), #sim{}) -> ok.
-terminate(_Reason, #sim{sock = Sock, status = Status, trace = Trace}) ->
+terminate(_Reason, S = #sim{sock = Sock, status = Status}) ->
     case Sock of
         undefined -> ok;
         _ -> gen_udp:close(Sock)
     end,
-    case Trace of
-        undefined -> ok;
-        _ -> ok = file:close(Trace)
-    end,
+    _ = close_trace(S),
     case Status of
         tty -> io:put_chars("\n");
         _ -> ok
     end.
+
+close_trace(S = #sim{trace = undefined}) ->
+    S;
+close_trace(S = #sim{trace = Fd}) ->
+    ok = file:close(Fd),
+    S#sim{trace = undefined}.
 
 %% After a tick: the caller has the final worlds once every robot is done,
 %% else the next tick is asked for.
@@ -440,8 +443,11 @@ next(S = #sim{bots = Bots, caller = Caller, obs = Obs, stop = Stop}, Again) ->
     Worlds = [W || #bot{world = W} <- Bots],
     case lists:all(fun torobot_world:done/1, Worlds) orelse stop(Stop, Obs) of
         true ->
+            %% the trace is whole on disk before the caller hears of the end
+            %% (it reads it back at once: the lab hashes it)
+            S1 = close_trace(S),
             Caller ! {?MODULE, self(), {done, Worlds, lists:reverse(Obs)}},
-            {stop, normal, S};
+            {stop, normal, S1};
         false ->
             {noreply, Again(S)}
     end.
