@@ -18,6 +18,7 @@
 
 -export([all/0, suite/0, init_per_suite/1, end_per_suite/1]).
 -export([supervision_trees/1, runnable_blocks/1, shell_blocks/1, erlang_sessions/1]).
+-export([links_resolve/1, cited_sections_exist/1, nothing_outside_the_repository/1]).
 
 -define(MARK, "<!-- runnable -->").
 -define(SHELL_TIMEOUT, 600000).
@@ -27,7 +28,8 @@ suite() ->
     [{timetrap, {minutes, 25}}].
 
 all() ->
-    [supervision_trees, runnable_blocks, shell_blocks, erlang_sessions].
+    [links_resolve, cited_sections_exist, nothing_outside_the_repository,
+     supervision_trees, runnable_blocks, shell_blocks, erlang_sessions].
 
 init_per_suite(Config) ->
     Root = toroco_test_lib:root(),
@@ -40,6 +42,43 @@ end_per_suite(_Config) ->
 %%====================================================================
 %% Cases
 %%====================================================================
+
+links_resolve(doc) ->
+    ["Every relative link and image of README.md and doc/*.md names a file or folder that "
+     "exists inside the repository"];
+links_resolve(Config) ->
+    Root = ?config(root, Config),
+    Links = [{File, T} || File <- guides(Root), T <- links(File)],
+    ct:comment("~b relative links", [length(Links)]),
+    ?assert(length(Links) > 10),
+    Broken = [{rel(Root, File), Target}
+              || {File, Target} <- Links, not resolves(Root, File, Target)],
+    ?assertEqual([], Broken).
+
+cited_sections_exist(doc) ->
+    ["Every \"SPEC §N\" cited in the code, scripts and guides is a section of doc/spec.md, "
+     "the contract in the repository"];
+cited_sections_exist(Config) ->
+    Root = ?config(root, Config),
+    {ok, Spec} = file:read_file(filename:join([Root, "doc", "spec.md"])),
+    Sections = [S || [S] <- match_all(Spec, "(?m)^## ([0-9]+[a-z]?)\\. ")],
+    ?assert(length(Sections) >= 17),
+    Missing = [{rel(Root, File), N}
+               || File <- sources(Root),
+                  {ok, Bin} <- [file:read_file(File)],
+                  [N] <- match_all(Bin, "SPEC §\\s?([0-9]+[a-z]?)"),
+                  not lists:member(N, Sections)],
+    ?assertEqual([], lists:usort(Missing)).
+
+nothing_outside_the_repository(doc) ->
+    ["No file of the project points outside the repository for its contract (no path "
+     "through the sibling folder the contract once lived in)"];
+nothing_outside_the_repository(Config) ->
+    Root = ?config(root, Config),
+    Outside = [rel(Root, File) || File <- sources(Root),
+                                  {ok, Bin} <- [file:read_file(File)],
+                                  binary:match(Bin, <<"../", "shared/">>) =/= nomatch],
+    ?assertEqual([], Outside).
 
 supervision_trees(doc) ->
     ["The supervision tree drawn in the README and in doc/concepts.md is toroco_sup's "
@@ -232,3 +271,53 @@ in_order([E | Rest], Out) ->
 
 strip(S) ->
     unicode:characters_to_binary(re:replace(S, "\\s+", "", [global, unicode])).
+
+%%====================================================================
+%% Links and citations
+%%====================================================================
+
+guides(Root) ->
+    [filename:join(Root, "README.md") | filelib:wildcard(filename:join([Root, "doc", "*.md"]))].
+
+%% The project's own text files: code, tests, scripts, configuration and
+%% guides (not what a build or npm put there).
+sources(Root) ->
+    Patterns = ["README.md", "Makefile", "rebar.config", "doc/*.md", "scripts/*",
+                "apps/*/src/*.[eh]rl", "apps/*/test/*.erl", "apps/*/README.md",
+                "test/*.erl", "bench/*", "c_src/*/*.[ch]", "c_src/*/src/*.[ch]",
+                "c_src/*/*.md", "detector/*.[ch]pp", "detector/src/*.[ch]pp",
+                "config/*.wiring", "config/*/*", "apps/*/priv/*.js", "apps/*/web/*.js",
+                "apps/*/web/src/*.js"],
+    lists:usort([F || P <- Patterns, F <- filelib:wildcard(filename:join(Root, P)),
+                      filelib:is_regular(F)]).
+
+%% The targets of [text](target) and ![alt](target), fenced code left out.
+links(File) ->
+    {ok, Bin} = file:read_file(File),
+    Text = re:replace(Bin, "(?ms)^```.*?^```", "", [global, {return, binary}]),
+    [T || [T] <- match_all(Text, "\\]\\(([^)\\s]+)\\)"),
+          not is_external(T)].
+
+is_external(T) ->
+    lists:any(fun(P) -> string:prefix(T, P) =/= nomatch end,
+              ["http://", "https://", "mailto:", "#"]).
+
+resolves(Root, File, Target) ->
+    [Path | _] = string:split(Target, "#"),
+    Abs = filename:absname(filename:join(filename:dirname(File), Path)),
+    Norm = normalize(filename:split(Abs), []),
+    lists:prefix(filename:split(Root), Norm) andalso filelib:is_file(filename:join(Norm)).
+
+normalize([], Acc) -> lists:reverse(Acc);
+normalize([".." | Rest], [_ | Acc]) -> normalize(Rest, Acc);
+normalize(["." | Rest], Acc) -> normalize(Rest, Acc);
+normalize([P | Rest], Acc) -> normalize(Rest, [P | Acc]).
+
+match_all(Bin, Re) ->
+    case re:run(Bin, Re, [global, unicode, {capture, all_but_first, list}]) of
+        {match, Ms} -> Ms;
+        nomatch -> []
+    end.
+
+rel(Root, File) ->
+    string:prefix(File, Root ++ "/").
