@@ -17,7 +17,8 @@
 -define(OTHERS, [toroco_hw, torobot, toroco_lib, toroco_live, toroco_lua]).
 
 all() ->
-    [no_call_into_the_runtimes_insides, no_include_of_the_runtimes_headers].
+    [no_call_into_the_runtimes_insides, no_include_of_the_runtimes_headers,
+     suites_use_the_api_only].
 
 no_call_into_the_runtimes_insides() ->
     [{doc, "No call from toroco_hw, torobot, toroco_lib, toroco_live or toroco_lua reaches a module of "
@@ -51,3 +52,27 @@ no_include_of_the_runtimes_headers(_Config) ->
 lines(File) ->
     {ok, Bin} = file:read_file(File),
     binary:split(Bin, <<"\n">>, [global]).
+
+suites_use_the_api_only() ->
+    [{doc, "The other applications' suites (and their test modules) call the runtime only "
+      "through its API, as their code does, and include none of its private headers; "
+      "the runtime's shared test helpers (toroco_test_lib) are not the runtime."}].
+suites_use_the_api_only(_Config) ->
+    _ = application:load(toroco),
+    {ok, Modules} = application:get_key(toroco, modules),
+    Inside = Modules -- ?API,
+    Root = toroco_test_lib:root(),
+    Tests = lists:append([filelib:wildcard(filename:join([Root, "apps", App, "test", "*.erl"]))
+                          || App <- ?OTHERS]),
+    ?assertNotEqual([], Tests, Root),
+    Offending = [{filename:basename(File), Mod}
+                 || File <- Tests,
+                    {ok, Bin} <- [file:read_file(File)],
+                    {match, Ms} <- [re:run(Bin, "\\b(toroco_[a-z0-9_]+):[a-z]",
+                                           [global, {capture, all_but_first, list}])],
+                    Mod <- lists:usort([list_to_atom(M) || [M] <- Ms]),
+                    lists:member(Mod, Inside)]
+        ++ [{filename:basename(File), header}
+            || File <- Tests, Line <- lines(File),
+               re:run(Line, "-include(_lib)?\\(\"toroco/src/|toroco_wire\\.hrl") =/= nomatch],
+    ?assertEqual([], Offending).

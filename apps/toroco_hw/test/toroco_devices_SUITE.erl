@@ -268,7 +268,7 @@ keepalive_and_stall(Config) ->
     ?assertEqual("1700000", pwm(Root, 0, "duty_cycle")),
     #{watchdogs := 0, keepalive_ms := 50} = dev(motors),
     %% this side stalls: the program's watchdog takes the servos to neutral
-    Pid = whereis(toroco_names:process(motors)),
+    Pid = toroco:whereis(motors),
     ok = sys:suspend(Pid),
     try
         ok = wait_until(fun() -> pwm(Root, 0, "duty_cycle") =:= ?NEUTRAL end, ?WAIT)
@@ -464,14 +464,14 @@ poll_crashes(_Config) ->
     ok = toroco:set_inputs(rec, #{level => [{gauge, level}]}),
     %% latched: wiring delivers the current value
     await_input(rec, level, [1]),
-    Pid = whereis(toroco_names:process(gauge)),
+    Pid = toroco:whereis(gauge),
     true = ets:insert(Tab, {v, crash}),
     ok = wait_until(fun() -> maps:get(crashes, dev(gauge)) >= 3 end, ?WAIT),
     true = ets:insert(Tab, {v, throw}),
     ok = wait_until(fun() -> maps:get(crashes, dev(gauge)) >= 6 end, ?WAIT),
     true = ets:insert(Tab, {v, 2}),
     await_input(rec, level, [1, 2]),
-    ?assertEqual(Pid, whereis(toroco_names:process(gauge))).
+    ?assertEqual(Pid, toroco:whereis(gauge)).
 
 poll_period_changed(doc) ->
     ["{toroco_poll, every_ms, Ms} re-times a polled sensor (the original Torocó's "
@@ -606,11 +606,11 @@ unknown_requests(_Config) ->
     [ok = toroco:add_device(N, M, Opts) || {N, M, Opts} <- Devices],
     lists:foreach(
       fun({N, _, _}) ->
-              Pid = whereis(toroco_names:process(N)),
+              Pid = toroco:whereis(N),
               Pid ! {no_such, message},
               ?assertEqual({error, {unknown_call, {N, {no_such, request}}}},
                            gen_statem:call(Pid, {no_such, request}, ?WAIT)),
-              ?assertEqual(Pid, whereis(toroco_names:process(N))),
+              ?assertEqual(Pid, toroco:whereis(N)),
               ?assertMatch(#{status := running}, toroco:inspect(N))
       end, Devices).
 

@@ -359,7 +359,7 @@ tcp_rig(Opts) ->
     ok = toroco:set_inputs(t, #{status => [{src, status}]}),
     ok = toroco:set_inputs(rec, #{cmd => [{t, cmd}]}),
     #{port := Port} = dev(t),
-    {Port, whereis(toroco_names:process(t))}.
+    {Port, toroco:whereis(t)}.
 
 %% One line from a client socket, decoded.
 recv_event(S) ->

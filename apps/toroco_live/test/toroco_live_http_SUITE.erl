@@ -173,15 +173,15 @@ control_reset_restart(Config) ->
     wait(fun() -> state(relay) =:= relaying end, 2000),
     {200, _, _} = control(Config, #{action => reset, name => relay}),
     wait(fun() -> state(relay) =:= waiting end, 2000),
-    Pid = whereis(toroco_names:process(relay)),
-    Before = toroco_restarts:count(relay),
+    Pid = toroco:whereis(relay),
+    Before = maps:get(restarts, toroco:inspect(relay)),
     {200, _, _} = control(Config, #{action => restart, name => relay}),
-    wait(fun() -> New = whereis(toroco_names:process(relay)),
+    wait(fun() -> New = toroco:whereis(relay),
                   is_pid(New) andalso New =/= Pid end, 3000),
-    wait(fun() -> toroco_restarts:count(relay) =:= Before + 1 end, 3000).
+    wait(fun() -> maps:get(restarts, toroco:inspect(relay)) =:= Before + 1 end, 3000).
 
 state(B) ->
-    {S, _} = sys:get_state(whereis(toroco_names:process(B))),
+    {S, _} = sys:get_state(toroco:whereis(B)),
     S.
 
 control_load_wiring() -> [{doc, "load_wiring loads a wiring file that is on the node"}].

@@ -143,7 +143,7 @@ inline_behavior_replaces_its_creator(Config) ->
                  toroco_lua:load_main(data(Config, "levels/main.lua"), #{})),
     ok = toroco:inject({mouse, left}, pressed),
     await(actuator, signal, [2]),
-    Gone = erlang:monitor(process, whereis(toroco_names:process(level2))),
+    Gone = erlang:monitor(process, toroco:whereis(level2)),
     ok = toroco:inject({mouse, left}, released),
     receive {'DOWN', Gone, process, _, _} -> ok after ?WAIT -> ct:fail(level2_not_removed) end,
     toroco_test_lib:wait_until(fun() -> is_map(toroco:inspect(level3)) end, ?WAIT, level3),
@@ -176,12 +176,12 @@ inline_behavior_crash_restarts_it_alone(Config) ->
     ok = toroco:set_inputs(a, #{made => [{maker, made}]}),
     ok = toroco:inject({s, make}, go),
     await(a, made, [1]),
-    toroco_test_lib:wait_until(fun() -> is_pid(whereis(toroco_names:process(child))) end,
+    toroco_test_lib:wait_until(fun() -> is_pid(toroco:whereis(child)) end,
                                ?WAIT, child),
     ok = toroco:inject({s, value}, 1),
     await(a, child, [{1, 1}]),
-    Maker = whereis(toroco_names:process(maker)),
-    Child = whereis(toroco_names:process(child)),
+    Maker = toroco:whereis(maker),
+    Child = toroco:whereis(child),
     Ref = erlang:monitor(process, Child),
     ok = toroco:inject({s, value}, <<"boom">>),
     receive {'DOWN', Ref, process, _, Why} ->
@@ -189,10 +189,10 @@ inline_behavior_crash_restarts_it_alone(Config) ->
     after ?WAIT -> ct:fail(child_not_stopped)
     end,
     back(child),
-    ?assertNotEqual(Child, whereis(toroco_names:process(child))),
+    ?assertNotEqual(Child, toroco:whereis(child)),
     ok = toroco:inject({s, value}, 2),
     await(a, child, [{1, 1}, {2, 2}]),
-    ?assertEqual(Maker, whereis(toroco_names:process(maker))),
+    ?assertEqual(Maker, toroco:whereis(maker)),
     ok = toroco:inject({s, make}, go),
     await(a, made, [1, 2]).
 
@@ -507,7 +507,7 @@ emissions_before_a_fault_in_a_burst_go_out(doc) ->
      "order, before the behavior stops"];
 emissions_before_a_fault_in_a_burst_go_out(Config) ->
     faulty(data(Config, "faulty.lua")),
-    Ref = erlang:monitor(process, whereis(toroco_names:process(f))),
+    Ref = erlang:monitor(process, toroco:whereis(f)),
     Kinds = [<<"k", (integer_to_binary(K))/binary>> || K <- lists:seq(1, 20)],
     [ok = toroco:inject({s, kind}, K) || K <- Kinds ++ [<<"error">>]],
     receive {'DOWN', Ref, process, _, Why} -> ?assertMatch({lua_error, _, 7, _}, Why)
@@ -547,10 +547,10 @@ hung_port_is_killed(doc) ->
 hung_port_is_killed(Config) ->
     faulty(data(Config, "faulty.lua")),
     OsPid = toroco_lua_port:os_pid(),
-    Pid = whereis(toroco_names:process(f)),
+    Pid = toroco:whereis(f),
     ok = toroco:inject({s, kind}, <<"pattern">>),
     reattached([f], OsPid),
-    ?assertEqual(Pid, whereis(toroco_names:process(f))),
+    ?assertEqual(Pid, toroco:whereis(f)),
     ok = toroco:inject({s, kind}, <<"again">>),
     await(a, alive, [<<"ok">>, <<"again">>]).
 
@@ -596,9 +596,9 @@ port_killed_every_lua_behavior_back(Config) ->
                                              ++ [{erl, [{s, value}]}])),
     ok = toroco:inject({s, value}, 1),
     [await(a, Echo(N), [1]) || N <- Names],
-    Sensor = whereis(toroco_names:process(s)),
+    Sensor = toroco:whereis(s),
     Owner = whereis(toroco_lua_port),
-    Pids = [whereis(toroco_names:process(N)) || N <- Names],
+    Pids = [toroco:whereis(N) || N <- Names],
     OsPid = toroco_lua_port:os_pid(),
     T0 = erlang:monotonic_time(millisecond),
     _ = os:cmd("kill -9 " ++ integer_to_list(OsPid)),
@@ -608,9 +608,9 @@ port_killed_every_lua_behavior_back(Config) ->
     Back = erlang:monotonic_time(millisecond) - T0,
     ct:pal("every Lua behavior back and answering ~b ms after kill -9", [Back]),
     ?assert(Back < 1000),
-    ?assertEqual(Pids, [whereis(toroco_names:process(N)) || N <- Names]),
+    ?assertEqual(Pids, [toroco:whereis(N) || N <- Names]),
     ?assertEqual(Owner, whereis(toroco_lua_port)),
-    ?assertEqual(Sensor, whereis(toroco_names:process(s))),
+    ?assertEqual(Sensor, toroco:whereis(s)),
     ?assertEqual([1], maps:keys(maps:get(layers, toroco:inspect())) -- [0]),
     await(a, erl, [1, 2]).
 
@@ -630,7 +630,7 @@ owner_killed_every_lua_behavior_back(Config) ->
     ok = toroco:set_inputs(a, maps:from_list([{Echo(N), [{N, echo}]} || N <- Names])),
     ok = toroco:inject({s, value}, 1),
     [await(a, Echo(N), [1]) || N <- Names],
-    Pids = [whereis(toroco_names:process(N)) || N <- Names],
+    Pids = [toroco:whereis(N) || N <- Names],
     OsPid = toroco_lua_port:os_pid(),
     Owner = whereis(toroco_lua_port),
     exit(Owner, kill),
@@ -640,7 +640,7 @@ owner_killed_every_lua_behavior_back(Config) ->
     reattached(Names, OsPid),
     ok = toroco:inject({s, value}, 2),
     [await(a, Echo(N), [1, 2]) || N <- Names],
-    ?assertEqual(Pids, [whereis(toroco_names:process(N)) || N <- Names]),
+    ?assertEqual(Pids, [toroco:whereis(N) || N <- Names]),
     ?assertEqual([1], maps:keys(maps:get(layers, toroco:inspect())) -- [0]).
 
 port_dying_again_and_again_is_left_to_supervision(doc) ->
@@ -648,7 +648,7 @@ port_dying_again_and_again_is_left_to_supervision(doc) ->
      "with lua_port_down, and its layer restarts it"];
 port_dying_again_and_again_is_left_to_supervision(Config) ->
     faulty(data(Config, "faulty.lua")),
-    Ref = erlang:monitor(process, whereis(toroco_names:process(f))),
+    Ref = erlang:monitor(process, toroco:whereis(f)),
     [begin
          OsPid = toroco_lua_port:os_pid(),
          _ = os:cmd("kill -9 " ++ integer_to_list(OsPid)),
@@ -683,12 +683,12 @@ bad_frames_are_answered(Config) ->
     ok = toroco_lua:add_behavior(lb, #{file => data(Config, "echo.lua")}),
     ok = toroco:set_inputs(lb, #{value => [{s, value}]}),
     ok = toroco:set_inputs(a, #{echo => [{lb, echo}]}),
-    Pid = whereis(toroco_names:process(lb)),
+    Pid = toroco:whereis(lb),
     ok = toroco:inject({s, value}, self()),
     ok = toroco:inject({s, value}, list_to_tuple(lists:seq(1, 300))),
     ok = toroco:inject({s, value}, 5),
     await(a, echo, [5]),
-    ?assertEqual(Pid, whereis(toroco_names:process(lb))).
+    ?assertEqual(Pid, toroco:whereis(lb)).
 
 %%% ---------------------------------------------------------------------
 %%% Reload
@@ -849,7 +849,7 @@ faulty(File) ->
 
 %% Injects Kind and returns the reason behavior Name stopped with.
 fault(Name, Kind) ->
-    Ref = erlang:monitor(process, whereis(toroco_names:process(Name))),
+    Ref = erlang:monitor(process, toroco:whereis(Name)),
     ok = toroco:inject({s, kind}, Kind),
     receive {'DOWN', Ref, process, _, Why} -> Why
     after 2 * ?WAIT -> ct:fail({not_stopped, Name, Kind})
@@ -878,7 +878,7 @@ back(Name) ->
     back(Name, erlang:monotonic_time(millisecond) + ?WAIT).
 
 back(Name, Deadline) ->
-    case whereis(toroco_names:process(Name)) of
+    case toroco:whereis(Name) of
         Pid when is_pid(Pid) ->
             case catch toroco_lua:waits(Name) of
                 {ok, _} -> ok;
