@@ -42,6 +42,16 @@
 %%     DistanceM}' from the robot's centre, bearing counter-clockwise from
 %%     the heading, or `none') and `docked' (`true' while the robot's
 %%     centre is within `dock_radius' of the dock).</li>
+%% <li>`{floor_line, [{X, Y}, ...]}', any number: a strip of dark tape on
+%%     the floor along those points. `{grey_sensor, #{offset => 0.06,
+%%     spread => 0.03, width => 0.02, dark => 900, light => 100}}': the
+%%     Torobot's two grey-level sensors under its front, `offset' metres
+%%     ahead of its centre and `spread' to each side; each reads `dark'
+%%     over a line (its point within `width' / 2 of one), `light' off it,
+%%     as the original's ADC did. Devices `trc_grey_left' and
+%%     `trc_grey_right' (the names the original Torocó's configuration
+%%     gave them), output `value'; a world without `grey_sensor' has
+%%     neither.</li>
 %% <li>`{figures, [Figure]}': what the summary measures besides the
 %%     Torobot's keys: `laps' (turns of the trajectory round the arena's
 %%     centre, or round `{lap_centre, {X, Y}}'), `coverage' (the fraction of
@@ -53,7 +63,7 @@
 -module(torobot_sensors).
 
 -export([devices/0, new/1, read/2]).
--export([figures/1, lights/1, dock/1]).
+-export([figures/1, lights/1, dock/1, floor_lines/1]).
 -export_type([state/0, readings/0]).
 
 -type readings() :: #{atom() => #{atom() => term()}}.
@@ -66,6 +76,10 @@
 %% @doc The lamps, `{Centre, Power}'.
 -spec lights(torobot_world:world()) -> [{torobot_world:point(), float()}].
 lights(W) -> maps:get(lights, torobot_world:extras(W)).
+
+%% @doc The lines of dark tape on the floor, each its points.
+-spec floor_lines(torobot_world:world()) -> [[torobot_world:point()]].
+floor_lines(W) -> maps:get(floor_lines, torobot_world:extras(W)).
 
 %% @doc The dock's place, or `none'.
 -spec dock(torobot_world:world()) -> torobot_world:point() | none.
@@ -82,7 +96,16 @@ devices() ->
      {bumper, fun(_) -> [contact] end},
      {odometry, fun(_) -> [wheels] end},
      {light, fun(_) -> [left, right] end},
-     {beacon, fun(_) -> [bearing, docked] end}].
+     {beacon, fun(_) -> [bearing, docked] end},
+     {trc_grey_left, fun grey_outputs/1},
+     {trc_grey_right, fun grey_outputs/1}].
+
+%% A world's grey sensors, if it has them.
+grey_outputs(W) ->
+    case cfg(grey_sensor, W) of
+        none -> [];
+        #{} -> [value]
+    end.
 
 %% @doc The sensing state at the start of a run.
 -spec new(torobot_world:world()) -> state().
@@ -96,7 +119,7 @@ read(W, {Pose0, T0}) ->
     Readings = #{range => ranges(W), bumper => #{contact => bumper(W)},
                  odometry => #{wheels => odometry(W, Pose0, Pose, T - T0)},
                  light => light(W), beacon => beacon(W)},
-    {Readings, {Pose, T}}.
+    {maps:merge(Readings, grey(W)), {Pose, T}}.
 
 cfg(Key, W) -> maps:get(Key, torobot_world:extras(W)).
 
@@ -152,6 +175,35 @@ lamp(W, {Sx, Sy} = At, Axis, {{Lx, Ly} = Centre, Power}, Half) ->
         true -> Power * Cos / (1 + (D / Half) * (D / Half));
         false -> 0.0
     end.
+
+grey(W) ->
+    case cfg(grey_sensor, W) of
+        none ->
+            #{};
+        #{offset := Ahead, spread := Side, width := Width, dark := Dark, light := Light} ->
+            {X, Y, H} = torobot_world:pose(W),
+            Th = H * math:pi() / 180,
+            Lines = floor_lines(W),
+            Reading = fun(Across) ->
+                              At = {X + Ahead * math:cos(Th) - Across * math:sin(Th),
+                                    Y + Ahead * math:sin(Th) + Across * math:cos(Th)},
+                              case on_line(At, Lines, Width / 2) of
+                                  true -> Dark;
+                                  false -> Light
+                              end
+                      end,
+            #{trc_grey_left => #{value => Reading(Side)},
+              trc_grey_right => #{value => Reading(-Side)}}
+    end.
+
+on_line(At, Lines, Half) ->
+    lists:any(fun(Pts) ->
+                      lists:any(fun({A, B}) when A =:= B -> torobot_geometry:distance(At, A) =< Half;
+                                   ({A, B}) ->
+                                        torobot_geometry:distance(
+                                          At, torobot_geometry:closest(At, A, B)) =< Half
+                                end, lists:zip(lists:droplast(Pts), tl(Pts)))
+              end, Lines).
 
 beacon(W) ->
     #{range := Range, dock_radius := DockR} = cfg(beacon, W),

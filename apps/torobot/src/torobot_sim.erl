@@ -268,8 +268,9 @@ with_robots(Worlds, Nodes, Opts) ->
     RobotOpts0 = #{wiring => WiringFile, speed => Speed, time => Time,
                   trace => Trace =/= undefined,
                   thresholds => torobot_world:ir_thresholds(hd(Worlds)),
-                  sensors => [{Name, Outputs(hd(Worlds))}
-                              || {Name, Outputs} <- torobot_sensors:devices()]},
+                  %% a sensor the world has not (no outputs) gets no device
+                  sensors => [{Name, Os} || {Name, Outputs} <- torobot_sensors:devices(),
+                                            Os <- [Outputs(hd(Worlds))], Os =/= []]},
     RobotOpts = maps:merge(RobotOpts0, maps:with([lua], Opts)),
     Started = start_robots(Worlds, Nodes, RobotOpts),
     try

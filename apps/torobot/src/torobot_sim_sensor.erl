@@ -46,6 +46,9 @@ handle_event(Type, {?MODULE, Readings}, _State, D = #{outputs := Outs, last := L
         K -> {keep_state, D#{last := maps:merge(Last, Changed), emitted := N + K},
               [{set, Changed}]}
     end;
+handle_event({call, From}, Request, _State, _D) ->
+    %% fed by the world, not polled: a Lua converter on it applies alone
+    {keep_state_and_data, [{reply, From, {error, {unknown_call, Request}}}]};
 handle_event(_Type, _Content, _State, _D) ->
     keep_state_and_data.
 

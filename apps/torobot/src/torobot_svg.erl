@@ -96,8 +96,8 @@ objects(World, H) ->
       || {Colour, {X, Y}, R} <- torobot_world:objects(World)],
      "</g>\n"].
 
-%% The library's lamps (yellow) and dock (a green square), when the world
-%% has them.
+%% The library's floor lines (dark tape), lamps (yellow) and dock (a green
+%% square), when the world has them.
 -spec fixtures(torobot_world:world(), float()) -> iodata().
 fixtures(World, H) ->
     Lamps = [["<circle", attrs([{cx, x(X)}, {cy, y(Y, H)}, {r, 8}, {fill, "#ffd700"},
@@ -109,7 +109,12 @@ fixtures(World, H) ->
                                           {height, 20}, {fill, "none"}, {stroke, "#2ca02c"},
                                           {'stroke-width', 3}]), "/>\n"]
            end,
-    case Lamps ++ Dock of
+    Tape = [["<polyline", attrs([{points, lists:join(" ", [[x(X), ",", y(Y, H)] || {X, Y} <- Pts])},
+                                 {fill, "none"}, {stroke, "#555555"}, {'stroke-width', 4},
+                                 {'stroke-linejoin', "round"}]), "/>
+"]
+            || Pts <- torobot_sensors:floor_lines(World)],
+    case Tape ++ Lamps ++ Dock of
         [] -> [];
         Drawn -> ["<g id=\"fixtures\">\n", Drawn, "</g>\n"]
     end.

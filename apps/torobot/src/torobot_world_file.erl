@@ -79,10 +79,11 @@
 -define(BUMPER, #{front_deg => 25, side_deg => 110}).
 -define(LIGHT_SENSOR, #{mount_deg => 45, half_distance => 0.5}).
 -define(BEACON, #{range => 6.0, dock_radius => 0.10}).
+-define(GREY_SENSOR, #{offset => 0.06, spread => 0.03, width => 0.02, dark => 900, light => 100}).
 -define(FIGURES, [laps, coverage, docked_ms, light_distance_m, light_mean_m]).
 -define(SINGLE, [arena, robot, duration_s, robot_geometry, ir, camera, seed,
                  tick_ms, stop_on_red,
-                 range, bumper, light_sensor, dock, beacon, figures, lap_centre]).
+                 range, bumper, light_sensor, dock, beacon, figures, lap_centre, grey_sensor]).
 
 %%====================================================================
 %% Reading
@@ -351,6 +352,7 @@ default(range) -> ?RANGE;
 default(bumper) -> ?BUMPER;
 default(light_sensor) -> ?LIGHT_SENSOR;
 default(beacon) -> ?BEACON;
+default(grey_sensor) -> none;
 default(dock) -> none;
 default(figures) -> [];
 default(lap_centre) -> none.
@@ -375,6 +377,21 @@ library_term({light_sensor, #{} = Opts}) ->
     options(light_sensor, Opts, fun(mount_deg, V) -> is_number(V) andalso V >= 0 andalso V < 180;
                                    (half_distance, V) -> positive(V)
                                 end);
+library_term({grey_sensor, #{} = Opts}) ->
+    Valid = fun(K, V) when K =:= dark; K =:= light -> is_integer(V) andalso V >= 0 andalso V =< 1023;
+               (spread, V) -> is_number(V) andalso V >= 0;
+               (_, V) -> positive(V)
+            end,
+    case lists:all(fun({K, V}) -> is_map_key(K, ?GREY_SENSOR) andalso Valid(K, V) end,
+                   maps:to_list(Opts)) of
+        true -> {ok, grey_sensor, maps:merge(?GREY_SENSOR, Opts)};
+        false -> error
+    end;
+library_term({floor_line, [_, _ | _] = Ps}) ->
+    case [Pt || P <- Ps, {ok, Pt} <- [point(P)]] of
+        Pts when length(Pts) =:= length(Ps) -> {ok, floor_line, Pts};
+        _ -> error
+    end;
 library_term({beacon, #{} = Opts}) ->
     options(beacon, Opts, fun(_, V) -> positive(V) end);
 library_term({light, P, Power}) when is_number(Power), Power >= 0 ->
@@ -408,6 +425,8 @@ options(Key, Opts, Valid) ->
 -spec library(map()) -> map().
 library(Parsed) ->
     Lights = lists:reverse([L || {L, _} <- maps:get(light, Parsed, [])]),
-    maps:from_list([{lights, Lights}
+    Lines = lists:reverse([L || {L, _} <- maps:get(floor_line, Parsed, [])]),
+    maps:from_list([{lights, Lights}, {floor_lines, Lines}
                     | [{Key, value(Key, Parsed)}
-                       || Key <- [range, bumper, light_sensor, beacon, dock, figures, lap_centre]]]).
+                       || Key <- [range, bumper, light_sensor, beacon, dock, figures, lap_centre,
+                                  grey_sensor]]]).

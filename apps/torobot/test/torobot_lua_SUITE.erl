@@ -8,13 +8,15 @@
 -include_lib("stdlib/include/assert.hrl").
 
 -export([all/0, suite/0, init_per_suite/1, end_per_suite/1]).
--export([original_program_reaches_red/1, original_names_reach_the_devices/1]).
+-export([original_program_reaches_red/1, original_names_reach_the_devices/1,
+         line_follower_keeps_to_the_tape/1]).
 
 suite() ->
     [{timetrap, {seconds, 120}}].
 
 all() ->
-    [original_program_reaches_red, original_names_reach_the_devices].
+    [original_program_reaches_red, original_names_reach_the_devices,
+     line_follower_keeps_to_the_tape].
 
 init_per_suite(Config) ->
     Root = toroco_test_lib:root(),
@@ -88,6 +90,34 @@ names_behavior() ->
       "return function() toroco.set_output {motors = {30, -30}} end,\n"
       "  toroco.trigger(input.update, function(e, ...) toroco.send_output {blob = {...}} end),\n"
       "  toroco.trigger(input.left, function(e, v) toroco.send_output {left = {v}} end)\n">>.
+
+line_follower_keeps_to_the_tape(doc) ->
+    ["A line follower written for the original (configure_polling of trc_grey_left and "
+     "trc_grey_right with a converter, trc_motor) follows the tape of the line world in "
+     "lockstep: more than 3 m along it, never more than 5 cm from it, the same trace twice"];
+line_follower_keeps_to_the_tape(Config) ->
+    Root = toroco_test_lib:root(),
+    World = filename:join([Root, "config", "worlds", "line.world"]),
+    Main = filename:join([Root, "apps", "toroco_lua", "priv", "examples", "line_follower",
+                          "main.lua"]),
+    Run = fun(K) ->
+                  Trace = filename:join(?config(priv_dir, Config), "line" ++ integer_to_list(K)),
+                  {ok, W} = torobot_sim:simulate(World, #{lua => Main, time => lockstep,
+                                                          wiring => ?config(wiring, Config),
+                                                          trace => Trace}),
+                  {ok, Bin} = file:read_file(Trace),
+                  {W, crypto:hash(sha256, Bin)}
+          end,
+    [{W, Sha}, {_, Sha2}] = [Run(K) || K <- [1, 2]],
+    ?assertEqual(Sha, Sha2),
+    #{distance_m := D, wall_contacts := 0} = torobot_world:summary(W),
+    ?assert(D > 3.0),
+    [Tape] = torobot_sensors:floor_lines(W),
+    Off = lists:max([lists:min([torobot_geometry:distance({X, Y}, torobot_geometry:closest({X, Y}, A, B))
+                                || {A, B} <- lists:zip(lists:droplast(Tape), tl(Tape))])
+                     || {_, X, Y, _} <- torobot_world:trajectory(W)]),
+    ct:pal("distance ~.2f m, at most ~.3f m off the tape", [D, Off]),
+    ?assert(Off < 0.05).
 
 run(Config, Trace) ->
     {ok, Summary} = torobot_sim:run(?config(world, Config),

@@ -12,7 +12,7 @@
 all() ->
     [ranges_read_metres, bumper_names_the_side, odometry_shows_a_stall, light_is_brighter_on_its_side,
      beacon_bearing_and_dock, beacon_hidden_by_a_wall, figures_laps_and_coverage,
-     bad_terms_refused, torobot_summary_unchanged].
+     grey_sensors_see_the_tape, bad_terms_refused, torobot_summary_unchanged].
 
 world(Terms) ->
     {ok, W} = torobot_world:from_terms([{arena, {4.0, 3.0}}, {duration_s, 60} | Terms]),
@@ -113,6 +113,21 @@ figures_laps_and_coverage(_Config) ->
     #{coverage := Still} = torobot_world:summary(W0),
     ?assert(Still < 0.05).
 
+grey_sensors_see_the_tape() ->
+    [{doc, "The grey sensors read dark over a floor line, light beside it: the one on the "
+      "side the tape is reads dark; a world without grey_sensor has neither device."}].
+grey_sensors_see_the_tape(_Config) ->
+    Tape = {floor_line, [{0.0, 1.525}, {4.0, 1.525}]},   % under the left sensor
+    Grey = {grey_sensor, #{offset => 0.06, spread => 0.025, width => 0.02}},
+    R = read(world([{robot, {1.0, 1.5, 0.0}}, Tape, Grey])),
+    ?assertMatch(#{trc_grey_left := #{value := 900}, trc_grey_right := #{value := 100}}, R),
+    R2 = read(world([{robot, {1.0, 1.55, 0.0}}, Tape, Grey])),
+    ?assertMatch(#{trc_grey_left := #{value := 100}, trc_grey_right := #{value := 900}}, R2),
+    Plain = world([{robot, {1.0, 1.5, 0.0}}, Tape]),
+    ?assertEqual(false, maps:is_key(trc_grey_left, read(Plain))),
+    ?assertEqual([], [N || {N, Outputs} <- torobot_sensors:devices(), Outputs(Plain) =/= [],
+                           lists:member(N, [trc_grey_left, trc_grey_right])]).
+
 bad_terms_refused() ->
     [{doc, "Malformed sensor terms are refused naming the term; given twice, refused as "
       "duplicates."}].
@@ -121,7 +136,9 @@ bad_terms_refused(_Config) ->
     [?assertEqual({error, {bad_term, T}}, torobot_world:from_terms(Base ++ [T]))
      || T <- [{range, #{sensors => #{front => x}}}, {bumper, #{front_deg => 0}},
               {light, {1, 1}, -3}, {dock, nowhere}, {figures, [happiness]},
-              {beacon, #{colour => red}}]],
+              {beacon, #{colour => red}}, {floor_line, [{1, 1}]}, {floor_line, [{1, 1}, x]},
+              {grey_sensor, #{dark => 2000}}, {grey_sensor, #{offset => -1}},
+              {grey_sensor, #{colour => grey}}]],
     ?assertEqual({error, {duplicate, {dock, {1, 2}}}},
                  torobot_world:from_terms(Base ++ [{dock, {1, 1}}, {dock, {1, 2}}])).
 
