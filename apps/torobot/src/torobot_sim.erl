@@ -124,6 +124,8 @@
               marks = [] :: [map()],
               robot_events = [] :: [{non_neg_integer(), term()}],
               seed = 0 :: integer(),
+              %% whether each tick's observation is kept (observe/2)
+              observing = true :: boolean(),
               obs = [] :: [torobot_props:observation()]}).
 
 -define(OPTIONS, [svg, wiring, status, speed, nodes, time, trace, faults, seed, stop, marks, lua]).
@@ -158,7 +160,8 @@ run(WorldSpec, Opts) ->
 -spec simulate(world_spec(), opts()) ->
           {ok, torobot_world:world() | [torobot_world:world()]} | {error, term()}.
 simulate(WorldSpec, Opts) when is_map(Opts) ->
-    case observe(WorldSpec, Opts) of
+    %% nothing judges this run: no observation is made of each tick
+    case observe(WorldSpec, Opts, false) of
         {ok, Final, _Obs} -> {ok, Final};
         {error, _} = Error -> Error
     end.
@@ -174,6 +177,9 @@ simulate(WorldSpec, Opts) when is_map(Opts) ->
           {ok, torobot_world:world() | [torobot_world:world()], [torobot_props:observation()]}
           | {error, term()}.
 observe(WorldSpec, Opts) when is_map(Opts) ->
+    observe(WorldSpec, Opts, true).
+
+observe(WorldSpec, Opts, Observing) ->
     WiringFile = maps:get(wiring, Opts,
                           case Opts of
                               #{lua := _} -> "config/torobot_lua.wiring";
@@ -206,7 +212,7 @@ observe(WorldSpec, Opts) when is_map(Opts) ->
                                               false -> local
                                           end),
             case with_robots(Worlds, Nodes, Opts#{wiring => WiringFile, speed => Speed,
-                                                  time => Time}) of
+                                                  time => Time, observing => Observing}) of
                 {ok, [Final], Obs} when not Named -> {ok, Final, Obs};
                 {ok, Finals, Obs} -> {ok, Finals, Obs};
                 {error, _} = Error -> Error
@@ -261,7 +267,8 @@ with_robots(Worlds, Nodes, Opts) ->
     {ok, Sim} = gen_server:start(?MODULE, {self(), maps:get(status, Opts, false), Speed,
                                            torobot_world:tick_ms(hd(Worlds)), Time, Trace,
                                            maps:get(faults, Opts, []), maps:get(seed, Opts, 0),
-                                           maps:get(stop, Opts, none),
+                                           {maps:get(stop, Opts, none),
+                                            maps:get(observing, Opts, true)},
                                            maps:get(marks, Opts, [])},
                                  []),
     MRef = monitor(process, Sim),
@@ -340,12 +347,13 @@ svg(_Worlds, #{}) ->
 
 -spec init({pid(), status(), number(), pos_integer(), realtime | lockstep,
             file:name_all() | undefined, torobot_faults:concrete(), integer(),
-            none | fun(), [map()]}) ->
+            {none | fun(), boolean()}, [map()]}) ->
           {ok, #sim{}} | {stop, term()}.
-init({Caller, Status, Speed, Tick, Time, TracePath, Faults, Seed, Stop, Marks}) ->
+init({Caller, Status, Speed, Tick, Time, TracePath, Faults, Seed, {Stop, Observing}, Marks}) ->
     monitor(process, Caller),
     S = #sim{caller = Caller, status = Status, speed = Speed, tick = Tick, time = Time,
              faults = Faults, seed = Seed, robot_events = robot_events(Faults), stop = Stop,
+             observing = Observing,
              marks = [#{t_ms => Ms, kind => fault,
                         text => iolist_to_binary(torobot_faults:describe(F))}
                       || {at, Ms, F} <- Faults]
@@ -562,6 +570,8 @@ robot_events(Faults) ->
                         end || {at, Ms, F} <- torobot_faults:robot_faults(Faults)])).
 
 %% What the properties judge (SPEC §17): each robot's tick, after it moved.
+observed(_Bots, S = #sim{observing = false}) ->
+    S;
 observed([#bot{world = W, motors = Motors, lines = Lines}], S = #sim{obs = Obs})
   when Motors =/= none ->
     {Wheels, Winner} = Motors,
