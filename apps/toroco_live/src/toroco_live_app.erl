@@ -18,7 +18,6 @@ start(_Type, _Args) ->
                                                   Env));
                 false -> ok
             end,
-            rosbridge_connect(maps:get(rosbridge_connect, Env, [])),
             {ok, Sup};
         Error ->
             Error
@@ -39,33 +38,6 @@ start_dashboard(Opts) ->
             logger:error("toroco_live: the dashboard did not start: ~0p", [Reason],
                          #{domain => [toroco, live]})
     end.
-
-%% Client mode from the app env: a URL, {Url, Opts}, or a list of them. A
-%% URL that cannot be used is logged; the application stays up.
-rosbridge_connect([]) ->
-    ok;
-rosbridge_connect(L) when is_list(L) ->
-    case io_lib:printable_unicode_list(L) of
-        true -> dial({L, #{}});
-        false -> lists:foreach(fun(C) when is_tuple(C) -> dial(C);
-                                  (Url) -> dial({Url, #{}})
-                               end, L)
-    end;
-rosbridge_connect(C) when is_tuple(C) ->
-    dial(C);
-rosbridge_connect(Url) ->
-    dial({Url, #{}}).
-
-dial({Url, Opts}) ->
-    case toroco_live:rosbridge_connect(Url, Opts) of
-        {ok, _} -> ok;
-        {error, Reason} ->
-            logger:error("toroco_live: rosbridge_connect ~0p: ~0p", [Url, Reason],
-                         #{domain => [toroco, live, rosbridge]})
-    end;
-dial(Other) ->
-    logger:error("toroco_live: rosbridge_connect ~0p: not a URL or {Url, Opts}", [Other],
-                 #{domain => [toroco, live, rosbridge]}).
 
 -spec stop(term()) -> ok.
 stop(_State) ->
