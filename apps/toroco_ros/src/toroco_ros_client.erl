@@ -78,7 +78,7 @@
 -define(REFRESH_MS, 2000).
 -define(SEND_TIMEOUT_MS, 5000).
 -define(MAX_RESPONSE_HEAD, 8192).
--define(LOG, #{domain => [toroco, live, rosbridge]}).
+-define(LOG, #{domain => [toroco, ros, client]}).
 
 -record(data, {url :: binary(),
                host :: string(),

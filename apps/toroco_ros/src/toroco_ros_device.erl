@@ -83,7 +83,7 @@ handle_event(info, {?MODULE, publish, cmd_vel, Msg}, _State, D = #{received := R
         {error, Why} ->
             #{name := Name, bad_message := B} = D,
             logger:warning("~p: a /cmd_vel message that is not a Twist: ~0p", [Name, Why],
-                           #{domain => [toroco, live, ros]}),
+                           #{domain => [toroco, ros]}),
             {keep_state, D#{received := R + 1, bad_message := B + 1}, []}
     end;
 handle_event(_Type, _Content, _State, _D) ->

@@ -63,7 +63,7 @@
 -define(MAX_PENDING, 8).
 -define(MAX_FRAGMENTS, 10000).
 -define(FRAGMENT_MS, 10000).
--define(LOG, #{domain => [toroco, live, ros]}).
+-define(LOG, #{domain => [toroco, ros]}).
 -define(UNAUTHORIZED, "publishing needs the dashboard's token: connect with ?token=T on "
         "the URL or send {\"op\": \"auth\", \"mac\": T}; without it this connection may only "
         "subscribe and call the read-only services").

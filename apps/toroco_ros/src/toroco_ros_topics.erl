@@ -64,7 +64,7 @@
 %%====================================================================
 
 %% @doc The robot's wheel geometry: the Torobot's (`wheel_base' 0.20 m,
-%% `max_wheel_speed' 0.25 m/s) with the app env `toroco_live' `ros_geometry'
+%% `max_wheel_speed' 0.25 m/s) with the app env `toroco_ros' `ros_geometry'
 %% (a map with either key) over it.
 -spec geometry() -> geometry().
 geometry() ->
