@@ -17,7 +17,7 @@
 -define(OTHERS, [toroco_hw, torobot, toroco_lib, toroco_live, toroco_lua, toroco_ros]).
 %% What toroco_live documents as its API for the applications built on it
 %% (toroco_live's module doc, doc/dashboard.md "Built on toroco_live").
--define(LIVE_API, [toroco_live, toroco_live_listener, toroco_live_ws, toroco_live_ws_conn,
+-define(LIVE_API, [toroco_live, toroco_live_listener, toroco_live_ws_conn,
                    toroco_live_ws_frame, toroco_live_clients, toroco_live_tap, toroco_live_bridge,
                    toroco_live_profile, toroco_live_extensions, toroco_live_metrics,
                    toroco_live_json, toroco_live_world, toroco_live_channels, toroco_live_http,

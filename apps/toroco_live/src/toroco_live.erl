@@ -11,12 +11,15 @@
 %% env (the same keys).
 %%
 %% <b>Built on it</b> (documented as API): `toroco_live_listener' (a bounded
-%% port), `toroco_live_ws' and `toroco_live_ws_conn' (a WebSocket
-%% connection and its behaviour), `toroco_live_ws_frame' (frames, server
+%% port), `toroco_live_ws_conn' (a WebSocket connection, a behaviour),
+%% `toroco_live_ws_frame' (frames, server
 %% and client side), `toroco_live_clients' (a hub's clients, per-client
 %% bounds and the tap), `toroco_live_tap' (the tap's client),
-%% `toroco_live_bridge', `toroco_live_profile', `toroco_live_extensions'
-%% and `toroco_live_metrics:family/4'.
+%% `toroco_live_bridge', `toroco_live_profile', `toroco_live_extensions',
+%% `toroco_live_metrics:family/4', and the helpers `toroco_live_json',
+%% `toroco_live_channels', `toroco_live_world', `toroco_live_auth' and
+%% `toroco_live_http:peer/1', `token/1' (doc/dashboard.md, "Built on
+%% toroco_live").
 %%
 %% <b>ROS 2</b> (SPEC §15) is the application `toroco_ros', built on this
 %% one: its rosbridge server is a bridge (`toroco_live_bridge') that listens

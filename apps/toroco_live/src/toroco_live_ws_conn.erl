@@ -1,4 +1,4 @@
-%% @doc One WebSocket client of a `toroco_live' port, whatever protocol it
+%% @doc (API, a behaviour) One WebSocket client of a `toroco_live' port, whatever protocol it
 %% speaks: the mochiweb connection process that answered the upgrade
 %% becomes this gen_server, owns the socket and runs the WebSocket's side of
 %% the conversation, and a callback module (the Foxglove bridge's

@@ -1,4 +1,4 @@
-%% @doc WebSocket (RFC 6455) for the Foxglove bridge: the opening handshake
+%% @doc (API) WebSocket (RFC 6455) for the bridges: the opening handshake
 %% answered through mochiweb, and the frame codec as pure code.
 %%
 %% mochiweb parses the HTTP request and writes the 101 answer; the frames

@@ -1,5 +1,6 @@
 %% @doc The rosbridge v2 protocol (RobotWebTools `ROSBRIDGE_PROTOCOL.md'),
-%% pure: the operations this project sends and reads, built and matched
+%% pure (but for the clock, for a `cbor-raw' message without a stamp): the
+%% operations this project sends and reads, built and matched
 %% here only, for the server's connections (`toroco_ros_server_conn') and
 %% the client (`toroco_ros_client'). An operation is a map with an `op';
 %% on the wire it is JSON text ({@link encode/1}) or, for a subscription
