@@ -1,5 +1,7 @@
 %% @doc The `toroco_live' application: what a person looks at. It depends on
-%% the runtime (`toroco'); the runtime never depends on it.
+%% the runtime (`toroco'); the runtime never depends on it, and it never
+%% depends on the applications built on it (`toroco_ros' adds itself
+%% through `toroco_live_extensions').
 -module(toroco_live_app).
 -behaviour(application).
 
@@ -7,6 +9,9 @@
 
 -spec start(application:start_type(), term()) -> {ok, pid()} | {error, term()}.
 start(_Type, _Args) ->
+    %% A configuration left by a node that lost the application without
+    %% stopping it would start the dashboard before its options are read.
+    ok = toroco_live_config:clear(),
     case toroco_live_sup:start_link() of
         {ok, Sup} ->
             Env = maps:from_list(application:get_all_env(toroco_live)),

@@ -120,12 +120,15 @@ open(Option) ->
     case lists:keyfind(Option, 1, bridges()) of
         {_, #{supervisor := Sup, id := Id} = Bridge} ->
             ok = close(Bridge),
-            case supervisor:restart_child(Sup, Id) of
+            try supervisor:restart_child(Sup, Id) of
                 {ok, _} -> {ok, port(Id)};
                 {ok, _, _} -> {ok, port(Id)};
                 %% the supervisor adds the child: the reason is enough
                 {error, {Reason, Child}} when element(1, Child) =:= child -> {error, Reason};
                 {error, Reason} -> {error, Reason}
+            catch
+                %% its application went without taking it away: not running
+                exit:{noproc, _} -> {ok, off}
             end;
         false ->
             {ok, off}

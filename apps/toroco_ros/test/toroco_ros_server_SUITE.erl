@@ -11,7 +11,7 @@
 all() ->
     [topics_and_types, services_round_trip, publish_needs_the_token, subscribe_throttled, cbor_raw,
      fragments_out, bad_input, flood_disconnected, client_that_never_reads, not_a_websocket,
-     start_options, lockstep_stimulus, simulated_range_and_odometry, drive_the_teleop_robot,
+     start_options, server_goes_with_the_application, lockstep_stimulus, simulated_range_and_odometry, drive_the_teleop_robot,
      runtime_restart, {group, tls}].
 
 %% The hostile clients again with TLS on the port (wss://, Node trusting a
@@ -404,6 +404,33 @@ start_options(Config) ->
         toroco_live:start(#{http => 0, foxglove => off, rosbridge => Taken}),
     not_running = toroco_live:info(),
     gen_tcp:close(L),
+    ok.
+
+server_goes_with_the_application() ->
+    [{doc, "The server is a static child of toroco_ros_sup: stopping toroco_ros leaves the "
+      "dashboard running and rosbridge off (client mode not_started); starting it again "
+      "listens on the option's port at once; toroco_live:stop/0 leaves the child without a "
+      "process"}].
+server_goes_with_the_application(_Config) ->
+    ok = application:stop(toroco_ros),
+    try
+        #{rosbridge := off, http := Http} = toroco_live:info(),
+        true = is_integer(Http),
+        error = toroco_live_extensions:find(bridge, rosbridge),
+        {error, not_started} = toroco_live:rosbridge_connect("ws://127.0.0.1:1/", #{}),
+        [] = toroco_live:rosbridge_clients()
+    after
+        {ok, _} = application:ensure_all_started(toroco_ros)
+    end,
+    #{rosbridge := Port} = toroco_live:info(),
+    true = is_integer(Port),
+    [{toroco_ros_client_sup, _, supervisor, _}, {toroco_ros_server, Pid, worker, _}] =
+        lists:sort(supervisor:which_children(toroco_ros_sup)),
+    true = is_pid(Pid),
+    toroco_live:stop(),
+    [{toroco_ros_server, undefined, worker, _}] =
+        [C || C = {toroco_ros_server, _, _, _} <- supervisor:which_children(toroco_ros_sup)],
+    off = toroco_ros:port(),
     ok.
 
 lockstep_stimulus() ->
