@@ -14,11 +14,18 @@
 -compile([export_all, nowarn_export_all]).
 
 -define(API, [toroco, toroco_clock, toroco_behavior, toroco_device, toroco_slots]).
--define(OTHERS, [toroco_hw, torobot, toroco_lib, toroco_live, toroco_lua]).
+-define(OTHERS, [toroco_hw, torobot, toroco_lib, toroco_live, toroco_lua, toroco_ros]).
+%% What toroco_live documents as its API for the applications built on it
+%% (toroco_live's module doc, doc/dashboard.md "Built on toroco_live").
+-define(LIVE_API, [toroco_live, toroco_live_listener, toroco_live_ws_conn,
+                   toroco_live_ws_frame, toroco_live_clients, toroco_live_tap, toroco_live_bridge,
+                   toroco_live_profile, toroco_live_extensions, toroco_live_metrics,
+                   toroco_live_json, toroco_live_world, toroco_live_channels, toroco_live_http,
+                   toroco_live_auth]).
 
 all() ->
     [no_call_into_the_runtimes_insides, no_include_of_the_runtimes_headers,
-     suites_use_the_api_only].
+     suites_use_the_api_only, ros_uses_the_dashboards_api_only, dashboard_never_calls_ros].
 
 no_call_into_the_runtimes_insides() ->
     [{doc, "No call from toroco_hw, torobot, toroco_lib, toroco_live or toroco_lua reaches a module of "
@@ -35,6 +42,32 @@ no_call_into_the_runtimes_insides(_Config) ->
         {ok, Calls} = xref:q(X, Query),
         ct:log("~s~n~p", [Query, Calls]),
         ?assertEqual([], Calls)
+    after
+        xref:stop(X)
+    end.
+
+ros_uses_the_dashboards_api_only() ->
+    [{doc, "toroco_ros calls toroco_live only through the modules toroco_live documents as "
+      "its API"}].
+ros_uses_the_dashboards_api_only(_Config) ->
+    Query = lists:flatten(io_lib:format("(E | toroco_ros : App) || (toroco_live : App - ~w : Mod)",
+                                        [?LIVE_API])),
+    ?assertEqual([], xref_query([toroco_live, toroco_ros], Query)).
+
+dashboard_never_calls_ros() ->
+    [{doc, "No call from toroco_live reaches toroco_ros (the dependency goes one way)"}].
+dashboard_never_calls_ros(_Config) ->
+    ?assertEqual([], xref_query([toroco_live, toroco_ros],
+                                "(E | toroco_live : App) || toroco_ros : App")).
+
+xref_query(Apps, Query) ->
+    {ok, X} = xref:start([{xref_mode, functions}]),
+    try
+        ok = xref:set_default(X, [{warnings, false}, {verbose, false}]),
+        [{ok, App} = xref:add_application(X, code:lib_dir(App), [{name, App}]) || App <- Apps],
+        {ok, Calls} = xref:q(X, Query),
+        ct:log("~s~n~p", [Query, Calls]),
+        Calls
     after
         xref:stop(X)
     end.

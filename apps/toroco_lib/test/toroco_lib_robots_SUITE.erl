@@ -59,7 +59,7 @@ every_robot_is_tested(Config) ->
 
 teleop() ->
     [{doc, "Nobody driving, the teleop robot stands still in its room: the motors' idle "
-      "holds it (driven from ROS 2 in toroco_live_rosbridge_SUITE)."}].
+      "holds it (driven from ROS 2 in toroco_ros_server_SUITE)."}].
 teleop(Config) ->
     World = filename:join(?config(priv_dir, Config), "teleop.world"),
     {ok, Text} = file:read_file(world(teleop, Config)),

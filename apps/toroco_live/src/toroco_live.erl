@@ -1,21 +1,33 @@
 %% @doc The public API of `toroco_live' (SPEC §11): starts and stops the
 %% dashboard, the HTTP + WebSocket server a person opens in a browser.
 %%
-%% {@link start/1} adds one child to `toroco_live_sup', the dashboard's own
-%% supervisor (`toroco_live_dashboard_sup': the hub that feeds the pages and
-%% the HTTP listener), and then the Foxglove bridge when it is asked for and
-%% its module (`toroco_live_foxglove') is part of the node: see {@link
-%% foxglove/2}, the one place the bridge is started from, and the rosbridge
-%% server (SPEC §15, `toroco_live_rosbridge') when asked for. {@link stop/0}
-%% takes them all away again. The application `toroco_live' calls {@link
-%% start/1} with its app env (the same keys).
+%% {@link start/1} sets the configuration (`toroco_live_config') and
+%% restarts the children of `toroco_live_sup' that read it: the dashboard's
+%% own supervisor (`toroco_live_dashboard_sup': the hub that feeds the
+%% pages and the HTTP listener), then every bridge (`toroco_live_bridge':
+%% the Foxglove bridge, and the rosbridge server of `toroco_ros'), each
+%% listening when its option is a port. {@link stop/0} terminates them
+%% again. The application `toroco_live' calls {@link start/1} with its app
+%% env (the same keys).
 %%
-%% <b>Client mode</b> (SPEC §15): {@link rosbridge_connect/2} dials a
-%% rosbridge server and keeps the robot's topics there
-%% (`toroco_live_rosclient', under `toroco_live_rosclient_sup'),
-%% {@link rosbridge_disconnect/1} ends it, {@link rosbridge_clients/0}
-%% says how each is doing. The app env `rosbridge_connect' (a URL, `{Url,
-%% Opts}', or a list of them) dials when the application starts.
+%% <b>Built on it</b> (documented as API): `toroco_live_listener' (a bounded
+%% port), `toroco_live_ws_conn' (a WebSocket connection, a behaviour),
+%% `toroco_live_ws_frame' (frames, server
+%% and client side), `toroco_live_clients' (a hub's clients, per-client
+%% bounds and the tap), `toroco_live_tap' (the tap's client),
+%% `toroco_live_bridge', `toroco_live_profile', `toroco_live_extensions',
+%% `toroco_live_metrics:family/4', and the helpers `toroco_live_json',
+%% `toroco_live_channels', `toroco_live_world', `toroco_live_auth' and
+%% `toroco_live_http:peer/1', `token/1' (doc/dashboard.md, "Built on
+%% toroco_live").
+%%
+%% <b>ROS 2</b> (SPEC §15) is the application `toroco_ros', built on this
+%% one: its rosbridge server is a bridge (`toroco_live_bridge') that listens
+%% on the option `rosbridge', its client mode is reached from here too
+%% ({@link rosbridge_connect/2}, {@link rosbridge_disconnect/1}, {@link
+%% rosbridge_clients/0}, which call what it added with
+%% `toroco_live_extensions'), and its recording profile `ros2' is a
+%% `toroco_live_profile'.
 %%
 %% <b>Recordings</b> (SPEC §12): {@link record/2}, {@link stop_recording/0}
 %% (MCAP files, `toroco_live_recorder'), {@link dump/1} (the flight
@@ -70,39 +82,45 @@
                     token => auto,
                     max_clients => 64, max_body => 16384}).
 -define(DASHBOARD, toroco_live_dashboard_sup).
--define(FOXGLOVE, toroco_live_foxglove).
--define(ROSBRIDGE, toroco_live_rosbridge).
 
-%% @doc Starts the dashboard (and the Foxglove bridge, if present and not
-%% `off') and returns the ports it listens on and the token controls need.
+%% @doc Starts the dashboard (and the bridges whose option is a port) and
+%% returns the ports it listens on and the token controls need.
 %% `{error, already_started}' when it runs already; `{error, {bad_option,
 %% {Key, Value}}}' for an option it cannot use; `{error, {tls, {File,
 %% Why}}}' for a certificate or key it cannot read; `{error,
 %% {tls_required, Detail}}' for an address beyond loopback without `tls'
 %% (nor `insecure => true'); `{error, {http, Reason}}' when the port cannot
-%% be opened; `{error, not_started}' before the application `toroco_live'
-%% runs (`application:ensure_all_started/1').
+%% be opened, `{error, {Bridge, Reason}}' when a bridge's cannot
+%% (`foxglove', `rosbridge'); `{error, not_started}' before the
+%% application `toroco_live' runs (`application:ensure_all_started/1').
+%% The rosbridge server is `toroco_ros''s: without that application
+%% running, `rosbridge' is kept for it and {@link info/0} says `off'.
 -spec start(opts()) -> {ok, info()} | {error, term()}.
 start(Opts) when is_map(Opts) ->
     case {whereis(toroco_live_sup), options(maps:merge(?DEFAULTS, Opts))} of
         {undefined, _} -> {error, not_started};
         {_, {ok, Config}} ->
-            case exposure(Config) of
-                ok -> start_dashboard(Config);
-                {error, _} = Error -> Error
+            %% running already: its configuration is set
+            case toroco_live_config:current() of
+                undefined -> start_checked(Config);
+                _ -> {error, already_started}
             end;
         {_, {error, _} = Error} -> Error
     end;
 start(Other) ->
     {error, {bad_option, Other}}.
 
-%% @doc Stops the dashboard and the bridge; `ok' also when nothing ran.
+start_checked(Config) ->
+    case exposure(Config) of
+        ok -> start_dashboard(Config);
+        {error, _} = Error -> Error
+    end.
+
+%% @doc Stops the dashboard and the bridges; `ok' also when nothing ran.
 -spec stop() -> ok.
 stop() ->
-    _ = [begin
-             _ = supervisor:terminate_child(toroco_live_sup, Id),
-             supervisor:delete_child(toroco_live_sup, Id)
-         end || Id <- [?ROSBRIDGE, ?FOXGLOVE, ?DASHBOARD]],
+    _ = [toroco_live_bridge:close(B) || {_, B} <- lists:reverse(toroco_live_bridge:bridges())],
+    _ = supervisor:terminate_child(toroco_live_sup, ?DASHBOARD),
     toroco_live_config:clear(),
     ok.
 
@@ -111,9 +129,11 @@ stop() ->
 info() ->
     case toroco_live_config:current() of
         undefined -> not_running;
-        #{http := Http, foxglove := Fox, token := Token} = Config ->
-            #{http => Http, foxglove => Fox, rosbridge => maps:get(rosbridge, Config, off),
-              token => Token, tls => maps:is_key(tls, Config)}
+        #{http := Http, token := Token} = Config ->
+            Ports = maps:from_list([{foxglove, off}, {rosbridge, off}
+                                    | [{Key, toroco_live_bridge:port(Id)}
+                                       || {Key, #{id := Id}} <- toroco_live_bridge:bridges()]]),
+            Ports#{http => Http, token => Token, tls => maps:is_key(tls, Config)}
     end.
 
 %% @doc The page's address with the token, for a person to open once:
@@ -184,48 +204,32 @@ replay(Path, Opts) ->
 %% Client mode
 %%====================================================================
 
-%% @doc Dials the rosbridge v2 server at `Url' (`ws://host:port/path' or
-%% `wss://...' with `cacertfile' or a pinned `fingerprint' to check the
-%% server's certificate; `?token=T' for a server that asks for one, never
-%% shown), advertises the robot's
-%% topics there, publishes its messages, subscribes to its inbound topics
-%% (`/cmd_vel') and reconnects with backoff when the connection goes.
-%% `{ok, Pid}' at once, connected or not (see {@link rosbridge_clients/0});
-%% `{error, {bad_url, Url}}', `{error, {unsupported_scheme, S}}',
-%% `{error, {unverified_wss, Why}}' or `{error, {bad_option, {Key,
-%% Value}}}' (options: `max_queue', `backoff_min', `backoff_max',
-%% `connect_timeout', `max_message', `cacertfile', `fingerprint', see
-%% `toroco_live_rosclient'). A server whose certificate does not match is
-%% never sent a byte: `last_error' says `{tls, Why}'.
--spec rosbridge_connect(binary() | string(), toroco_live_rosclient:opts()) ->
-          {ok, pid()} | {error, term()}.
+%% @doc Dials the rosbridge v2 server at `Url' (SPEC §15): the client mode
+%% of the application `toroco_ros' (`toroco_ros:connect/2', where the URL
+%% and the options are described), which this calls. `{error,
+%% not_started}' when `toroco_ros' does not run.
+-spec rosbridge_connect(binary() | string(), map()) -> {ok, pid()} | {error, term()}.
 rosbridge_connect(Url, Opts) ->
-    case toroco_live_rosclient:options(Url, Opts) of
-        {ok, _, _} when is_map(Opts) ->
-            try toroco_live_rosclient_sup:start_client(Url, Opts)
-            catch exit:{noproc, _} -> {error, not_started}
-            end;
-        {error, _} = E -> E
-    end.
+    client(connect, [Url, Opts], {error, not_started}).
 
-%% @doc Ends a client: it closes its connection and is not dialled again.
+%% @doc Ends a client: it closes its connection and is not dialled again
+%% (`toroco_ros:disconnect/1').
 -spec rosbridge_disconnect(pid()) -> ok | {error, not_found}.
 rosbridge_disconnect(Pid) ->
-    try toroco_live_rosclient_sup:stop_client(Pid)
-    catch exit:{noproc, _} -> {error, not_found}
-    end.
+    client(disconnect, [Pid], {error, not_found}).
 
-%% @doc Each client: its URL, `state' (`connected', `connecting' or
-%% `waiting' to dial again), `attempts' since it was last connected,
-%% `connects', messages `sent' and `received', `dropped' (the robot's
-%% messages it could not send), `refused' (the server's messages that did
-%% not fit their type or the `ros' device could not take), `refused_topics'
-%% (the topics the server said it does not take, on this connection),
-%% `last_error'.
--spec rosbridge_clients() -> [toroco_live_rosclient:info()].
+%% @doc Each client and how it is doing (`toroco_ros:clients/0'); `[]'
+%% when `toroco_ros' does not run.
+-spec rosbridge_clients() -> [map()].
 rosbridge_clients() ->
-    [I || Pid <- toroco_live_rosclient_sup:clients(),
-          I <- [try toroco_live_rosclient:info(Pid) catch exit:_ -> none end], I =/= none].
+    client(clients, [], []).
+
+%% The client mode is the module `toroco_ros' added (toroco_live_extensions).
+client(F, Args, Otherwise) ->
+    case toroco_live_extensions:find(client, rosbridge) of
+        {ok, Module} -> apply(Module, F, Args);
+        error -> Otherwise
+    end.
 
 %%====================================================================
 %% Starting
@@ -235,75 +239,30 @@ start_dashboard(Config0) ->
     Config = Config0#{token := token(maps:get(token, Config0)),
                       %% the key of the pages' session cookies (toroco_live_auth)
                       session_key => crypto:strong_rand_bytes(32)},
-    %% The secrets are not in the children's start arguments, so that no
-    %% supervisor report carries them: handlers read them from
-    %% toroco_live_config.
-    Children = maps:without([token, session_key], Config),
-    Spec = #{id => ?DASHBOARD, start => {?DASHBOARD, start_link, [Children]},
-             type => supervisor, restart => permanent},
-    case supervisor:start_child(toroco_live_sup, Spec) of
+    %% The children read it as they start (toroco_live_bridge).
+    toroco_live_config:set(Config),
+    case supervisor:restart_child(toroco_live_sup, ?DASHBOARD) of
         {ok, _} ->
-            Http = toroco_live_http:port(),
-            case {foxglove(maps:get(foxglove, Config), Children),
-                  rosbridge(maps:get(rosbridge, Config), Children)} of
-                {{ok, Fox}, {ok, Ros}} ->
-                    Info = #{http => Http, foxglove => Fox, rosbridge => Ros,
-                             token => maps:get(token, Config)},
-                    toroco_live_config:set(maps:merge(Config, Info)),
-                    {ok, Info};
-                {{error, Reason}, _} ->
-                    stop(),
-                    {error, {foxglove, Reason}};
-                {_, {error, Reason}} ->
-                    stop(),
-                    {error, {rosbridge, listen_reason(Reason)}}
-            end;
-        {error, {already_started, _}} ->
-            {error, already_started};
-        {error, already_present} ->
-            _ = supervisor:delete_child(toroco_live_sup, ?DASHBOARD),
-            start_dashboard(Config0);
-        {error, {{shutdown, {failed_to_start_child, _, Reason}}, _}} ->
-            {error, {http, listen_reason(Reason)}};
+            toroco_live_config:set(Config#{http => toroco_live_http:port()}),
+            start_bridges(toroco_live_bridge:bridges());
         {error, Reason} ->
+            stop(),
             {error, {http, listen_reason(Reason)}}
+    end.
+
+start_bridges([]) ->
+    {ok, info()};
+start_bridges([{Key, _} | Rest]) ->
+    case toroco_live_bridge:open(Key) of
+        {ok, _} -> start_bridges(Rest);
+        {error, Reason} ->
+            stop(),
+            {error, {Key, listen_reason(Reason)}}
     end.
 
 listen_reason({shutdown, {failed_to_start_child, _, R}}) -> listen_reason(R);
 listen_reason({{shutdown, {failed_to_start_child, _, R}}, _}) -> listen_reason(R);
 listen_reason(R) -> R.
-
-%% The Foxglove bridge (SPEC §12) is its own child of `toroco_live_sup',
-%% started here when its module is in the node: `toroco_live_foxglove'
-%% exports `child_spec(Config)' (Config as here, with `foxglove' the port
-%% asked for) and `port()', the port it listens on once started.
-foxglove(off, _Config) ->
-    {ok, off};
-foxglove(_Port, Config) ->
-    Bridge = bridge(),
-    case code:ensure_loaded(Bridge) of
-        {module, Bridge} ->
-            case supervisor:start_child(toroco_live_sup, Bridge:child_spec(Config)) of
-                {ok, _} -> {ok, Bridge:port()};
-                {error, Reason} -> {error, Reason}
-            end;
-        {error, _} ->
-            {ok, off}
-    end.
-
-%% The rosbridge server (SPEC §15), its own child of `toroco_live_sup'.
-rosbridge(off, _Config) ->
-    {ok, off};
-rosbridge(_Port, Config) ->
-    case supervisor:start_child(toroco_live_sup, toroco_live_rosbridge:child_spec(Config)) of
-        {ok, _} -> {ok, toroco_live_rosbridge:port()};
-        %% The supervisor adds the child it could not start: the reason is enough.
-        {error, {Reason, Child}} when element(1, Child) =:= child -> {error, Reason};
-        {error, Reason} -> {error, Reason}
-    end.
-
-%% Named at run time: a node built without the bridge is a normal case.
-bridge() -> ?FOXGLOVE.
 
 token(auto) ->
     base64url(crypto:strong_rand_bytes(18));

@@ -1,5 +1,7 @@
 %% @doc The `toroco_live' application: what a person looks at. It depends on
-%% the runtime (`toroco'); the runtime never depends on it.
+%% the runtime (`toroco'); the runtime never depends on it, and it never
+%% depends on the applications built on it (`toroco_ros' adds itself
+%% through `toroco_live_extensions').
 -module(toroco_live_app).
 -behaviour(application).
 
@@ -7,6 +9,9 @@
 
 -spec start(application:start_type(), term()) -> {ok, pid()} | {error, term()}.
 start(_Type, _Args) ->
+    %% A configuration left by a node that lost the application without
+    %% stopping it would start the dashboard before its options are read.
+    ok = toroco_live_config:clear(),
     case toroco_live_sup:start_link() of
         {ok, Sup} ->
             Env = maps:from_list(application:get_all_env(toroco_live)),
@@ -18,7 +23,6 @@ start(_Type, _Args) ->
                                                   Env));
                 false -> ok
             end,
-            rosbridge_connect(maps:get(rosbridge_connect, Env, [])),
             {ok, Sup};
         Error ->
             Error
@@ -39,33 +43,6 @@ start_dashboard(Opts) ->
             logger:error("toroco_live: the dashboard did not start: ~0p", [Reason],
                          #{domain => [toroco, live]})
     end.
-
-%% Client mode from the app env: a URL, {Url, Opts}, or a list of them. A
-%% URL that cannot be used is logged; the application stays up.
-rosbridge_connect([]) ->
-    ok;
-rosbridge_connect(L) when is_list(L) ->
-    case io_lib:printable_unicode_list(L) of
-        true -> dial({L, #{}});
-        false -> lists:foreach(fun(C) when is_tuple(C) -> dial(C);
-                                  (Url) -> dial({Url, #{}})
-                               end, L)
-    end;
-rosbridge_connect(C) when is_tuple(C) ->
-    dial(C);
-rosbridge_connect(Url) ->
-    dial({Url, #{}}).
-
-dial({Url, Opts}) ->
-    case toroco_live:rosbridge_connect(Url, Opts) of
-        {ok, _} -> ok;
-        {error, Reason} ->
-            logger:error("toroco_live: rosbridge_connect ~0p: ~0p", [Url, Reason],
-                         #{domain => [toroco, live, rosbridge]})
-    end;
-dial(Other) ->
-    logger:error("toroco_live: rosbridge_connect ~0p: not a URL or {Url, Opts}", [Other],
-                 #{domain => [toroco, live, rosbridge]}).
 
 -spec stop(term()) -> ok.
 stop(_State) ->

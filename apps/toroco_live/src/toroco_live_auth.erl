@@ -1,4 +1,4 @@
-%% @doc Who may drive the robot: the token checks of every `toroco_live'
+%% @doc (API) Who may drive the robot: the token checks of every `toroco_live'
 %% port (the dashboard's controls and WebSocket, the rosbridge server's
 %% publishers), each answered here, and the failures counted per client
 %% address so that the token cannot be guessed: after `?MAX_FAILURES'

@@ -1,4 +1,4 @@
-%% @doc The channels of SPEC §12, shared by the Foxglove bridge, the
+%% @doc (API) The channels of SPEC §12, shared by the Foxglove bridge, the
 %% recorder, the flight recorder and replay: their topics, their JSON
 %% Schemas, and the JSON message each event of the observer tap (SPEC §10)
 %% becomes. Pure except {@link from_wiring/0}, which reads the running

@@ -1,4 +1,4 @@
-%% @doc The clients of a WebSocket hub (the Foxglove bridge's and the
+%% @doc (API) The clients of a WebSocket hub (the Foxglove bridge's and the
 %% rosbridge server's), kept in the hub's state: who is connected
 %% (monitored), what each subscribed to (keys of the hub's choosing:
 %% channel ids, topic names), how many messages each missed, and the hub's

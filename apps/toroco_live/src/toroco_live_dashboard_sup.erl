@@ -1,4 +1,5 @@
-%% @doc The dashboard: one hub and one HTTP listener.
+%% @doc The dashboard: one hub and one HTTP listener, a child of
+%% `toroco_live_sup' with a process while the dashboard runs.
 %%
 %% ```
 %% toroco_live_dashboard_sup (rest_for_one)
@@ -15,11 +16,19 @@
 -module(toroco_live_dashboard_sup).
 -behaviour(supervisor).
 
--export([start_link/1, init/1]).
+-export([start_link/0, init/1]).
 
--spec start_link(map()) -> {ok, pid()} | {error, term()}.
-start_link(Config) ->
-    supervisor:start_link({local, ?MODULE}, ?MODULE, Config).
+%% @doc The dashboard with the configuration `toroco_live:start/1' set;
+%% `ignore' (no process) when none is set.
+-spec start_link() -> {ok, pid()} | ignore | {error, term()}.
+start_link() ->
+    case toroco_live_config:current() of
+        undefined -> ignore;
+        %% No secret in a start argument (nor in a crash report): the
+        %% handlers read them from toroco_live_config.
+        Config -> supervisor:start_link({local, ?MODULE}, ?MODULE,
+                                        maps:without([token, session_key], Config))
+    end.
 
 -spec init(map()) -> {ok, {supervisor:sup_flags(), [supervisor:child_spec()]}}.
 init(Config) ->

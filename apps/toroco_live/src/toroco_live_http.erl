@@ -1,4 +1,5 @@
-%% @doc The dashboard's HTTP side: the listener and the routes. Each
+%% @doc The dashboard's HTTP side: the listener and the routes ({@link
+%% peer/1} and {@link token/1} are API, for the bridges' upgrades). Each
 %% connection is a mochiweb process that calls {@link loop/1} per request;
 %% the listener (`toroco_live_listener', registered as this module) bounds
 %% them: request and idle timeouts, a share per client address, the

@@ -1,4 +1,4 @@
-%% @doc Terms become JSON one way everywhere (SPEC §11): the dashboard, the
+%% @doc (API) Terms become JSON one way everywhere (SPEC §11): the dashboard, the
 %% Foxglove bridge and the recordings all use this module.
 %%
 %% {@link value/1} is the JSON form of a term (as a `jiffy'-encodable term):

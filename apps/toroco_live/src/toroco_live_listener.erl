@@ -1,4 +1,4 @@
-%% @doc A listening port of `toroco_live' that strangers can reach (the
+%% @doc (API) A listening port of `toroco_live' that strangers can reach (the
 %% dashboard's HTTP/WebSocket port, the Foxglove bridge's), bounded: this
 %% process, the port's guard, owns mochiweb's listener and keeps the slots
 %% of its connections (`toroco_slots', the pure core shared with

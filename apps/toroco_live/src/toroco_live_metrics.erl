@@ -13,28 +13,23 @@
 %% <tr><td>`toroco_live_clients'</td><td>gauge</td><td>dashboard WebSocket clients</td></tr>
 %% <tr><td>`toroco_live_skipped_total'</td><td>counter</td><td>states a slow client did not get (coalesced)</td></tr>
 %% <tr><td>`toroco_live_tap_dropped_total'</td><td>counter</td><td>tap events the dashboard fell behind on</td></tr>
-%% <tr><td>`toroco_live_rosbridge_clients'</td><td>gauge</td><td>rosbridge clients connected</td></tr>
 %% <tr><td>`toroco_live_foxglove_clients'</td><td>gauge</td><td>Foxglove clients connected</td></tr>
 %% <tr><td>`toroco_live_foxglove_subscriptions'</td><td>gauge</td><td>subscriptions of Foxglove clients to channels</td></tr>
-%% <tr><td>`toroco_live_rosbridge_subscriptions'</td><td>gauge</td><td>subscriptions of rosbridge clients to topics</td></tr>
-%% <tr><td>`toroco_live_rosbridge_total'</td><td>counter</td><td>`counter': the rosbridge server's totals (`toroco_live_rosbridge:stats/0': `connections', `messages', `dropped', `tap_dropped', `published', `publish_dropped', `refused_unauthorized', `faults', `disconnected', `fragments_expired')</td></tr>
-%% <tr><td>`toroco_live_connections'</td><td>gauge</td><td>`listener' (`dashboard', `foxglove', `rosbridge'): TCP connections holding a slot (`toroco_live_listener')</td></tr>
+%% <tr><td>`toroco_live_connections'</td><td>gauge</td><td>`listener' (`dashboard', `foxglove', and the other bridges: `rosbridge'): TCP connections holding a slot (`toroco_live_listener')</td></tr>
 %% <tr><td>`toroco_live_connections_accepted_total'</td><td>counter</td><td>`listener': connections given a slot</td></tr>
 %% <tr><td>`toroco_live_connections_closed_total'</td><td>counter</td><td>`listener', `reason': `request_timeout', `idle_timeout', `shed' (for a newcomer), `too_many_from_peer', `too_many_clients' (refused), `tls_handshake' (failed), `ended'</td></tr>
 %% <tr><td>`toroco_live_auth_failures_total'</td><td>counter</td><td>wrong tokens or sessions presented (`toroco_live_auth')</td></tr>
 %% <tr><td>`toroco_live_auth_limited_total'</td><td>counter</td><td>checks refused: the address failed ten times within a minute</td></tr>
 %% <tr><td>`toroco_live_auth_limited_addresses'</td><td>gauge</td><td>addresses refused now</td></tr>
-%% <tr><td>`toroco_live_rosclient_connected'</td><td>gauge</td><td>`url': a rosbridge client (SPEC §15, client mode), 1 connected, 0 dialling or waiting to</td></tr>
-%% <tr><td>`toroco_live_rosclient_attempts'</td><td>gauge</td><td>`url': failed attempts since it was last connected</td></tr>
-%% <tr><td>`toroco_live_rosclient_connects_total'</td><td>counter</td><td>`url': connections made</td></tr>
-%% <tr><td>`toroco_live_rosclient_sent_total'</td><td>counter</td><td>`url': the robot's messages published there</td></tr>
-%% <tr><td>`toroco_live_rosclient_received_total'</td><td>counter</td><td>`url': messages received on inbound topics</td></tr>
-%% <tr><td>`toroco_live_rosclient_dropped_total'</td><td>counter</td><td>`url': the robot's messages not sent (queue full, connection lost)</td></tr>
-%% <tr><td>`toroco_live_rosclient_refused_total'</td><td>counter</td><td>`url': received messages that did not fit their type</td></tr>
 %% </table>
+%%
+%% Other applications add their families (`toroco_live_extensions', kind
+%% `metrics', made with {@link family/4}): `toroco_ros' the rosbridge
+%% server's and clients' (`toroco_ros_metrics'). A bridge's listener is
+%% among `toroco_live_connections' under its option's name.
 -module(toroco_live_metrics).
 
--export([text/0]).
+-export([text/0, family/4]).
 
 %% @doc The whole exposition.
 -spec text() -> iodata().
@@ -66,7 +61,15 @@ text() ->
             [{[], maps:get(skipped, Stats, 0)}]),
      family(toroco_live_tap_dropped_total, counter, "Tap events the dashboard fell behind on.",
             [{[], maps:get(tap_dropped, Stats, 0)}])
-     | foxglove() ++ rosbridge() ++ listeners() ++ auth() ++ rosclients()].
+     | foxglove() ++ listeners() ++ auth() ++ sources()].
+
+%% What other applications add (toroco_live_extensions, kind `metrics').
+sources() ->
+    [begin
+         {M, F} = Source,
+         try M:F() catch Class:Why -> logger:warning("metrics of ~p: ~p:~0p", [Name, Class, Why],
+                                                     #{domain => [toroco, live]}), [] end
+     end || {Name, Source} <- toroco_live_extensions:all(metrics)].
 
 %% The token checks (toroco_live_auth), while the dashboard runs.
 auth() ->
@@ -92,45 +95,11 @@ foxglove() ->
                     "Subscriptions of Foxglove clients to channels.", [{[], Subs}])]
     end.
 
-%% The rosbridge server's counters, when it runs.
-rosbridge() ->
-    case whereis(toroco_live_rosbridge) of
-        undefined -> [];
-        _ ->
-            Stats = toroco_live_rosbridge:stats(),
-            Totals = [connections, messages, dropped, tap_dropped, published, publish_dropped,
-                      refused_unauthorized, faults, disconnected, fragments_expired],
-            [family(toroco_live_rosbridge_clients, gauge, "rosbridge clients connected.",
-                    [{[], maps:get(clients, Stats, 0)}]),
-             family(toroco_live_rosbridge_subscriptions, gauge, "Subscriptions of rosbridge clients to topics.",
-                    [{[], maps:get(subscriptions, Stats, 0)}]),
-             family(toroco_live_rosbridge_total, counter, "The rosbridge server's totals.",
-                    [{[{counter, K}], maps:get(K, Stats, 0)} || K <- Totals])]
-    end.
-
-%% The rosbridge clients (toroco_live_rosclient).
-rosclients() ->
-    Clients = toroco_live:rosbridge_clients(),
-    Each = fun(Key) -> [{[{url, U}], maps:get(Key, C)} || #{url := U} = C <- Clients] end,
-    [family(toroco_live_rosclient_connected, gauge, "A rosbridge client: 1 connected, 0 not.",
-            [{[{url, U}], case S of connected -> 1; _ -> 0 end} || #{url := U, state := S} <- Clients]),
-     family(toroco_live_rosclient_attempts, gauge, "Failed attempts since last connected.",
-            Each(attempts)),
-     family(toroco_live_rosclient_connects_total, counter, "Connections made.", Each(connects)),
-     family(toroco_live_rosclient_sent_total, counter, "Messages published to the server.",
-            Each(sent)),
-     family(toroco_live_rosclient_received_total, counter, "Messages received on inbound topics.",
-            Each(received)),
-     family(toroco_live_rosclient_dropped_total, counter, "The robot's messages not sent.",
-            Each(dropped)),
-     family(toroco_live_rosclient_refused_total, counter, "Received messages refused.",
-            Each(refused))].
-
 %% The bounded ports (`toroco_live_listener'), those that run.
 listeners() ->
-    Ports = [{L, S} || {L, Name} <- [{dashboard, toroco_live_http},
-                                     {foxglove, toroco_live_foxglove_listener},
-                                     {rosbridge, toroco_live_rosbridge_listener}],
+    Ports = [{L, S} || {L, Name} <- [{dashboard, toroco_live_http}
+                                     | [{Key, Listener}
+                                        || {Key, #{listener := Listener}} <- toroco_live_bridge:bridges()]],
                        S <- listener_stats(Name)],
     [family(toroco_live_connections, gauge, "TCP connections holding a slot, per port.",
             [{[{listener, L}], N} || {L, #{connections := N}} <- Ports]),
@@ -154,6 +123,11 @@ up(running) -> 1;
 up(suspended) -> 0.5;
 up(_) -> 0.
 
+%% @doc A metric family in the Prometheus text format: its `Name', `Type'
+%% (`gauge', `counter'), one line of `Help', and its samples, each its
+%% labels and value. For other applications' sources (`metrics' in
+%% `toroco_live_extensions').
+-spec family(atom(), gauge | counter, string(), [{[{atom(), term()}], number()}]) -> iodata().
 family(Name, Type, Help, Samples) ->
     [io_lib:format("# HELP ~s ~s~n# TYPE ~s ~s~n", [Name, Help, Name, Type]),
      [[atom_to_list(Name), labels(Ls), " ", number(V), "\n"] || {Ls, V} <- Samples]].

@@ -13,15 +13,15 @@
 %% `stop_recording/0' returns that error.
 %%
 %% <b>Profiles.</b> `profile => foxglove' (the default) writes the
-%% bridge's JSON channels. `profile => ros2' writes ROS 2 data (SPEC §15):
-%% the header's profile `ros2', one channel per ROS topic
-%% (`toroco_live_ros:of_event/1' and, for the simulated world's `/odom',
-%% `toroco_live_ros:of_world/2'), each with its type's `ros2msg' schema
-%% and `cdr' messages (`toroco_live_ros_msgs'); the events that are not an
-%% output's emission (deliveries, routers, lifecycle) go on their §12
-%% topics as `std_msgs/msg/String' carrying the same JSON, so the file
-%% holds what the default one does, typed where a ROS type fits. A
-%% message its type does not take (a field missing) is left out, counted
+%% bridge's JSON channels. Any other profile is a module of the
+%% `toroco_live_profile' behaviour another application added (`ros2',
+%% added by `toroco_ros', SPEC §15): the header's profile is the module's,
+%% an emission becomes the messages the module makes of it, each with its
+%% type's schema and encoding; the events that are not an output's
+%% emission (deliveries, routers, lifecycle) go on their §12 topics
+%% wrapped by the module (`std_msgs/msg/String' carrying the same JSON),
+%% so the file holds what the default one does, typed where a type fits.
+%% A message its type does not take (a field missing) is left out, counted
 %% in `unencodable' and logged once per topic.
 %%
 %% Files: {@link open/2}, {@link event/2}, {@link world/4},
@@ -37,12 +37,11 @@
 -export_type([log/0, recording/0]).
 
 -define(KINDS, [emit, deliver, router, lifecycle]).
--define(PROFILES, [foxglove, ros2]).
--define(STRING, <<"std_msgs/msg/String">>).
 
-%% A channel: a key of the bridge's channels (profile foxglove) or a ROS
-%% topic with its type (profile ros2).
+%% A channel: a key of the bridge's channels (profile foxglove) or a
+%% topic with its type (another profile, its module).
 -record(log, {writer :: toroco_live_mcap:writer(),
+              profile = foxglove :: foxglove | module(),
               channels = #{} :: #{toroco_live_channels:key() | {binary(), binary()}
                                       => non_neg_integer()},
               schemas = #{} :: #{binary() => pos_integer()},
@@ -53,8 +52,8 @@
               fd :: file:io_device(),
               kinds :: [atom()],
               names :: all | [atom()],
-              profile :: foxglove | ros2,
-              %% ros2: messages their type did not take, and the topics
+              profile :: foxglove | module(),
+              %% another profile: messages their type did not take, and the topics
               %% already logged for it
               unencodable = 0 :: non_neg_integer(),
               warned = [] :: [binary()],
@@ -72,7 +71,7 @@
 
 %% @doc A recording of the events of `kinds' (default all) about `names'
 %% (default all) into `Path', in the `profile' `foxglove' (default) or
-%% `ros2'.
+%% one added as a `toroco_live_profile' (`ros2').
 -spec open(file:filename_all(), map()) -> {ok, recording()} | {error, term()}.
 open(Path, Opts) when is_map(Opts) ->
     Kinds = maps:get(kinds, Opts, ?KINDS),
@@ -83,14 +82,18 @@ open(Path, Opts) when is_map(Opts) ->
         [] when not is_list(Kinds) -> {error, {bad_option, {kinds, Kinds}}};
         [] when Names =/= all, not is_list(Names) -> {error, {bad_option, {names, Names}}};
         [] ->
-            case {Kinds -- ?KINDS, lists:member(Profile, ?PROFILES)} of
-                {[], true} -> open(Path, Kinds, Names, Profile);
-                {[], false} -> {error, {bad_option, {profile, Profile}}};
+            case {Kinds -- ?KINDS, profile(Profile)} of
+                {[], {ok, Module}} -> open(Path, Kinds, Names, Module);
+                {[], error} -> {error, {bad_option, {profile, Profile}}};
                 {Unknown, _} -> {error, {bad_option, {kinds, Unknown}}}
             end
     end;
 open(_Path, Opts) ->
     {error, {bad_option, Opts}}.
+
+profile(foxglove) -> {ok, foxglove};
+profile(Name) when is_atom(Name) -> toroco_live_profile:find(Name);
+profile(_) -> error.
 
 open(Path, Kinds, Names, Profile) ->
     case file:open(Path, [write, raw, binary]) of
@@ -118,7 +121,7 @@ event(Event, R = #rec{kinds = Kinds, names = Names, since = Since}) ->
          lists:any(fun(N) -> lists:member(N, Names) end, toroco_live_channels:event_names(Event))),
     case Wanted of
         false -> R;
-        true when R#rec.profile =:= ros2 -> ros_event(Event, R);
+        true when R#rec.profile =/= foxglove -> typed_event(Event, R);
         true ->
             case toroco_live_channels:of_event(Event) of
                 {Key, T, Json} -> message(Key, T, Json, R);
@@ -128,24 +131,28 @@ event(Event, R = #rec{kinds = Kinds, names = Names, since = Since}) ->
 event(_, Failed) ->
     Failed.
 
-%% An emission is its ROS topics' messages; any other event its §12 JSON
-%% as a String on its §12 topic.
-ros_event(Event, R) ->
+%% An emission is the profile's messages; any other event its §12 JSON,
+%% wrapped by the profile, on its §12 topic.
+typed_event(Event, R = #rec{profile = Module}) ->
     case element(1, Event) of
         emit ->
             T = toroco_live_channels:event_time(Event),
-            lists:foldl(fun({Topic, Type, Msg}, Acc) -> ros_message(Topic, Type, T, Msg, Acc) end,
-                        R, toroco_live_ros:of_event(Event));
+            typed_messages(Module:of_event(Event), T, R);
         _ ->
             case toroco_live_channels:of_event(Event) of
                 {Key, T, Json} ->
-                    ros_message(toroco_live_channels:topic(Key), ?STRING, T, #{data => Json}, R);
+                    typed_message(toroco_live_channels:topic(Key), Module:text_type(), T,
+                                  Module:text(Json), R);
                 none -> R
             end
     end.
 
-ros_message(Topic, Type, T, Msg, R = #rec{unencodable = U, warned = Warned}) ->
-    case toroco_live_ros_msgs:cdr(Type, Msg) of
+typed_messages(Messages, T, R) ->
+    lists:foldl(fun({Topic, Type, Msg}, Acc) -> typed_message(Topic, Type, T, Msg, Acc) end,
+                R, Messages).
+
+typed_message(Topic, Type, T, Msg, R = #rec{profile = Module, unencodable = U, warned = Warned}) ->
+    case Module:encode(Type, Msg) of
         {ok, Cdr} -> write(log_event({Topic, Type}, {T, Cdr}, R#rec.log), R);
         {error, Why} ->
             lists:member(Topic, Warned) orelse
@@ -154,13 +161,13 @@ ros_message(Topic, Type, T, Msg, R = #rec{unencodable = U, warned = Warned}) ->
             R#rec{unencodable = U + 1, warned = lists:usort([Topic | Warned])}
     end.
 
-%% @doc A world snapshot at `T' (ns): its ROS messages (`/odom') in the
-%% ros2 profile, else `Msgs', the bridge's world messages made of it.
+%% @doc A world snapshot at `T' (ns): the profile's messages of it (ROS 2's
+%% `/odom'), or in the profile foxglove `Msgs', the bridge's world
+%% messages made of it.
 -spec world(map() | none, integer(), [{toroco_live_channels:key(), integer(), binary()}],
             recording()) -> recording().
-world(Snapshot, T, _Msgs, R = #rec{profile = ros2}) ->
-    lists:foldl(fun({Topic, Type, Msg}, Acc) -> ros_message(Topic, Type, T, Msg, Acc) end,
-                R, toroco_live_ros:of_world(Snapshot, T));
+world(Snapshot, T, _Msgs, R = #rec{profile = Module}) when Module =/= foxglove ->
+    typed_messages(Module:of_world(Snapshot, T), T, R);
 world(_Snapshot, _T, Msgs, R = #rec{}) ->
     lists:foldl(fun({K, T, J}, Acc) -> message(K, T, J, Acc) end, R, Msgs);
 world(_, _, _, Failed) ->
@@ -201,8 +208,8 @@ path(#rec{path = P}) -> P;
 path({failed, P, _}) -> P.
 
 %% @doc Ends the recording: the file is complete (summary, footer) and
-%% readable by any MCAP reader. A ros2 recording also says how many
-%% messages their type did not take (`unencodable').
+%% readable by any MCAP reader. A recording in a typed profile (`ros2')
+%% also says how many messages their type did not take (`unencodable').
 -spec close(recording()) -> {ok, #{path := file:filename_all(), messages := non_neg_integer(),
                                    dropped := non_neg_integer(),
                                    unencodable => non_neg_integer()}} | {error, term()}.
@@ -211,7 +218,7 @@ close(#rec{path = Path, fd = Fd, log = L, dropped = D, profile = Profile, unenco
     _ = file:close(Fd),
     Counts = #{path => Path, messages => log_messages(L), dropped => D},
     case Result of
-        ok when Profile =:= ros2 -> {ok, Counts#{unencodable => U}};
+        ok when Profile =/= foxglove -> {ok, Counts#{unencodable => U}};
         ok -> {ok, Counts};
         {error, Why} -> {error, {write_failed, Path, Why}}
     end;
@@ -235,14 +242,14 @@ log_new() ->
 log_new(foxglove) ->
     {Head, W} = toroco_live_mcap:new(#{}),
     {Head, #log{writer = W}};
-log_new(ros2) ->
-    {Head, W} = toroco_live_mcap:new(#{profile => <<"ros2">>}),
-    {Head, #log{writer = W}}.
+log_new(Module) ->
+    {Head, W} = toroco_live_mcap:new(#{profile => Module:mcap_profile()}),
+    {Head, #log{writer = W, profile = Module}}.
 
 %% @doc The bytes of one message on channel `Key' at `T' (ns), with the
 %% channel's and its schema's records the first time they appear. `Key'
-%% is one of the bridge's channels (JSON), or `{Topic, Type}' with a ROS 2
-%% type for CDR bytes.
+%% is one of the bridge's channels (JSON), or `{Topic, Type}' with a type
+%% of the log's profile for its bytes (ROS 2's CDR).
 -spec log_event(toroco_live_channels:key() | {binary(), binary()}, {integer(), binary()}, log()) ->
           {iodata(), log()}.
 log_event(Key, {T, Json}, L0) ->
@@ -263,7 +270,7 @@ log_messages(#log{writer = W}) ->
 declare(Key, L = #log{channels = Chs}) when is_map_key(Key, Chs) ->
     {[], L};
 declare(Key, L = #log{writer = W, channels = Chs, schemas = Ss}) ->
-    {Name, SchemaEnc, Schema, Topic, MsgEnc} = channel(Key),
+    {Name, SchemaEnc, Schema, Topic, MsgEnc} = channel(Key, L#log.profile),
     {SBytes, W1, Ss1, SId} =
         case Ss of
             #{Name := Id} -> {[], W, Ss, Id};
@@ -276,9 +283,9 @@ declare(Key, L = #log{writer = W, channels = Chs, schemas = Ss}) ->
     {CBytes, W2} = toroco_live_mcap:add_channel(W1, CId, SId, Topic, MsgEnc, #{}),
     {[SBytes, CBytes], L#log{writer = W2, channels = Chs#{Key => CId}, schemas = Ss1}}.
 
-channel({Topic, Type}) when is_binary(Topic) ->
-    {ok, Definition} = toroco_live_ros_msgs:definition(Type),
-    {Type, <<"ros2msg">>, Definition, Topic, <<"cdr">>};
-channel(Key) ->
+channel({Topic, Type}, Module) when is_binary(Topic) ->
+    {ok, {SchemaEnc, Schema, MsgEnc}} = Module:schema(Type),
+    {Type, SchemaEnc, Schema, Topic, MsgEnc};
+channel(Key, foxglove) ->
     {Name, Schema} = toroco_live_channels:schema(Key),
     {Name, <<"jsonschema">>, Schema, toroco_live_channels:topic(Key), <<"json">>}.

@@ -17,11 +17,11 @@
 %% tap). The call returns when the last event has been replayed and the
 %% actuators have had `?SETTLE_MS' to answer.
 %%
-%% A recording in the ros2 profile replays too: its `std_msgs/msg/String'
-%% channels carry the same JSON in CDR (`toroco_live_ros_msgs:string_data/1'),
-%% so the outputs recorded as Strings are replayed and the deliveries
-%% compared; an output recorded with a typed ROS message (a range sensor's
-%% Range) cannot be, and is not.
+%% A recording in another profile (`ros2', a `toroco_live_profile') replays
+%% too: its wrapper channels (`std_msgs/msg/String') carry the same JSON,
+%% which the profile reads back (`text_json/1'), so the outputs recorded
+%% that way are replayed and the deliveries compared; an output recorded
+%% with a typed message (a range sensor's Range) cannot be, and is not.
 -module(toroco_live_replay).
 
 -export([replay/2]).
@@ -66,12 +66,16 @@ messages(#{channels := Chs, schemas := Schemas, messages := Ms}) ->
                      {ok, Json} <- [JsonOf(D)]].
 
 %% How a channel's message becomes the JSON of SPEC §12: as it is, or (the
-%% ros2 profile) a std_msgs/msg/String's data.
+%% profile of another application) its text type's JSON.
 json_of(#{encoding := <<"json">>}, _) ->
     {ok, fun(D) -> {ok, D} end};
-json_of(#{encoding := <<"cdr">>, schema := S}, Schemas) ->
+json_of(#{schema := S}, Schemas) ->
     case Schemas of
-        #{S := #{name := <<"std_msgs/msg/String">>}} -> {ok, fun toroco_live_ros_msgs:string_data/1};
+        #{S := #{name := Name}} ->
+            case [M || {_, M} <- toroco_live_extensions:all(profile), M:text_type() =:= Name] of
+                [Module | _] -> {ok, fun Module:text_json/1};
+                [] -> error
+            end;
         #{} -> error
     end;
 json_of(_, _) ->

@@ -4,16 +4,20 @@
 %% toroco_live_sup (one_for_one)
 %%   toroco_live_world            the simulated world's latest snapshot (always there)
 %%   toroco_live_flight           the flight recorder (always on) and the recording
-%%   toroco_live_rosclient_sup    the rosbridge clients, one per server dialled
-%%                                (toroco_live:rosbridge_connect/2)
-%%   toroco_live_dashboard_sup    the dashboard, added by toroco_live:start/1
-%%   toroco_live_foxglove         the Foxglove bridge, added by toroco_live:start/1
-%%   toroco_live_rosbridge        the rosbridge v2 server, added by toroco_live:start/1
+%%   toroco_live_dashboard_sup    the dashboard, while it runs (toroco_live:start/1)
+%%   toroco_live_foxglove         the Foxglove bridge, while the dashboard runs and
+%%                                its option `foxglove' is a port
 %% '''
 %%
-%% one_for_one: the dashboard, the bridges, the rosbridge clients and the
-%% recorders are independent views of the robot; one crashing takes none
-%% of the others with it.
+%% The tree is the same whatever the configuration: the dashboard's and the
+%% bridge's children have no process while the configuration
+%% (`toroco_live_config', set by `toroco_live:start/1') does not ask for
+%% them, and `toroco_live:start/1' and `stop/0' restart and terminate them
+%% (`toroco_live_bridge'). Other applications' bridges (the rosbridge
+%% server, `toroco_ros') are children of their own supervisors.
+%%
+%% one_for_one: the dashboard, the bridge and the recorders are independent
+%% views of the robot; one crashing takes none of the others with it.
 -module(toroco_live_sup).
 -behaviour(supervisor).
 
@@ -29,6 +33,7 @@ init([]) ->
     World = #{id => toroco_live_world, start => {toroco_live_world, start_link, []}},
     Flight = #{id => toroco_live_flight, start => {toroco_live_flight, start_link, []},
                shutdown => 30000},
-    Clients = #{id => toroco_live_rosclient_sup, start => {toroco_live_rosclient_sup, start_link, []},
-                type => supervisor},
-    {ok, {Flags, [World, Flight, Clients]}}.
+    Dashboard = #{id => toroco_live_dashboard_sup, start => {toroco_live_dashboard_sup, start_link, []},
+                  type => supervisor},
+    Foxglove = toroco_live_bridge:child_spec(foxglove, toroco_live_foxglove),
+    {ok, {Flags, [World, Flight, Dashboard, Foxglove]}}.

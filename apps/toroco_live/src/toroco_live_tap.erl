@@ -1,4 +1,4 @@
-%% @doc One subscription to the observer tap (SPEC §10), kept in the state
+%% @doc (API) One subscription to the observer tap (SPEC §10), kept in the state
 %% of the process that reads it: the dashboard's hub, the flight recorder
 %% (and the recordings it writes), the Foxglove bridge, and any other
 %% client of `toroco_live' that watches the robot.

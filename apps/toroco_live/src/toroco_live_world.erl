@@ -1,4 +1,4 @@
-%% @doc The simulated world as the dashboard and the Foxglove bridge see it:
+%% @doc (API) The simulated world as the dashboard and the bridges see it:
 %% a registered process (`toroco_live_world') that a simulator tells about
 %% each step of its world, and that keeps the latest snapshot and each
 %% robot's trajectory for whoever draws them.

@@ -1,9 +1,9 @@
-%% @doc One WebSocket client of a `toroco_live' port, whatever protocol it
+%% @doc (API, a behaviour) One WebSocket client of a `toroco_live' port, whatever protocol it
 %% speaks: the mochiweb connection process that answered the upgrade
 %% becomes this gen_server, owns the socket and runs the WebSocket's side of
 %% the conversation, and a callback module (the Foxglove bridge's
 %% `toroco_live_foxglove_conn', the rosbridge server's
-%% `toroco_live_rosbridge_conn') runs the protocol's.
+%% `toroco_ros_server_conn') runs the protocol's.
 %%
 %% This module does: the upgrade (`toroco_live_ws_frame:accept/2') or a
 %% 400 naming what was wrong; the socket's options (one read at a time,

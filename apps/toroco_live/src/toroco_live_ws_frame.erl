@@ -1,4 +1,4 @@
-%% @doc WebSocket (RFC 6455) for the Foxglove bridge: the opening handshake
+%% @doc (API) WebSocket (RFC 6455) for the bridges: the opening handshake
 %% answered through mochiweb, and the frame codec as pure code.
 %%
 %% mochiweb parses the HTTP request and writes the 101 answer; the frames
@@ -14,7 +14,7 @@
 %% fault (unmasked client frame, reserved bits, a message over the size
 %% limit, a control frame fragmented or too long).
 %%
-%% The client's side, for the rosbridge client (`toroco_live_rosclient'):
+%% The client's side, for the rosbridge client (`toroco_ros_client'):
 %% {@link client_decoder/1} reads a server's frames (unmasked; a masked
 %% one is an error), {@link client_frame/2} and {@link client_close_frame/2}
 %% write masked frames with a fresh key each, {@link accept_key/1} is the

@@ -19,7 +19,7 @@ all() ->
 suite() -> [{timetrap, {seconds, 120}}].
 
 init_per_suite(Config) ->
-    Env = tl_live:start(#{}),
+    Env = tl_live:start(#{}, [toroco_ros]),
     {ok, _} = application:ensure_all_started(ssl),
     {ok, _} = application:ensure_all_started(inets),
     [{env, Env}, {tls, tl_tls:make(?config(priv_dir, Config))} | Config].
@@ -29,7 +29,7 @@ end_per_suite(Config) ->
 
 init_per_testcase(_Case, Config) ->
     tl_live:fake_robot(),
-    ok = toroco:add_device(ros, toroco_live_ros_device, #{}),
+    ok = toroco:add_device(ros, toroco_ros_device, #{}),
     ok = toroco:add_device(cmd, toroco_fake_actuator, #{inputs => [v]}),
     ok = toroco:set_inputs(cmd, #{v => [{ros, cmd_vel}]}),
     Config.

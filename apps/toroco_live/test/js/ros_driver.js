@@ -1,4 +1,4 @@
-// Drives rosbridge clients for toroco_live_rosbridge_SUITE: one JSON
+// Drives rosbridge clients for toroco_ros_server_SUITE: one JSON
 // command per stdin line, one JSON event per stdout line.
 // The reference client (roslib 2.1.0, ESM, over ws):
 //   {"cmd":"connect","url":U}                 -> open | error | close {code}

@@ -5,7 +5,7 @@
 %% than 1 kHz) and reading every frame, taken in turn in the same run.
 %% TOROCO_BENCH_QUICK=1 runs shorter tests; TOROCO_BENCH_ONLY=rosbridge
 %% runs this section alone.
--module(toroco_live_ros_bench).
+-module(toroco_ros_bench).
 -export([main/1]).
 
 -define(TOPIC, <<"/toroco/out/relay/out">>).
@@ -15,7 +15,7 @@ main([Dir]) ->
     {ok, _} = application:ensure_all_started(toroco_hw),
     _ = application:load(toroco_live),
     ok = application:set_env(toroco_live, enabled, false),
-    {ok, _} = application:ensure_all_started(toroco_live),
+    {ok, _} = application:ensure_all_started(toroco_ros),
     {ok, #{foxglove := Fox, rosbridge := Ros}} =
         toroco_live:start(#{http => 0, foxglove => 0, rosbridge => 0}),
     N = case Quick of true -> 20000; false -> 100000 end,

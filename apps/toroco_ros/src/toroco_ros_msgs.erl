@@ -26,7 +26,7 @@
 %% length with the terminating zero, its bytes and the zero, a fixed array
 %% as its elements without a length. {@link types/0} lists what is known;
 %% {@link string_data/1} reads a `std_msgs/msg/String' back (replay).
--module(toroco_live_ros_msgs).
+-module(toroco_ros_msgs).
 
 -export([types/0, fields/1, definition/1, cdr/2, string_data/1]).
 

@@ -1,7 +1,7 @@
 %% @doc The robot as ROS 2 topics (SPEC §15): which topics it has, their
 %% ROS 2 types, and the ROS 2 message each tap event (SPEC §10) and each
 %% world snapshot (`toroco_live_world') becomes. The rosbridge server
-%% (`toroco_live_rosbridge') encodes these messages as JSON, a ros2
+%% (`toroco_ros_server') encodes these messages as JSON, a ros2
 %% recording as CDR: a message is an Erlang map with atom keys named as the
 %% ROS 2 fields, numbers as integers or floats, strings as binaries, and
 %% every field of its type present. Pure except {@link topics/0} and
@@ -9,7 +9,7 @@
 %%
 %% | topic                            | type                       | dir | from |
 %% |----------------------------------|----------------------------|-----|------|
-%% | `/cmd_vel'                       | `geometry_msgs/msg/Twist'  | in  | source `{ros, cmd_vel}' (`toroco_live_ros_device') |
+%% | `/cmd_vel'                       | `geometry_msgs/msg/Twist'  | in  | source `{ros, cmd_vel}' (`toroco_ros_device') |
 %% | `/toroco/motors/applied'         | `geometry_msgs/msg/Twist'  | out | output `{motors, applied}' |
 %% | `/odom'                          | `nav_msgs/msg/Odometry'    | out | the simulated world's snapshots |
 %% | `/range/<output>'                | `sensor_msgs/msg/Range'    | out | each output of the device named `range' |
@@ -36,7 +36,7 @@
 %% 1.5 m: the simulated sensor's defaults), `variance' 0 (the field ROS 2
 %% Jazzy added). Stamps are the event's `T' (ns; simulated time in a
 %% lockstep run) as `builtin_interfaces/msg/Time' `#{sec, nanosec}'.
--module(toroco_live_ros).
+-module(toroco_ros_topics).
 
 -export([geometry/0, wheels_to_twist/2, twist_to_wheels/2]).
 -export([topics/0, topics/1, of_event/1, event_topic/1, of_world/1, of_world/2]).
@@ -64,12 +64,12 @@
 %%====================================================================
 
 %% @doc The robot's wheel geometry: the Torobot's (`wheel_base' 0.20 m,
-%% `max_wheel_speed' 0.25 m/s) with the app env `toroco_live' `ros_geometry'
+%% `max_wheel_speed' 0.25 m/s) with the app env `toroco_ros' `ros_geometry'
 %% (a map with either key) over it.
 -spec geometry() -> geometry().
 geometry() ->
     Defaults = #{wheel_base => 0.20, max_wheel_speed => 0.25},
-    Env = case application:get_env(toroco_live, ros_geometry, #{}) of
+    Env = case application:get_env(toroco_ros, ros_geometry, #{}) of
               #{} = M -> maps:with([wheel_base, max_wheel_speed], M);
               _ -> #{}
           end,
@@ -111,12 +111,12 @@ vector3(X, Y, Z) -> #{x => float(X), y => float(Y), z => float(Z)}.
 %%====================================================================
 
 %% @doc The ROS 2 types this module makes and reads (those of
-%% `toroco_live_ros_msgs', the one table of them), each with its fields (in
+%% `toroco_ros_msgs', the one table of them), each with its fields (in
 %% order) as `{Name, FieldType}': a primitive, `{array, Primitive, N}' or
 %% another of these types. {@link fields/1} gives one.
 -spec types() -> [binary()].
 types() ->
-    toroco_live_ros_msgs:types().
+    toroco_ros_msgs:types().
 
 -type field_type() :: float64 | float32 | uint8 | int32 | uint32 | string
                     | {array, float64, pos_integer()} | binary().
@@ -125,7 +125,7 @@ types() ->
 %% constants, which only its definition carries, left out).
 -spec fields(binary()) -> [{atom(), field_type()}].
 fields(Type) ->
-    {ok, Fields} = toroco_live_ros_msgs:fields(Type),
+    {ok, Fields} = toroco_ros_msgs:fields(Type),
     [{Name, field_type(FT)} || Field <- Fields, {Name, FT} <- [name_type(Field)]].
 
 name_type({const, _, _, _}) -> none;
@@ -137,11 +137,11 @@ field_type(FT) -> FT.
 
 %% @doc The ROS 2 message definition of a type with its dependencies, as
 %% ROS 2 tools concatenate them (rosbag2, rosapi's `typedefs_full_text'):
-%% `toroco_live_ros_msgs:definition/1', the one place the ros2 recordings
+%% `toroco_ros_msgs:definition/1', the one place the ros2 recordings
 %% take them from too.
 -spec definition(binary()) -> binary().
 definition(Type) ->
-    {ok, Definition} = toroco_live_ros_msgs:definition(Type),
+    {ok, Definition} = toroco_ros_msgs:definition(Type),
     Definition.
 
 %% @doc The type of one of the robot's topics now, `error' if it has none.
@@ -288,7 +288,7 @@ event_topic(_) -> none.
 
 range_limits() ->
     Defaults = #{field_of_view => 0.05, min_range => 0.02, max_range => 1.5},
-    Env = case application:get_env(toroco_live, ros_range, #{}) of
+    Env = case application:get_env(toroco_ros, ros_range, #{}) of
               #{} = M -> maps:filter(fun(_, V) -> is_number(V) end,
                                      maps:with(maps:keys(Defaults), M));
               _ -> #{}

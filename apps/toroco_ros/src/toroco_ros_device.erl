@@ -1,15 +1,15 @@
 %% @doc The `ros' device: what ROS clients publish on the robot's inbound
 %% topics (SPEC §15) becomes sources the wiring can name. Add it as
-%% `{device, ros, toroco_live_ros_device, #{}}' in a wiring file; its
+%% `{device, ros, toroco_ros_device, #{}}' in a wiring file; its
 %% output `cmd_vel' (the topic `/cmd_vel', `geometry_msgs/msg/Twist') is
 %% the source `{ros, cmd_vel}', and each Twist published there is emitted
-%% as `{Left, Right}' wheel velocities (`toroco_live_ros:twist_to_wheels/2'
-%% with `toroco_live_ros:geometry/0'), a `send'. Holding the command, and
+%% as `{Left, Right}' wheel velocities (`toroco_ros_topics:twist_to_wheels/2'
+%% with `toroco_ros_topics:geometry/0'), a `send'. Holding the command, and
 %% stopping when commands stop, are the wiring's: the library's teleop
 %% (`toroco_lib_teleop') latches each command and lets it go `timeout_ms'
 %% after the last.
 %%
-%% The rosbridge server (`toroco_live_rosbridge') checks a message against
+%% The rosbridge server (`toroco_ros_server') checks a message against
 %% its type before it hands it over with {@link publish/3}, a call bounded by
 %% `?CALL_MS': a device that does not take it by then (the robot is behind)
 %% answers `{error, busy}' and the message is dropped, so a client waits at
@@ -25,9 +25,9 @@
 %% and its consequences run as steps at the robot's current simulated time),
 %% so such a run is no longer exact; for a reproducible run hand the
 %% commands as stimuli of the ticks instead: `toroco_clock:tick(T,
-%% [toroco_live_ros_device:stimulus(ros, Twist)])', taken exactly like a
+%% [toroco_ros_device:stimulus(ros, Twist)])', taken exactly like a
 %% publish.
--module(toroco_live_ros_device).
+-module(toroco_ros_device).
 -behaviour(toroco_device).
 
 -export([publish/3, stimulus/2]).
@@ -76,14 +76,14 @@ handle_event({call, From}, {?MODULE, publish, cmd_vel, Msg}, State, D) ->
 handle_event({call, From}, _Request, _State, _D) ->
     {keep_state_and_data, [{reply, From, {error, unknown_call}}]};
 handle_event(info, {?MODULE, publish, cmd_vel, Msg}, _State, D = #{received := R}) ->
-    case toroco_live_ros:twist_to_wheels(Msg, toroco_live_ros:geometry()) of
+    case toroco_ros_topics:twist_to_wheels(Msg, toroco_ros_topics:geometry()) of
         {ok, Wheels} ->
             #{emitted := E} = D,
             {keep_state, D#{received := R + 1, emitted := E + 1}, [{send, #{cmd_vel => Wheels}}]};
         {error, Why} ->
             #{name := Name, bad_message := B} = D,
             logger:warning("~p: a /cmd_vel message that is not a Twist: ~0p", [Name, Why],
-                           #{domain => [toroco, live, ros]}),
+                           #{domain => [toroco, ros]}),
             {keep_state, D#{received := R + 1, bad_message := B + 1}, []}
     end;
 handle_event(_Type, _Content, _State, _D) ->

@@ -1,9 +1,9 @@
 %% @doc CBOR (RFC 8949) encoding, pure, for the rosbridge server's `cbor'
-%% and `cbor-raw' compressions (`toroco_live_rosbridge_conn'): integers,
+%% and `cbor-raw' compressions (`toroco_ros_server_conn'): integers,
 %% floats (always 64-bit), `true', `false', `null', other atoms and binaries
 %% as text strings, `{bytes, Binary}' as a byte string, lists as arrays,
 %% maps (atom or binary keys) as maps.
--module(toroco_live_cbor).
+-module(toroco_ros_cbor).
 
 -export([encode/1]).
 

@@ -4,14 +4,14 @@
 %% `motors' (applied), the `ros' device wired to a fake actuator `cmd',
 %% and the fake sensor `s' wired to the fake actuator `a'; the driving
 %% cases run the teleop robot (config/robots/teleop.wiring) in its world.
--module(toroco_live_rosbridge_SUITE).
+-module(toroco_ros_server_SUITE).
 -include_lib("common_test/include/ct.hrl").
 -compile([export_all, nowarn_export_all]).
 
 all() ->
     [topics_and_types, services_round_trip, publish_needs_the_token, subscribe_throttled, cbor_raw,
      fragments_out, bad_input, flood_disconnected, client_that_never_reads, not_a_websocket,
-     start_options, lockstep_stimulus, simulated_range_and_odometry, drive_the_teleop_robot,
+     start_options, server_goes_with_the_application, lockstep_stimulus, simulated_range_and_odometry, drive_the_teleop_robot,
      runtime_restart, {group, tls}].
 
 %% The hostile clients again with TLS on the port (wss://, Node trusting a
@@ -30,22 +30,22 @@ suite() -> [{timetrap, {seconds, 90}}].
 -define(TWIST, <<"geometry_msgs/msg/Twist">>).
 
 init_per_suite(Config) ->
-    Env = tl_live:start(#{}),
+    Env = tl_live:start(#{}, [toroco_ros]),
     %% Running already, each simulated run takes away only what it added.
     {ok, _} = application:ensure_all_started(torobot),
     [{env, Env} | Config].
 
 end_per_suite(Config) ->
     application:stop(torobot),
-    application:unset_env(toroco_live, rosbridge_fragment_ms),
-    application:unset_env(toroco_live, rosbridge_max_message),
+    application:unset_env(toroco_ros, rosbridge_fragment_ms),
+    application:unset_env(toroco_ros, rosbridge_max_message),
     tl_live:stop(?config(env, Config)).
 
 init_per_testcase(Case, Config) ->
     Sim = lists:member(Case, [simulated_range_and_odometry, drive_the_teleop_robot]),
     Sim orelse fake_robot(),
-    ok = application:set_env(toroco_live, rosbridge_fragment_ms, 500),
-    ok = application:set_env(toroco_live, rosbridge_max_message, 65536),
+    ok = application:set_env(toroco_ros, rosbridge_fragment_ms, 500),
+    ok = application:set_env(toroco_ros, rosbridge_max_message, 65536),
     {Tls, Scheme} = case proplists:get_value(tls, Config) of
                         undefined -> {#{}, "ws://127.0.0.1"};
                         T -> {#{tls => tl_tls:tls(T)}, "wss://localhost"}
@@ -74,7 +74,7 @@ fake_robot() ->
     tl_live:fake_robot(),
     ok = toroco:add_device(range, toroco_fake_sensor, #{outputs => [front]}),
     ok = toroco:add_device(motors, toroco_fake_sensor, #{outputs => [applied]}),
-    ok = toroco:add_device(ros, toroco_live_ros_device, #{}),
+    ok = toroco:add_device(ros, toroco_ros_device, #{}),
     ok = toroco:add_device(cmd, toroco_fake_actuator, #{inputs => [v]}),
     ok = toroco:set_inputs(cmd, #{v => [{ros, cmd_vel}]}).
 
@@ -224,8 +224,8 @@ cbor_raw(Config) ->
       <<"header">> := #{<<"frame_id">> := <<"range_front">>, <<"stamp">> := #{<<"sec">> := _}}} =
         Raw(<<"/range/front">>),
     true = abs(R - 0.37) < 1.0e-6,    % float32
-    G = toroco_live_ros:geometry(),
-    #{linear := #{x := Vx}, angular := #{z := Wz}} = toroco_live_ros:wheels_to_twist({20, 60}, G),
+    G = toroco_ros_topics:geometry(),
+    #{linear := #{x := Vx}, angular := #{z := Wz}} = toroco_ros_topics:wheels_to_twist({20, 60}, G),
     #{<<"linear">> := #{<<"x">> := X}, <<"angular">> := #{<<"z">> := Z}} = Raw(<<"/toroco/motors/applied">>),
     true = abs(X - Vx) < 1.0e-12 andalso abs(Z - Wz) < 1.0e-12,
     #{<<"data">> := Data} = Raw(<<"/toroco/out/s/dist">>),
@@ -350,7 +350,7 @@ client_that_never_reads(Config) ->
     Ms = erlang:monotonic_time(millisecond) - T0,
     Vs = [I || {d, {I, _}, _} <- toroco_fake_actuator:history(a)],
     Vs = lists:seq(1, N),
-    Missed = fun() -> S = toroco_live_rosbridge:stats(),
+    Missed = fun() -> S = toroco_ros_server:stats(),
                       maps:get(dropped, S, 0) + maps:get(tap_dropped, S, 0)
              end,
     ok = toroco_test_lib:wait_until(fun() -> Missed() > 0 end, 10000, nothing_missed),
@@ -365,12 +365,12 @@ client_that_never_reads(Config) ->
     %% send timeout (5 s) ends its connection. Every client still there,
     %% the new one among them, has its subscription.
     toroco_test_lib:wait_until(
-      fun() -> case toroco_live_rosbridge:stats() of
+      fun() -> case toroco_ros_server:stats() of
                    #{clients := K, subscriptions := K} -> K >= 1;
                    _ -> false
                end
       end, 10000, every_client_subscribed),
-    ct:log("clients left: ~b", [maps:get(clients, toroco_live_rosbridge:stats())]),
+    ct:log("clients left: ~b", [maps:get(clients, toroco_ros_server:stats())]),
     ok = toroco:inject({s, dist}, last),
     {ok, #{<<"msg">> := #{<<"data">> := D}}, _} = await_message(C, <<"/toroco/out/s/dist">>),
     #{<<"term">> := <<"last">>} = jiffy:decode(D, [return_maps]),
@@ -395,7 +395,7 @@ start_options(Config) ->
     toroco_live:stop(),
     {error, {bad_option, {rosbridge, fast}}} = toroco_live:start(#{http => 0, rosbridge => fast}),
     {ok, #{rosbridge := off}} = toroco_live:start(#{http => 0, foxglove => off}),
-    off = toroco_live_rosbridge:port(),
+    off = toroco_ros_server:port(),
     toroco_live:stop(),
     %% A port already taken: refused naming the server, nothing left running.
     {ok, L} = gen_tcp:listen(0, [{ip, {127, 0, 0, 1}}]),
@@ -406,6 +406,33 @@ start_options(Config) ->
     gen_tcp:close(L),
     ok.
 
+server_goes_with_the_application() ->
+    [{doc, "The server is a static child of toroco_ros_sup: stopping toroco_ros leaves the "
+      "dashboard running and rosbridge off (client mode not_started); starting it again "
+      "listens on the option's port at once; toroco_live:stop/0 leaves the child without a "
+      "process"}].
+server_goes_with_the_application(_Config) ->
+    ok = application:stop(toroco_ros),
+    try
+        #{rosbridge := off, http := Http} = toroco_live:info(),
+        true = is_integer(Http),
+        error = toroco_live_extensions:find(bridge, rosbridge),
+        {error, not_started} = toroco_live:rosbridge_connect("ws://127.0.0.1:1/", #{}),
+        [] = toroco_live:rosbridge_clients()
+    after
+        {ok, _} = application:ensure_all_started(toroco_ros)
+    end,
+    #{rosbridge := Port} = toroco_live:info(),
+    true = is_integer(Port),
+    [{toroco_ros_client_sup, _, supervisor, _}, {toroco_ros_server, Pid, worker, _}] =
+        lists:sort(supervisor:which_children(toroco_ros_sup)),
+    true = is_pid(Pid),
+    toroco_live:stop(),
+    [{toroco_ros_server, undefined, worker, _}] =
+        [C || C = {toroco_ros_server, _, _, _} <- supervisor:which_children(toroco_ros_sup)],
+    off = toroco_ros:port(),
+    ok.
+
 lockstep_stimulus() ->
     [{doc, "In lockstep a Twist handed to a tick as the ros device's stimulus reaches the "
       "wiring as {Left, Right} at that tick, in the trace; a live publish is taken too"}].
@@ -413,13 +440,13 @@ lockstep_stimulus(_Config) ->
     ok = toroco_clock:lockstep(#{trace => true}),
     try
         Twist = #{<<"linear">> => #{<<"x">> => 0.125}},
-        {ok, Lines} = toroco_clock:tick(100, [toroco_live_ros_device:stimulus(ros, Twist)]),
+        {ok, Lines} = toroco_clock:tick(100, [toroco_ros_device:stimulus(ros, Twist)]),
         [{v, {50, 50}, _}] = toroco_fake_actuator:history(cmd),
         Trace = iolist_to_binary(Lines),
         ct:log("~s", [Trace]),
         true = nomatch =/= binary:match(Trace, <<"cmd_vel">>),
         %% A live publish arrives when it arrives, and is taken.
-        ok = toroco_live_ros_device:publish(ros, cmd_vel, #{angular => #{z => 1.0}}),
+        ok = toroco_ros_device:publish(ros, cmd_vel, #{angular => #{z => 1.0}}),
         ok = toroco_clock:settle(),
         {ok, _} = toroco_clock:tick(200, []),
         [{v, {50, 50}, _}, {v, {-40, 40}, _}] = toroco_fake_actuator:history(cmd)
@@ -549,7 +576,7 @@ await_subscribed(C, N) ->
 %% The server holds at least N subscriptions (of any client to any topic).
 await_subscriptions(N) ->
     toroco_test_lib:wait_until(
-      fun() -> maps:get(subscriptions, toroco_live_rosbridge:stats(), 0) >= N end,
+      fun() -> maps:get(subscriptions, toroco_ros_server:stats(), 0) >= N end,
       10000, {subscriptions, N}).
 
 await_message(C, Topic) ->

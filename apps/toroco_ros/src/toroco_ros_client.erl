@@ -2,8 +2,8 @@
 %% a user's ROS 2 graph, or another robot's `toroco_live'), advertises its
 %% topics there, publishes its messages, subscribes to its inbound topics
 %% and feeds what comes into the robot (the `ros' device,
-%% `toroco_live_ros_device', as the rosbridge server does). One process per server, a child of
-%% `toroco_live_rosclient_sup', started by `toroco_live:rosbridge_connect/2'.
+%% `toroco_ros_device', as the rosbridge server does). One process per server, a child of
+%% `toroco_ros_client_sup', started by `toroco_live:rosbridge_connect/2'.
 %%
 %% A `gen_statem' with three states:
 %% ```
@@ -20,13 +20,13 @@
 %% of it (jitter, so robots that lost one server do not return in step),
 %% and starts again from `backoff_min' once connected.
 %%
-%% Connected: every outbound topic of `toroco_live_ros:topics/0' is
+%% Connected: every outbound topic of `toroco_ros_topics:topics/0' is
 %% advertised (`op: advertise') and every inbound one subscribed (`op:
-%% subscribe'), again when the wiring changes (a lifecycle event, or every
+%% subscribe'; the operations are `toroco_ros_protocol''s), again when the wiring changes (a lifecycle event, or every
 %% `?REFRESH_MS'); topics that went are unadvertised. The robot's
 %% messages come from the observer tap (SPEC §10, subscribed only while
-%% connected) through `toroco_live_ros:of_event/1', and from the simulated
-%% world's snapshots (`toroco_live_ros:of_world/2': `/odom'), and are sent
+%% connected) through `toroco_ros_topics:of_event/1', and from the simulated
+%% world's snapshots (`toroco_ros_topics:of_world/2': `/odom'), and are sent
 %% as `op: publish'. The tap's buffer (`max_queue', default 1000 events)
 %% is the bounded queue: past it the tap drops and counts, and so does
 %% this process (`dropped'); a server that stops reading stalls the socket
@@ -53,14 +53,14 @@
 %% byte: the attempt fails with `{tls, Why}' and is dialled again with
 %% backoff like any other failure.
 %%
-%% Options: `max_queue', `backoff_min', `backoff_max', `connect_timeout'
-%% (TCP connect, TLS handshake and upgrade, default 5000 ms),
-%% `max_message' (largest message read, default 1 MiB), `cacertfile',
-%% `fingerprint'.
--module(toroco_live_rosclient).
+%% Options (`toroco_ros_client_opts', with the URL): `max_queue',
+%% `backoff_min', `backoff_max', `connect_timeout' (TCP connect, TLS
+%% handshake and upgrade, default 5000 ms), `max_message' (largest message
+%% read, default 1 MiB), `cacertfile', `fingerprint'.
+-module(toroco_ros_client).
 -behaviour(gen_statem).
 
--export([start_link/2, info/1, options/2, inbound/3]).
+-export([start_link/2, info/1, inbound/3]).
 -export([init/1, callback_mode/0, terminate/3, connecting/3, connected/3, waiting/3]).
 
 -export_type([opts/0, info/0]).
@@ -75,12 +75,10 @@
                   dropped := non_neg_integer(), refused := non_neg_integer(),
                   refused_topics := [binary()], last_error := term()}.
 
--define(DEFAULTS, #{max_queue => 1000, backoff_min => 250, backoff_max => 30000,
-                    connect_timeout => 5000, max_message => 1048576}).
 -define(REFRESH_MS, 2000).
 -define(SEND_TIMEOUT_MS, 5000).
 -define(MAX_RESPONSE_HEAD, 8192).
--define(LOG, #{domain => [toroco, live, rosbridge]}).
+-define(LOG, #{domain => [toroco, ros, client]}).
 
 -record(data, {url :: binary(),
                host :: string(),
@@ -111,7 +109,8 @@
 %% API
 %%====================================================================
 
-%% @doc A client of the server at `Url' (options checked by {@link options/2}).
+%% @doc A client of the server at `Url' (options checked by
+%% `toroco_ros_client_opts:options/2').
 -spec start_link(binary() | string(), opts()) -> {ok, pid()} | {error, term()}.
 start_link(Url, Opts) ->
     gen_statem:start_link(?MODULE, {Url, Opts}, []).
@@ -121,111 +120,17 @@ start_link(Url, Opts) ->
 info(Pid) ->
     gen_statem:call(Pid, info, 2000).
 
-%% @doc The URL parsed (the URL without its query, as shown, the host, the
-%% port, the resource asked for) and the options with their defaults (and
-%% `verify', how the certificate is checked), or the first thing wrong:
-%% `{bad_url, Url}', `{unsupported_scheme, S}', `{bad_option, {Key,
-%% Value}}', `{unverified_wss, Why}' (`wss://' without `cacertfile' nor
-%% `fingerprint'), `{tls_options_without_wss, Why}'.
--spec options(term(), term()) ->
-          {ok, {binary(), string(), inet:port_number(), binary()}, map()} | {error, term()}.
-options(Url, Opts) when is_map(Opts) ->
-    case parse_url(Url) of
-        {ok, {Scheme, Parsed}} ->
-            Bad = [{K, V} || {K, V} <- lists:sort(maps:to_list(Opts)), not option(K, V)],
-            case {Bad, verify(Scheme, Opts)} of
-                {[], {ok, Verify}} -> {ok, Parsed, maps:merge(?DEFAULTS, Opts#{verify => Verify})};
-                {[], {error, _} = E} -> E;
-                {[First | _], _} -> {error, {bad_option, First}}
-            end;
-        {error, _} = E -> E
-    end;
-options(_Url, Opts) ->
-    {error, {bad_option, Opts}}.
-
-option(K, V) when K =:= max_queue; K =:= backoff_min; K =:= backoff_max; K =:= connect_timeout;
-                  K =:= max_message ->
-    is_integer(V) andalso V > 0;
-option(cacertfile, F) -> (is_list(F) orelse is_binary(F)) andalso filelib:is_regular(F);
-option(fingerprint, F) -> pin(F) =/= error;
-option(_, _) -> false.
-
-%% How the server's certificate is checked: not at all for ws://; for
-%% wss:// against `cacertfile' or the pinned `fingerprint', and refused
-%% with neither (an unchecked certificate is no better than ws://).
-verify(<<"ws">>, Opts) ->
-    case maps:with([cacertfile, fingerprint], Opts) of
-        M when map_size(M) =:= 0 -> {ok, none};
-        _ -> {error, {tls_options_without_wss, <<"cacertfile and fingerprint are for wss:// URLs">>}}
-    end;
-verify(<<"wss">>, #{cacertfile := _, fingerprint := _}) ->
-    {error, {bad_option, {fingerprint, <<"give cacertfile or fingerprint, not both">>}}};
-verify(<<"wss">>, #{cacertfile := F}) ->
-    case application:ensure_all_started(ssl) of
-        {ok, _} -> {ok, {cacertfile, F}};
-        {error, Why} -> {error, {ssl_not_started, Why}}
-    end;
-verify(<<"wss">>, #{fingerprint := F}) ->
-    case application:ensure_all_started(ssl) of
-        {ok, _} -> {ok, {fingerprint, pin(F)}};
-        {error, Why} -> {error, {ssl_not_started, Why}}
-    end;
-verify(<<"wss">>, _) ->
-    {error, {unverified_wss, <<"wss:// needs the server's certificate checked: "
-                               "#{cacertfile => File} or #{fingerprint => Sha256}">>}}.
-
-%% A SHA-256 fingerprint: 32 bytes, or 64 hex digits (colons allowed, as
-%% openssl and scripts/tls-cert print it).
-pin(F) when is_binary(F), byte_size(F) =:= 32 -> F;
-pin(F) when is_list(F) -> pin(unicode:characters_to_binary(F));
-pin(F) when is_binary(F) ->
-    Hex = binary:replace(F, <<":">>, <<>>, [global]),
-    case byte_size(Hex) =:= 64 andalso
-        lists:all(fun(C) -> lists:member(C, "0123456789abcdefABCDEF") end, binary_to_list(Hex)) of
-        true -> binary:decode_hex(Hex);
-        false -> error
-    end;
-pin(_) -> error.
-
-parse_url(Url) when is_list(Url) ->
-    case unicode:characters_to_binary(Url) of
-        B when is_binary(B) -> parse_url(B);
-        _ -> {error, {bad_url, Url}}
-    end;
-parse_url(Url) when is_binary(Url) ->
-    case uri_string:parse(Url) of
-        #{scheme := Scheme, host := Host} = U when (Scheme =:= <<"ws">> orelse Scheme =:= <<"wss">>),
-                                                   Host =/= <<>> ->
-            Path = case maps:get(path, U, <<>>) of
-                       <<>> -> <<"/">>;
-                       P -> P
-                   end,
-            Resource = case U of
-                           #{query := Q} -> <<Path/binary, $?, Q/binary>>;
-                           #{} -> Path
-                       end,
-            %% what is shown (logs, /api/state, /metrics) leaves out the
-            %% query: it may hold a token
-            Shown = uri_string:recompose(maps:without([query, fragment], U)),
-            Default = case Scheme of <<"ws">> -> 80; <<"wss">> -> 443 end,
-            {ok, {Scheme, {Shown, binary_to_list(Host), maps:get(port, U, Default), Resource}}};
-        #{scheme := Scheme} -> {error, {unsupported_scheme, Scheme}};
-        _ -> {error, {bad_url, Url}}
-    end;
-parse_url(Url) ->
-    {error, {bad_url, Url}}.
-
 %% @doc Where a message from ROS enters the robot, as the rosbridge server
-%% does it: checked against its topic's type (`toroco_live_ros:normalise/1')
-%% and handed to the `ros' device (`toroco_live_ros_device:publish/3'),
+%% does it: checked against its topic's type (`toroco_ros_topics:normalise/1')
+%% and handed to the `ros' device (`toroco_ros_device:publish/3'),
 %% which emits it on the output of the topic's name (`/cmd_vel': the
 %% source `{ros, cmd_vel}').
 -spec inbound(binary(), binary(), term()) -> ok | {error, term()}.
 inbound(<<$/, Name/binary>> = Topic, Type, Msg) ->
-    case toroco_live_ros:normalise({Type, Msg}) of
+    case toroco_ros_topics:normalise({Type, Msg}) of
         {ok, M} ->
             try binary_to_existing_atom(Name, utf8) of
-                Output -> toroco_live_ros_device:publish(ros, Output, M)
+                Output -> toroco_ros_device:publish(ros, Output, M)
             catch error:badarg -> {error, {unknown_topic, Topic}}
             end;
         {error, _} = E -> E
@@ -243,7 +148,7 @@ callback_mode() -> [state_functions, state_enter].
 -spec init({term(), term()}) -> {ok, connecting, #data{}} | {stop, term()}.
 init({Url, Opts}) ->
     process_flag(trap_exit, true),
-    case options(Url, Opts) of
+    case toroco_ros_client_opts:options(Url, Opts) of
         {ok, {U, Host, Port, Resource}, Options} ->
             logger:notice("rosbridge client: connecting to ~ts", [U], ?LOG),
             %% one event at a time: each is a message to the remote end
@@ -315,7 +220,7 @@ connected(info, {Error, S, Why}, D = #data{socket = S}) when Error =:= tcp_error
     fail({Error, Why}, D);
 connected(info, {toroco_live_world, changed}, D) ->
     Snapshot = try toroco_live_world:latest() catch exit:_ -> none end,
-    publish_all(toroco_live_ros:of_world(Snapshot, erlang:system_time(nanosecond)), D);
+    publish_all(toroco_ros_topics:of_world(Snapshot, erlang:system_time(nanosecond)), D);
 connected({timeout, refresh}, refresh, D) ->
     with_socket(refresh(tap_on(D)), [{{timeout, refresh}, ?REFRESH_MS, refresh}]);
 connected(info, Msg, D = #data{tap = Tap}) ->
@@ -544,28 +449,25 @@ tap_off(D = #data{tap = Tap}) ->
 
 %% Advertise what appeared, unadvertise what went, subscribe to the inbound.
 refresh(D = #data{advertised = Adv, subscribed = Sub, refused_topics = Refused}) ->
-    Topics = try toroco_live_ros:topics() catch _:_ -> [] end,
+    Topics = try toroco_ros_topics:topics() catch _:_ -> [] end,
     Out = maps:from_list([{T, Ty} || #{topic := T, type := Ty, dir := out} <- Topics,
                                      not is_map_key(T, Refused)]),
     In = maps:from_list([{T, Ty} || #{topic := T, type := Ty, dir := in} <- Topics,
                                     not is_map_key(T, Refused)]),
-    Ops = [advertise_op(T, Ty) || {T, Ty} <- lists:sort(maps:to_list(Out)),
-                                  maps:get(T, Adv, none) =/= Ty]
-        ++ [#{op => unadvertise, topic => T} || T <- lists:sort(maps:keys(Adv)),
-                                                 not maps:is_key(T, Out)]
-        ++ [#{op => subscribe, id => <<"subscribe:", T/binary>>, topic => T, type => Ty}
+    Ops = [toroco_ros_protocol:advertise(T, Ty) || {T, Ty} <- lists:sort(maps:to_list(Out)),
+                                                  maps:get(T, Adv, none) =/= Ty]
+        ++ [toroco_ros_protocol:unadvertise(T) || T <- lists:sort(maps:keys(Adv)),
+                                                   not maps:is_key(T, Out)]
+        ++ [toroco_ros_protocol:subscribe(T, Ty)
             || {T, Ty} <- lists:sort(maps:to_list(In)), not maps:is_key(T, Sub)],
     send_ops(Ops, D#data{advertised = Out, subscribed = maps:merge(Sub, In)}).
-
-advertise_op(Topic, Type) ->
-    #{op => advertise, id => <<"advertise:", Topic/binary>>, topic => Topic, type => Type}.
 
 send_event({dropped, N}, D = #data{dropped = Dr}) ->
     {keep_state, D#data{dropped = Dr + N}};
 send_event({lifecycle, _, _, _}, D) ->
     with_socket(refresh(D), []);
 send_event(Event, D) ->
-    publish_all(try toroco_live_ros:of_event(Event) catch _:_ -> [] end, D).
+    publish_all(try toroco_ros_topics:of_event(Event) catch _:_ -> [] end, D).
 
 publish_all(Messages, D0) ->
     D = lists:foldl(fun({Topic, _, _}, Acc = #data{refused_topics = R}) when is_map_key(Topic, R) ->
@@ -573,7 +475,7 @@ publish_all(Messages, D0) ->
                        ({Topic, Type, Msg}, Acc = #data{advertised = Adv}) ->
                             Acc1 = case Adv of
                                        #{Topic := Type} -> Acc;
-                                       #{} -> send_ops([advertise_op(Topic, Type)],
+                                       #{} -> send_ops([toroco_ros_protocol:advertise(Topic, Type)],
                                                        Acc#data{advertised = Adv#{Topic => Type}})
                                    end,
                             publish(Topic, Msg, Acc1)
@@ -583,7 +485,7 @@ publish_all(Messages, D0) ->
 publish(_Topic, _Msg, D = #data{socket = none}) ->
     D;
 publish(Topic, Msg, D = #data{sent = N, dropped = Dr}) ->
-    case encode(#{op => publish, topic => Topic, msg => Msg}) of
+    case toroco_ros_protocol:encode(toroco_ros_protocol:publish(Topic, Msg)) of
         {ok, Json} ->
             case send(Json, D) of
                 D1 = #data{socket = none} -> D1#data{dropped = Dr + 1};
@@ -594,14 +496,9 @@ publish(Topic, Msg, D = #data{sent = N, dropped = Dr}) ->
 
 send_ops(Ops, D) ->
     lists:foldl(fun(Op, Acc) ->
-                        {ok, Json} = encode(Op),
+                        {ok, Json} = toroco_ros_protocol:encode(Op),
                         send(Json, Acc)
                 end, D, Ops).
-
-encode(Term) ->
-    try {ok, jiffy:encode(Term)}
-    catch _:_ -> error
-    end.
 
 %% A failed send closes the socket; the state function sees `socket = none'
 %% and goes to waiting (with_socket/2).
@@ -636,9 +533,8 @@ server_messages([_ | Rest], D) ->
 %% A server's op: a publish on a topic subscribed to enters the robot; a
 %% status is logged; anything else is not the client's business.
 server_op(Json, D = #data{subscribed = Sub, received = N, refused = Refused}) ->
-    case decode(Json) of
-        #{<<"op">> := <<"publish">>, <<"topic">> := Topic, <<"msg">> := Msg}
-          when is_map_key(Topic, Sub) ->
+    case toroco_ros_protocol:read(Json) of
+        {publish, Topic, Msg} when is_map_key(Topic, Sub) ->
             case inbound(Topic, maps:get(Topic, Sub), Msg) of
                 ok -> D#data{received = N + 1};
                 {error, Why} ->
@@ -646,13 +542,10 @@ server_op(Json, D = #data{subscribed = Sub, received = N, refused = Refused}) ->
                                 [D#data.url, Topic, Why], ?LOG),
                     D#data{received = N + 1, refused = Refused + 1}
             end;
-        #{<<"op">> := <<"status">>, <<"level">> := <<"error">>, <<"id">> := <<"advertise:", Topic/binary>>} = St ->
+        {refused, Topic, St} ->
             status(St, D),
             refuse_topic(Topic, D);
-        #{<<"op">> := <<"status">>, <<"level">> := <<"error">>, <<"id">> := <<"subscribe:", Topic/binary>>} = St ->
-            status(St, D),
-            refuse_topic(Topic, D);
-        #{<<"op">> := <<"status">>} = St ->
+        {status, St} ->
             status(St, D),
             D;
         _ ->
@@ -667,11 +560,6 @@ status(Status, D) ->
 %% again, on this connection.
 refuse_topic(Topic, D = #data{refused_topics = R}) ->
     D#data{refused_topics = R#{Topic => true}}.
-
-decode(Json) ->
-    try jiffy:decode(Json, [return_maps])
-    catch _:_ -> not_json
-    end.
 
 info(State, #data{url = Url, attempts = A, connects = C, sent = S, received = R,
                   dropped = Dr, refused = Rf, last_error = E, refused_topics = RT}) ->

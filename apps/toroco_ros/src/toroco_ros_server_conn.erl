@@ -1,7 +1,8 @@
-%% @doc One rosbridge client of the server (`toroco_live_rosbridge'): the
+%% @doc One rosbridge client of the server (`toroco_ros_server'): the
 %% protocol's side of a `toroco_live_ws_conn', the process that answered
 %% the WebSocket upgrade and owns the socket. JSON text frames, one
-%% rosbridge v2 operation each.
+%% rosbridge v2 operation each (`toroco_ros_protocol' builds and reads
+%% them).
 %%
 %% <ul>
 %% <li>`subscribe' (`topic', `id', `type', `throttle_rate' ms,
@@ -14,18 +15,14 @@
 %%     out as `fragment' operations (`id', `data', `num' from 0, `total').</li>
 %% <li>`advertise' / `unadvertise' / `publish': on the inbound topics
 %%     (`/cmd_vel'), checked against the topic's type
-%%     (`toroco_live_ros:normalise/1') and handed to the `ros' device
-%%     (`toroco_live_ros_device:publish/3') and to the topic's
+%%     (`toroco_ros_topics:normalise/1') and handed to the `ros' device
+%%     (`toroco_ros_device:publish/3') and to the topic's
 %%     subscribers; or on a topic the robot does not have, which the hub
-%%     relays to its subscribers (`toroco_live_rosbridge', relaying: how
+%%     relays to its subscribers (`toroco_ros_server', relaying: how
 %%     a robot in client mode shows its topics here). Publishing needs the
 %%     dashboard's token.</li>
-%% <li>`call_service' (`service', `args', `id'): `/rosapi/topics',
-%%     `/rosapi/topics_and_raw_types' (with each type's message definition,
-%%     `toroco_live_ros:definition/1', which Foxglove's Rosbridge connection
-%%     reads for ROS 2), `/rosapi/topic_type', `/rosapi/services',
-%%     `/rosapi/get_ros_version' (2, `jazzy': the types' distribution), `/toroco/inspect' (`args'
-%%     `{}' or `{"name": N}'), answered with `service_response'. None of
+%% <li>`call_service' (`service', `args', `id'): the services of
+%%     `toroco_ros_rosapi', answered with `service_response'. None of
 %%     them changes the robot, so none needs the token.</li>
 %% <li>`auth' (`mac' or `token': the dashboard's token; `?token=T' on the
 %%     URL does the same), `set_level' (`none', `error', `warning', `info':
@@ -38,9 +35,9 @@
 %% </ul>
 %% Topic and service names are taken with or without the leading slash.
 %% A subscription's `compression' may be `none' (JSON text), `cbor' (the
-%% publish operation as CBOR, a binary frame: `toroco_live_cbor') or
+%% publish operation as CBOR, a binary frame: `toroco_ros_cbor') or
 %% `cbor-raw' (CBOR with `msg' `{bytes, secs, nsecs}', the message's CDR
-%% bytes: `toroco_live_ros_msgs:cdr/2'; what Foxglove's Rosbridge connection asks
+%% bytes: `toroco_ros_msgs:cdr/2'; what Foxglove's Rosbridge connection asks
 %% for); any other (`png') is refused naming it, and so is any compression
 %% on another operation.
 %%
@@ -53,7 +50,7 @@
 %% (`?MAX_FAULTS') or stops reading (a send blocked `?SEND_TIMEOUT_MS') is
 %% disconnected; one that reads slowly loses messages (the hub counts them
 %% and tells it, a `warning').
--module(toroco_live_rosbridge_conn).
+-module(toroco_ros_server_conn).
 -behaviour(toroco_live_ws_conn).
 
 -export([serve/2]).
@@ -66,7 +63,7 @@
 -define(MAX_PENDING, 8).
 -define(MAX_FRAGMENTS, 10000).
 -define(FRAGMENT_MS, 10000).
--define(LOG, #{domain => [toroco, live, ros]}).
+-define(LOG, #{domain => [toroco, ros]}).
 -define(UNAUTHORIZED, "publishing needs the dashboard's token: connect with ?token=T on "
         "the URL or send {\"op\": \"auth\", \"mac\": T}; without it this connection may only "
         "subscribe and call the read-only services").
@@ -76,7 +73,7 @@
               last = none :: none | integer(),
               %% the last subscribe's: none, cbor or cbor_raw
               compression = none :: none | cbor | cbor_raw,
-              queue = [] :: [{binary(), binary(), toroco_live_ros:message()}],
+              queue = [] :: [{binary(), binary(), toroco_ros_topics:message()}],
               timer = none :: none | reference()}).
 
 -record(conn, {socket :: toroco_live_ws_conn:socket(),
@@ -97,7 +94,7 @@
 -spec serve(mochiweb_request:request(), map()) -> ok.
 serve(Req, Opts) ->
     Max = maps:get(max_message, Opts,
-                   application:get_env(toroco_live, rosbridge_max_message, ?MAX_MESSAGE)),
+                   application:get_env(toroco_ros, rosbridge_max_message, ?MAX_MESSAGE)),
     toroco_live_ws_conn:serve(Req, #{subprotocol => none, max => Max,
                                      endpoint => "a rosbridge v2 WebSocket endpoint"},
                               {?MODULE, {Max, toroco_live_http:peer(Req), toroco_live_http:token(Req)}}).
@@ -106,7 +103,7 @@ serve(Req, Opts) ->
            {pos_integer(), inet:ip_address() | unknown, binary() | none}) ->
           {ok, #conn{}} | {error, term()}.
 join(Socket, {Max, Peer, Token}) ->
-    case toroco_live_rosbridge:join() of
+    case toroco_ros_server:join() of
         ok -> {ok, #conn{socket = Socket, max = Max, peer = Peer,
                          authorized = authorize(Peer, Token) =:= true}};
         {error, _} = Error -> Error
@@ -128,7 +125,7 @@ handle_frame({binary, _}, C) ->
 
 -spec handle_framing_error(term(), #conn{}) -> toroco_live_ws_conn:result(#conn{}).
 handle_framing_error(too_big, C) ->
-    toroco_live_rosbridge:count(faults),
+    toroco_ros_server:count(faults),
     {ok, status(C, error, null,
                 io_lib:format("a message over the limit of ~b bytes: closing, the rest of "
                               "it cannot be read", [C#conn.max]))};
@@ -141,15 +138,15 @@ handle_info({flush, Topic}, C) ->
 handle_info({fragments_expired, Id, Ref}, C = #conn{fragments = F}) ->
     case F of
         #{Id := {Total, Got, _, Ref}} ->
-            toroco_live_rosbridge:count(fragments_expired),
-            Ms = application:get_env(toroco_live, rosbridge_fragment_ms, ?FRAGMENT_MS),
+            toroco_ros_server:count(fragments_expired),
+            Ms = application:get_env(toroco_ros, rosbridge_fragment_ms, ?FRAGMENT_MS),
             fault(C#conn{fragments = maps:remove(Id, F)}, Id,
                   io_lib:format("fragments of message ~ts never completed: ~b of ~b "
                                 "came in ~b ms; dropped", [text(Id), map_size(Got), Total, Ms]));
         #{} -> {ok, C}
     end;
 handle_info(Msg, C) ->
-    case toroco_live_rosbridge:receive_hub(Msg) of
+    case toroco_ros_server:receive_hub(Msg) of
         {ok, {message, Topic, Message}} -> {ok, message(Topic, Message, C)};
         {ok, {dropped, N}} ->
             {ok, status(C, warning, null,
@@ -209,26 +206,17 @@ publish_out(Topic, {Type, Json, Msg}, C = #conn{subs = Subs}) ->
     Sub = maps:get(Topic, Subs),
     case Sub#sub.compression of
         none ->
-            Text = iolist_to_binary([<<"{\"op\":\"publish\",\"topic\":">>, jiffy:encode(Topic),
-                                     <<",\"msg\":">>, Json, $}]),
+            Text = toroco_ros_protocol:publish_text(Topic, Json),
             case fragment_size(Sub) of
                 Size when is_integer(Size), byte_size(Text) > Size -> send_fragments(Text, Size, C);
                 _ -> send_text(C, Text)
             end;
         cbor ->
-            send_binary(C, toroco_live_cbor:encode(#{op => publish, topic => Topic, msg => Msg}));
+            send_binary(C, toroco_ros_protocol:cbor(toroco_ros_protocol:publish(Topic, Msg)));
         cbor_raw ->
-            %% As rosbridge does for ROS 2: the CDR bytes and the time.
-            #{sec := Sec, nanosec := Nsec} =
-                case Msg of
-                    #{header := #{stamp := Stamp}} -> Stamp;
-                    #{} -> toroco_live_ros:stamp(erlang:system_time(nanosecond))
-                end,
-            case toroco_live_ros_msgs:cdr(Type, Msg) of
-                {ok, Cdr} ->
-                    Raw = #{bytes => {bytes, Cdr}, secs => Sec, nsecs => Nsec},
-                    send_binary(C, toroco_live_cbor:encode(#{op => publish, topic => Topic,
-                                                             msg => Raw}));
+            case toroco_ros_protocol:publish_raw(Topic, Type, Msg) of
+                {ok, Op} ->
+                    send_binary(C, toroco_ros_protocol:cbor(Op));
                 {error, Why} ->
                     %% A relayed topic of a type this server cannot encode.
                     status(C, warning, null, [<<"cannot send ">>, Topic, <<" as cbor-raw: ">>,
@@ -236,43 +224,20 @@ publish_out(Topic, {Type, Json, Msg}, C = #conn{subs = Subs}) ->
             end
     end.
 
-%% Pieces cut at character boundaries, so each is a JSON string.
 send_fragments(Text, Size, C = #conn{out_id = N}) ->
-    Pieces = pieces(Text, Size, []),
     Id = <<"toroco_fragment_", (integer_to_binary(N))/binary>>,
-    Total = length(Pieces),
-    lists:foldl(fun({Num, P}, Acc) ->
-                        send_json(Acc, #{op => fragment, id => Id, data => P, num => Num,
-                                         total => Total})
-                end, C#conn{out_id = N + 1}, lists:zip(lists:seq(0, Total - 1), Pieces)).
-
-pieces(<<>>, _Size, Acc) -> lists:reverse(Acc);
-pieces(Text, Size, Acc) when byte_size(Text) =< Size -> lists:reverse([Text | Acc]);
-pieces(Text, Size, Acc) ->
-    Cut = boundary(Text, Size),
-    <<P:Cut/binary, Rest/binary>> = Text,
-    pieces(Rest, Size, [P | Acc]).
-
-%% The largest cut at or below Size not inside a UTF-8 sequence (at least
-%% one character, even if longer than Size).
-boundary(Text, Size) when Size > 0 ->
-    case binary:at(Text, Size) band 16#C0 of
-        16#80 -> boundary(Text, Size - 1);
-        _ -> Size
-    end;
-boundary(Text, 0) ->
-    <<Char/utf8, _/binary>> = Text,
-    byte_size(<<Char/utf8>>).
+    lists:foldl(fun(Op, Acc) -> send_json(Acc, Op) end, C#conn{out_id = N + 1},
+                toroco_ros_protocol:fragments(Text, Size, Id)).
 
 %%====================================================================
 %% From the client
 %%====================================================================
 
 text_message(Text, C) ->
-    case jiffy_decode(Text) of
-        #{<<"op">> := Op} = M when is_binary(Op) -> safe_op(Op, M, C);
-        not_json -> fault(C, null, <<"not JSON">>);
-        _ -> fault(C, null, <<"a JSON object with an \"op\" field was expected">>)
+    case toroco_ros_protocol:decode(Text) of
+        {ok, {Op, _, M}} -> safe_op(Op, M, C);
+        {error, not_json} -> fault(C, null, <<"not JSON">>);
+        {error, not_an_op} -> fault(C, null, <<"a JSON object with an \"op\" field was expected">>)
     end.
 
 %% A message this module did not foresee is a fault of the client's, logged,
@@ -308,21 +273,21 @@ op(<<"advertise">>, Id, M, C) ->
     with_topic(Id, M, C, fun(Topic) -> advertise(Id, Topic, M, C) end);
 op(<<"unadvertise">>, Id, M, C = #conn{advertised = A}) ->
     with_topic(Id, M, C, fun(Topic) ->
-                                 toroco_live_rosbridge:unadvertise(self(), Topic),
+                                 toroco_ros_server:unadvertise(self(), Topic),
                                  {ok, C#conn{advertised = maps:remove(Topic, A)}}
                          end);
 op(<<"publish">>, Id, M, C) ->
     with_topic(Id, M, C, fun(Topic) -> publish(Id, Topic, M, C) end);
 op(<<"call_service">>, Id, M, C) ->
     case maps:get(<<"service">>, M, null) of
-        S when is_binary(S), S =/= <<>> -> call_service(Id, slash(S), maps:get(<<"args">>, M, #{}), C);
+        S when is_binary(S), S =/= <<>> -> call_service(Id, toroco_ros_rosapi:slash(S), maps:get(<<"args">>, M, #{}), C);
         _ -> fault(C, Id, <<"call_service needs a \"service\" name">>)
     end;
 op(<<"service_response">>, Id, _M, C) ->
     fault(C, Id, [<<"no service call of this server waits for id ">>, text(Id),
                   <<": it calls no client services">>]);
 op(<<"set_level">>, Id, M, C) ->
-    case level(maps:get(<<"level">>, M, null)) of
+    case toroco_ros_protocol:level(maps:get(<<"level">>, M, null)) of
         {ok, L} -> {ok, C#conn{level = L}};
         error -> fault(C, Id, [<<"set_level: unknown level ">>, text(maps:get(<<"level">>, M, null)),
                                <<" (none, error, warning, info)">>])
@@ -330,12 +295,7 @@ op(<<"set_level">>, Id, M, C) ->
 op(<<"status">>, _Id, _M, C) ->
     {ok, C};
 op(<<"auth">>, Id, M, C) ->
-    Token = case M of
-                #{<<"token">> := T} when is_binary(T) -> T;
-                #{<<"mac">> := T} when is_binary(T) -> T;
-                _ -> none
-            end,
-    case authorize(C#conn.peer, Token) of
+    case authorize(C#conn.peer, toroco_ros_protocol:auth_token(M)) of
         true -> {ok, status(C#conn{authorized = true}, info, Id, <<"authorized: this connection may publish">>)};
         false -> fault(C, Id, <<"auth: not the dashboard's token">>);
         {limited, Ms} ->
@@ -352,20 +312,12 @@ op(Op, Id, _M, C) when Op =:= <<"advertise_service">>; Op =:= <<"unadvertise_ser
 op(Op, Id, _M, C) ->
     fault(C, Id, [<<"unknown op ">>, text(Op)]).
 
-level(<<"info">>) -> {ok, 1};
-level(<<"warning">>) -> {ok, 2};
-level(<<"error">>) -> {ok, 3};
-level(<<"none">>) -> {ok, 4};
-level(_) -> error.
-
 with_topic(Id, M, C, Fun) ->
     case maps:get(<<"topic">>, M, null) of
-        T when is_binary(T), T =/= <<>>, byte_size(T) =< 256 -> Fun(slash(T));
+        T when is_binary(T), T =/= <<>>, byte_size(T) =< 256 -> Fun(toroco_ros_rosapi:slash(T));
         _ -> fault(C, Id, <<"a \"topic\" name is needed">>)
     end.
 
-slash(<<$/, _/binary>> = Name) -> Name;
-slash(Name) -> <<$/, Name/binary>>.
 
 %% Subscription changes: at most ?MAX_SUB_CHANGES a second.
 rate(Id, C = #conn{window = {Start, N}}, Fun) ->
@@ -396,7 +348,7 @@ subscribe(Id, M, C = #conn{subs = Subs}) ->
                                  F -> F
                              end},
         Count = lists:sum([map_size(S#sub.ids) || S <- maps:values(Subs)]),
-        case {known_type(Topic), maps:get(<<"type">>, M, null)} of
+        case {toroco_ros_rosapi:topic_type(Topic), maps:get(<<"type">>, M, null)} of
             _ when Count >= ?MAX_SUBS ->
                 fault(C, Id, io_lib:format("at most ~b subscriptions per connection", [?MAX_SUBS]));
             {{error, _}, _} ->
@@ -419,7 +371,7 @@ int(_, Default) -> Default.
 add_sub(Topic, Id, Opts, Compression, C = #conn{subs = Subs}) ->
     Sub = case Subs of
               #{Topic := S} -> S;
-              #{} -> toroco_live_rosbridge:subscribe(self(), Topic), #sub{}
+              #{} -> toroco_ros_server:subscribe(self(), Topic), #sub{}
           end,
     C#conn{subs = Subs#{Topic => Sub#sub{ids = (Sub#sub.ids)#{Id => Opts},
                                          compression = Compression}}}.
@@ -434,7 +386,7 @@ unsubscribe(Id, M, C = #conn{subs = Subs}) ->
                       end,
                 case map_size(Ids) of
                     0 ->
-                        toroco_live_rosbridge:unsubscribe(self(), Topic),
+                        toroco_ros_server:unsubscribe(self(), Topic),
                         Sub#sub.timer =:= none orelse erlang:cancel_timer(Sub#sub.timer),
                         {ok, C#conn{subs = maps:remove(Topic, Subs)}};
                     _ ->
@@ -445,12 +397,6 @@ unsubscribe(Id, M, C = #conn{subs = Subs}) ->
                                              <<" with id ">>, text(Id)])}
         end
     end).
-
-known_type(Topic) ->
-    case [Ty || #{topic := T, type := Ty} <- toroco_live_rosbridge:topics(), T =:= Topic] of
-        [Type | _] -> {ok, Type};
-        [] -> {error, unknown_topic}
-    end.
 
 %% `pkg/Type' (as ROS 1 and many clients write it) is `pkg/msg/Type'; no
 %% type is the topic's.
@@ -467,18 +413,18 @@ same_type(_, _) -> false.
 %%--------------------------------------------------------------------
 
 inbound(Topic) ->
-    case [Ty || #{topic := T, type := Ty, dir := in} <- toroco_live_rosbridge:topics(), T =:= Topic] of
+    case [Ty || #{topic := T, type := Ty, dir := in} <- toroco_ros_server:topics(), T =:= Topic] of
         [Type | _] -> {ok, Type};
         [] -> error
     end.
 
 not_inbound(C, Id, Topic) ->
-    Inbound = [T || #{topic := T, dir := in} <- toroco_live_rosbridge:topics()],
+    Inbound = [T || #{topic := T, dir := in} <- toroco_ros_server:topics()],
     fault(C, Id, [<<"cannot publish on ">>, Topic, <<": the robot takes ">>,
                   lists:join(<<", ">>, Inbound)]).
 
 unauthorized(C, Id) ->
-    toroco_live_rosbridge:count(refused_unauthorized),
+    toroco_ros_server:count(refused_unauthorized),
     fault(C, Id, <<?UNAUTHORIZED>>).
 
 advertise(Id, _Topic, _M, C = #conn{authorized = false}) ->
@@ -500,9 +446,9 @@ publish(Id, Topic, M, C) ->
     case inbound(Topic) of
         error -> publish_relayed(Id, Topic, M, C);
         {ok, Type} ->
-            case toroco_live_ros:normalise({Type, maps:get(<<"msg">>, M, null)}) of
+            case toroco_ros_topics:normalise({Type, maps:get(<<"msg">>, M, null)}) of
                 {ok, Msg} ->
-                    toroco_live_rosbridge:relay(Topic, Type, Msg),
+                    toroco_ros_server:relay(Topic, Type, Msg),
                     hand_over(Id, Topic, Msg, C);
                 {error, {bad_field, Path}} ->
                     fault(C, Id, [<<"publish on ">>, Topic, <<": not a ">>, Type, <<": field ">>,
@@ -515,7 +461,7 @@ publish(Id, Topic, M, C) ->
 
 %% A topic the robot does not have, relayed by the hub to its subscribers.
 advertise_relayed(Id, Topic, Type, C = #conn{advertised = A}) when is_binary(Type), Type =/= <<>> ->
-    case toroco_live_rosbridge:advertise(self(), Topic, Type) of
+    case toroco_ros_server:advertise(self(), Topic, Type) of
         ok -> {ok, C#conn{advertised = A#{Topic => Type}}};
         {error, robot_topic} ->
             fault(C, Id, [<<"cannot advertise ">>, Topic, <<": the robot publishes it">>]);
@@ -530,7 +476,7 @@ advertise_relayed(Id, Topic, _Type, C) ->
 publish_relayed(Id, Topic, M, C = #conn{advertised = A}) ->
     case {A, maps:get(<<"msg">>, M, null)} of
         {#{Topic := Type}, Msg} when is_map(Msg) ->
-            toroco_live_rosbridge:relay(Topic, Type, Msg),
+            toroco_ros_server:relay(Topic, Type, Msg),
             {ok, C};
         {#{Topic := Type}, _} ->
             fault(C, Id, [<<"publish on ">>, Topic, <<": \"msg\" must be a ">>, Type, <<" object">>]);
@@ -540,81 +486,39 @@ publish_relayed(Id, Topic, M, C = #conn{advertised = A}) ->
 
 hand_over(Id, <<$/, Name/binary>> = Topic, Msg, C) ->
     Output = binary_to_existing_atom(Name),
-    case toroco_live_ros_device:publish(ros, Output, Msg) of
+    case toroco_ros_device:publish(ros, Output, Msg) of
         ok ->
-            toroco_live_rosbridge:count(published),
+            toroco_ros_server:count(published),
             {ok, C};
         {error, busy} ->
-            toroco_live_rosbridge:count(publish_dropped),
+            toroco_ros_server:count(publish_dropped),
             {ok, status(C, warning, Id, [<<"publish on ">>, Topic, <<" dropped: the robot is behind">>])};
         {error, {not_running, _}} ->
             fault(C, Id, [<<"publish on ">>, Topic, <<": no ros device runs; the wiring needs ">>,
-                          <<"{device, ros, toroco_live_ros_device, #{}}">>])
+                          <<"{device, ros, toroco_ros_device, #{}}">>])
     end.
 
 %%--------------------------------------------------------------------
 %% Services
 %%--------------------------------------------------------------------
 
--define(SERVICES, [<<"/rosapi/topics">>, <<"/rosapi/topics_and_raw_types">>,
-                   <<"/rosapi/topic_type">>, <<"/rosapi/services">>, <<"/rosapi/get_ros_version">>,
-                   <<"/toroco/inspect">>]).
-
 call_service(Id, Service, Args, C) ->
-    case service(Service, Args) of
+    case toroco_ros_rosapi:call(Service, Args) of
         {ok, Values} ->
-            {ok, send_json(C, #{op => service_response, id => Id, service => Service,
-                                values => Values, result => true})};
+            {ok, send_json(C, toroco_ros_protocol:service_response(Id, Service, Values, true))};
         {error, Why} ->
-            C1 = send_json(C, #{op => service_response, id => Id, service => Service,
-                                values => iolist_to_binary(Why), result => false}),
+            C1 = send_json(C, toroco_ros_protocol:service_response(Id, Service,
+                                                                    iolist_to_binary(Why), false)),
             fault(C1, Id, Why)
     end.
-
-service(<<"/rosapi/topics">>, _) ->
-    Topics = toroco_live_rosbridge:topics(),
-    {ok, #{topics => [T || #{topic := T} <- Topics], types => [Ty || #{type := Ty} <- Topics]}};
-service(<<"/rosapi/topics_and_raw_types">>, _) ->
-    Topics = toroco_live_rosbridge:topics(),
-    {ok, #{topics => [T || #{topic := T} <- Topics], types => [Ty || #{type := Ty} <- Topics],
-           typedefs_full_text => [toroco_live_ros:definition(Ty) || #{type := Ty} <- Topics]}};
-service(<<"/rosapi/topic_type">>, #{<<"topic">> := T}) when is_binary(T) ->
-    case known_type(slash(T)) of
-        {ok, Type} -> {ok, #{type => Type}};
-        {error, _} -> {ok, #{type => <<>>}}
-    end;
-service(<<"/rosapi/topic_type">>, _) ->
-    {error, <<"/rosapi/topic_type needs {\"topic\": T}">>};
-service(<<"/rosapi/get_ros_version">>, _) ->
-    %% The message types are Jazzy's (Range has `variance').
-    {ok, #{version => 2, distro => <<"jazzy">>}};
-service(<<"/rosapi/services">>, _) ->
-    {ok, #{services => ?SERVICES}};
-service(<<"/toroco/inspect">>, Args) when Args =:= #{}; Args =:= null; Args =:= [] ->
-    {ok, toroco_live_json:value(toroco:inspect())};
-service(<<"/toroco/inspect">>, #{<<"name">> := N}) when is_binary(N) ->
-    try binary_to_existing_atom(N) of
-        Name ->
-            case toroco:inspect(Name) of
-                #{} = Info -> {ok, toroco_live_json:value(Info)};
-                {error, _} -> {error, [<<"/toroco/inspect: no behavior or device ">>, N]}
-            end
-    catch error:badarg -> {error, [<<"/toroco/inspect: no behavior or device ">>, N]}
-    end;
-service(<<"/toroco/inspect">>, _) ->
-    {error, <<"/toroco/inspect takes {} or {\"name\": N}">>};
-service(Service, _) ->
-    {error, [<<"unknown service ">>, Service, <<" (call /rosapi/services)">>]}.
 
 %%--------------------------------------------------------------------
 %% Fragments in
 %%--------------------------------------------------------------------
 
 fragment(Id, M, C = #conn{fragments = F, max = Max}) ->
-    case M of
-        #{<<"data">> := Data, <<"num">> := Num, <<"total">> := Total}
-          when Id =/= null, is_binary(Data), is_integer(Num), is_integer(Total), Total > 0,
-               Total =< ?MAX_FRAGMENTS, Num >= 0, Num < Total ->
+    case toroco_ros_protocol:fragment(M) of
+        {ok, Num, Total, Data} when Id =/= null, Total =< ?MAX_FRAGMENTS ->
             Held = lists:sum([B || {_, _, B, _} <- maps:values(F)]),
             case F of
                 #{Id := {T, _, _, _}} when T =/= Total ->
@@ -629,7 +533,7 @@ fragment(Id, M, C = #conn{fragments = F, max = Max}) ->
                 #{} when map_size(F) >= ?MAX_PENDING ->
                     fault(C, Id, io_lib:format("at most ~b fragmented messages at once", [?MAX_PENDING]));
                 #{} ->
-                    Ms = application:get_env(toroco_live, rosbridge_fragment_ms, ?FRAGMENT_MS),
+                    Ms = application:get_env(toroco_ros, rosbridge_fragment_ms, ?FRAGMENT_MS),
                     Ref = make_ref(),
                     erlang:send_after(Ms, self(), {fragments_expired, Id, Ref}),
                     pieces_in(Id, Total, #{Num => Data}, byte_size(Data), Ref, C)
@@ -642,22 +546,17 @@ fragment(Id, M, C = #conn{fragments = F, max = Max}) ->
 pieces_in(Id, Total, Got, _Bytes, _Ref, C) when map_size(Got) =:= Total ->
     Whole = iolist_to_binary([maps:get(N, Got) || N <- lists:seq(0, Total - 1)]),
     C1 = drop_fragments(Id, C),
-    case jiffy_decode(Whole) of
-        #{<<"op">> := <<"fragment">>} -> fault(C1, Id, <<"fragments of fragments are not taken">>);
-        #{<<"op">> := Op} = M when is_binary(Op) -> safe_op(Op, M, C1);
-        _ -> fault(C1, Id, [<<"the fragments of message ">>, text(Id),
-                            <<" do not make a JSON object with an \"op\"">>])
+    case toroco_ros_protocol:decode(Whole) of
+        {ok, {<<"fragment">>, _, _}} -> fault(C1, Id, <<"fragments of fragments are not taken">>);
+        {ok, {Op, _, M}} -> safe_op(Op, M, C1);
+        {error, _} -> fault(C1, Id, [<<"the fragments of message ">>, text(Id),
+                                     <<" do not make a JSON object with an \"op\"">>])
     end;
 pieces_in(Id, Total, Got, Bytes, Ref, C = #conn{fragments = F}) ->
     {ok, C#conn{fragments = F#{Id => {Total, Got, Bytes, Ref}}}}.
 
 drop_fragments(Id, C = #conn{fragments = F}) ->
     C#conn{fragments = maps:remove(Id, F)}.
-
-jiffy_decode(Bin) ->
-    try jiffy:decode(Bin, [return_maps])
-    catch _:_ -> not_json
-    end.
 
 %%====================================================================
 %% Sending
@@ -667,33 +566,25 @@ text(B) when is_binary(B) -> binary:part(B, 0, min(200, byte_size(B)));
 text(Other) -> toroco_live_json:encode(toroco_live_json:value(Other)).
 
 fault(C = #conn{faults = N}, _Id, Msg) when N >= ?MAX_FAULTS ->
-    toroco_live_rosbridge:count(faults),
-    toroco_live_rosbridge:count(disconnected),
+    toroco_ros_server:count(faults),
+    toroco_ros_server:count(disconnected),
     logger:notice("rosbridge: a client was disconnected after ~b faults, the last: ~ts",
                   [N + 1, iolist_to_binary(Msg)], ?LOG),
     {close, 1008, too_many_faults,
      status(C, error, null, [<<"too many faults: disconnected; the last: ">>, Msg])};
 fault(C = #conn{faults = N}, Id, Msg) ->
-    toroco_live_rosbridge:count(faults),
+    toroco_ros_server:count(faults),
     {ok, status(C#conn{faults = N + 1}, error, Id, Msg)}.
 
 status(C = #conn{level = Min}, Level, Id, Msg) ->
-    case severity(Level) >= Min of
-        true ->
-            Base = #{op => status, level => Level, msg => iolist_to_binary(Msg)},
-            send_json(C, case Id of
-                             null -> Base;
-                             _ -> Base#{id => Id}
-                         end);
+    case toroco_ros_protocol:level(Level) >= {ok, Min} of
+        true -> send_json(C, toroco_ros_protocol:status(Level, Id, Msg));
         false -> C
     end.
 
-severity(info) -> 1;
-severity(warning) -> 2;
-severity(error) -> 3.
-
-send_json(C, Map) ->
-    send_text(C, jiffy:encode(Map)).
+send_json(C, Op) ->
+    {ok, Text} = toroco_ros_protocol:encode(Op),
+    send_text(C, Text).
 
 send_binary(C, Bin) ->
     send(C, toroco_live_ws_frame:frame(binary, Bin)).

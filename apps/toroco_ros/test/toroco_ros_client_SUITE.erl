@@ -4,7 +4,7 @@
 %% publishes on /cmd_vel), and this project's own server on a second node
 %% (OTP's `peer', on loopback, not connected to this one: two robots),
 %% used by roslib in Node.
--module(toroco_live_rosclient_SUITE).
+-module(toroco_ros_client_SUITE).
 -include_lib("common_test/include/ct.hrl").
 -compile([export_all, nowarn_export_all]).
 
@@ -19,7 +19,7 @@ all() ->
 suite() -> [{timetrap, {seconds, 90}}].
 
 init_per_suite(Config) ->
-    [{env, tl_live:start(#{})} | Config].
+    [{env, tl_live:start(#{}, [toroco_ros])} | Config].
 
 end_per_suite(Config) ->
     tl_live:stop(?config(env, Config)).
@@ -27,13 +27,13 @@ end_per_suite(Config) ->
 init_per_testcase(_Case, Config) ->
     tl_live:fake_robot(),
     %% the inbound topic /cmd_vel: the `ros' device's output, wired to motors
-    ok = toroco:add_device(ros, toroco_live_ros_device, #{}),
+    ok = toroco:add_device(ros, toroco_ros_device, #{}),
     ok = toroco:add_device(motors, toroco_fake_actuator, #{inputs => [setvel]}),
     ok = toroco:set_inputs(motors, #{setvel => [{ros, cmd_vel}]}),
     Config.
 
 end_per_testcase(_Case, _Config) ->
-    [ok = toroco_live:rosbridge_disconnect(P) || P <- toroco_live_rosclient_sup:clients()],
+    [ok = toroco_live:rosbridge_disconnect(P) || P <- toroco_ros_client_sup:clients()],
     ok = toroco_live:stop(),
     toroco_test_lib:clear().
 
@@ -66,7 +66,7 @@ advertises_publishes_and_drives(_Config) ->
     #{<<"term">> := <<"{near,7}">>} = jiffy:decode(Data, [return_maps]),
     %% a Twist from there drives the robot here
     Twist = #{linear => #{x => 0.125, y => 0, z => 0}, angular => #{x => 0, y => 0, z => 0.5}},
-    {ok, Wheels} = toroco_live_ros:twist_to_wheels(Twist, toroco_live_ros:geometry()),
+    {ok, Wheels} = toroco_ros_topics:twist_to_wheels(Twist, toroco_ros_topics:geometry()),
     send_op(S, #{op => publish, topic => <<"/cmd_vel">>, msg => Twist}),
     ok = toroco_fake_actuator:await(motors, fun(H) -> lists:keymember(Wheels, 2, H) end, 5000),
     %% one that does not fit, and one on a topic not subscribed: nothing moves
@@ -234,7 +234,7 @@ wss_checked_by_ca_or_fingerprint(Config) ->
     {ok, ByAddress} = toroco_live:rosbridge_connect(Url("127.0.0.1"), Ca),
     await_state([ByName, ByAddress], connected),
     %% the server took both as its clients
-    2 = maps:get(connections, toroco_live_rosbridge:stats()),
+    2 = maps:get(connections, toroco_ros_server:stats()),
     [ok = toroco_live:rosbridge_disconnect(P) || P <- [ByName, ByAddress]],
     ok = toroco_live:stop(),
     %% self-signed, pinned
@@ -271,14 +271,14 @@ wss_refuses_a_certificate_that_does_not_match(Config) ->
     [{tls, {fingerprint_mismatch, _}}] =
         [E || #{last_error := E = {tls, {fingerprint_mismatch, _}}} <- Infos],
     %% the server saw no WebSocket client: nothing was sent past the handshake
-    0 = maps:get(connections, toroco_live_rosbridge:stats(), 0),
+    0 = maps:get(connections, toroco_ros_server:stats(), 0),
     [ok = toroco_live:rosbridge_disconnect(P) || P <- [Ca, Pin]],
     ok = toroco_live:stop().
 
 await_state(Pids, State) ->
     toroco_live_test_client:wait(
       fun() ->
-              Now = [S || P <- Pids, #{state := S} <- [toroco_live_rosclient:info(P)]],
+              Now = [S || P <- Pids, #{state := S} <- [toroco_ros_client:info(P)]],
               Now =:= [State || _ <- Pids]
       end, 15000).
 
@@ -353,7 +353,7 @@ own_server_on_another_node(_Config) ->
         %% the robot here keeps emitting while roslib looks there
         Injector = spawn_link(fun() -> inject_loop(0) end),
         Twist = #{linear => #{x => 0.1, y => 0.0, z => 0.0}, angular => #{x => 0.0, y => 0.0, z => -0.4}},
-        {ok, Wheels} = toroco_live_ros:twist_to_wheels(Twist, toroco_live_ros:geometry()),
+        {ok, Wheels} = toroco_ros_topics:twist_to_wheels(Twist, toroco_ros_topics:geometry()),
         R = toroco_live_js:run("roslib_peer.js", [url_there(RosPort, Token), "/toroco/out/s/dist",
                                                   binary_to_list(jiffy:encode(Twist)), "10"]),
         unlink(Injector),
@@ -374,28 +374,28 @@ own_server_on_another_node(_Config) ->
     end.
 
 app_env_dials() ->
-    [{doc, "The app env rosbridge_connect ({Url, Opts}, or a list) dials when toroco_live "
-      "starts, under toroco_live_rosclient_sup; a URL it cannot use (wss) does not keep "
+    [{doc, "The app env rosbridge_connect ({Url, Opts}, or a list) dials when toroco_ros "
+      "starts, under toroco_ros_client_sup; a URL it cannot use (wss) does not keep "
       "the application from starting"}].
 app_env_dials(_Config) ->
     {L, Port} = listen(),
-    ok = application:stop(toroco_live),
-    ok = application:set_env(toroco_live, rosbridge_connect,
+    ok = application:stop(toroco_ros),
+    ok = application:set_env(toroco_ros, rosbridge_connect,
                              [{url(Port, "/"), #{backoff_min => 20}}, "wss://nowhere/"]),
     try
-        ok = application:start(toroco_live),
+        ok = application:start(toroco_ros),
         {S, _, P} = accept(L),
         {_, _, _} = recv_op(S, P, fun(#{<<"op">> := <<"subscribe">>}) -> true; (_) -> false end),
-        [Pid] = toroco_live_rosclient_sup:clients(),
-        [{_, Pid, worker, _}] = supervisor:which_children(toroco_live_rosclient_sup),
-        {_, Sup, supervisor, _} = lists:keyfind(toroco_live_rosclient_sup, 1,
-                                                supervisor:which_children(toroco_live_sup)),
-        Sup = whereis(toroco_live_rosclient_sup),
+        [Pid] = toroco_ros_client_sup:clients(),
+        [{_, Pid, worker, _}] = supervisor:which_children(toroco_ros_client_sup),
+        {_, Sup, supervisor, _} = lists:keyfind(toroco_ros_client_sup, 1,
+                                                supervisor:which_children(toroco_ros_sup)),
+        Sup = whereis(toroco_ros_client_sup),
         gen_tcp:close(S)
     after
-        application:unset_env(toroco_live, rosbridge_connect),
-        ok = application:stop(toroco_live),
-        ok = application:start(toroco_live),
+        application:unset_env(toroco_ros, rosbridge_connect),
+        ok = application:stop(toroco_ros),
+        ok = application:start(toroco_ros),
         gen_tcp:close(L)
     end.
 
@@ -413,10 +413,10 @@ start_server_node(Token) ->
     {ok, Peer, _} = peer:start_link(#{connection => standard_io, args => ["-pa" | Paths]}),
     ok = peer:call(Peer, application, load, [toroco_live]),
     ok = peer:call(Peer, application, set_env, [toroco_live, enabled, false]),
-    {ok, _} = peer:call(Peer, application, ensure_all_started, [toroco_live], 30000),
+    {ok, _} = peer:call(Peer, application, ensure_all_started, [toroco_ros], 30000),
     {ok, #{rosbridge := Port}} =
         peer:call(Peer, toroco_live, start, [#{http => 0, foxglove => off, rosbridge => 0, token => Token}]),
-    ok = peer:call(Peer, toroco, add_device, [ros, toroco_live_ros_device, #{}]),
+    ok = peer:call(Peer, toroco, add_device, [ros, toroco_ros_device, #{}]),
     {Peer, Port}.
 
 %%====================================================================
