@@ -38,6 +38,9 @@
 
 -include("toroco_wire.hrl").
 
+%% How the shell reaches this module's data and events (toroco_shell:host()).
+-define(HOST, {fun shell/1, fun shell/2, fun event/4}).
+
 -export([start_link/3, rewire/4, ready/2, info/2, call/4]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3]).
 
@@ -45,6 +48,10 @@
 -export_type([key/0]).
 -type core_event() :: term().
 -type kind_data() :: term().
+-type batch() :: toroco_tap:batch().
+%% What a kind does with an event of its own: core events to run, gen_statem
+%% actions (a call's reply among them), its data and the tap's batch.
+-type handled() :: {[core_event()], [gen_statem:action()], kind_data(), batch()}.
 
 %% The kind of consumer: `router' or `gate'.
 -callback kind() -> router | gate.
@@ -52,31 +59,37 @@
 -callback reg(key()) -> atom().
 %% Its data at start, from its configuration in the wiring table.
 -callback init(key(), Cfg :: map()) -> kind_data().
-%% One event into the core, and what comes out sent on.
--callback run(core_event(), Now :: integer(), kind_data()) -> kind_data().
+%% One event into the core, and what comes out sent on; what it taps for
+%% the observer goes into the batch (the shell's, sent when the event is
+%% handled: toroco_tap:after_event/3).
+-callback run(core_event(), Now :: integer(), kind_data(), batch()) -> {kind_data(), batch()}.
 %% After a batch of events (a router reports its state to the tap here).
--callback settled(kind_data()) -> kind_data().
+-callback settled(kind_data(), batch()) -> {kind_data(), batch()}.
 %% The core's earliest hold deadline.
 -callback deadline(kind_data()) -> infinity | integer().
 %% A finished re-wiring, into the core at once.
 -callback rewired(Cfg :: map(), Synced :: [{key(), toroco_router_core:latch()}],
-                  Reset :: [key()], Now :: integer(), kind_data()) -> kind_data().
+                  Reset :: [key()], Now :: integer(), kind_data(), batch()) ->
+    {kind_data(), batch()}.
 %% The core events of an answer that came after the wait (or from the
 %% caller of the wiring change).
 -callback late(key(), toroco_router_core:latch() | inhibited) -> [core_event()].
-%% Messages and calls of its own: `{events, CoreEvents, Data}', `{reply,
-%% Reply, CoreEvents, Data}' (calls), or `unknown'.
--callback handle(gen_statem:event_type(), term(), kind_data()) ->
-    {events, [core_event()], kind_data()} | {reply, term(), [core_event()], kind_data()} | unknown.
+%% Messages, calls (answered with a `reply' action) and timeouts of its
+%% own, or `unknown'.
+-callback handle(gen_statem:event_type(), term(), kind_data(), batch()) -> handled() | unknown.
 %% The inspection view.
 -callback info(Now :: integer(), kind_data()) -> term().
-%% The observer tap's events it keeps, not sent yet (toroco_tap:after_event/3).
--callback tap_batch(kind_data()) -> toroco_tap:batch().
--callback tap_batch(toroco_tap:batch(), kind_data()) -> kind_data().
 
 -record(c, {mod :: module(),
             key :: key(),
             data :: kind_data(),
+            %% the kind's event path callbacks, made once at start: external
+            %% funs, so a code reload of the kind takes effect at the next call
+            run :: fun((core_event(), integer(), kind_data(), batch()) -> {kind_data(), batch()}),
+            settled :: fun((kind_data(), batch()) -> {kind_data(), batch()}),
+            deadline :: fun((kind_data()) -> infinity | integer()),
+            %% lockstep, the idle tick, the tap's batch, the simulated hold timer
+            shell :: toroco_shell:shell(),
             links = toroco_wire:new_links() :: toroco_wire:links(),
             timer = infinity :: infinity | integer(),
             %% remote sources: when each was last heard (monotonic ms), its
@@ -86,7 +99,6 @@
             stale = [] :: [key()],
             stale_at = infinity :: infinity | integer(),
             tries = 0 :: non_neg_integer(),
-            idle = off :: toroco_wire:idle(),
             sync = none :: none | {toroco_wire:sync(), gen_statem:from() | none, map()}}).
 
 %%====================================================================
@@ -140,7 +152,9 @@ init({Mod, Key, Caller}) ->
     case toroco_wiring:lookup({Mod:kind(), Key}) of
         {ok, Cfg} ->
             ok = toroco_lockstep:up(Mod:reg(Key), consumer),
-            C = #c{mod = Mod, key = Key, data = Mod:init(Key, Cfg), idle = toroco_wire:idle_arm()},
+            C = #c{mod = Mod, key = Key, data = Mod:init(Key, Cfg), run = fun Mod:run/4,
+                   settled = fun Mod:settled/2, deadline = fun Mod:deadline/1,
+                   shell = toroco_shell:new()},
             {St, C1, Actions} = start_sync(Cfg, Caller, none, C),
             toroco_lockstep:ready(Mod:reg(Key)),
             {ok, St, C1, Actions};
@@ -152,42 +166,31 @@ init({Mod, Key, Caller}) ->
 
 -spec handle_event(gen_statem:event_type(), term(), ready | syncing | gone, #c{} | none) ->
           gen_statem:event_handler_result(ready | syncing | gone).
-%% Every event, then what becomes of the kind's tapped events
-%% (toroco_tap:after_event/3). In lockstep a barrier is answered at once,
-%% and a death is handed to toroco_lockstep, to come back as a step.
-handle_event(info, ?WIRE_BARRIER(Ref), _, _) ->
-    toroco_lockstep:synced(Ref),
-    keep_state_and_data;
+%% Lockstep, the idle tick and the tap's batch are the shell's
+%% (toroco_shell); the rest comes to event/4. In lockstep a death is handed
+%% to toroco_lockstep, to come back as a step, and the deaths a step
+%% caused are handed over before it is done.
+handle_event(internal, gone, gone, none) ->
+    {stop, normal};
 handle_event(info, {'DOWN', _, process, _, _} = Down, St, C) ->
     case toroco_lockstep:down(Down) of
         true -> keep_state_and_data;
-        false -> tap_after(event(info, Down, St, C), C)
+        false -> toroco_shell:handle_event(info, Down, St, C, ?HOST)
     end;
-handle_event(Type, Content, St, C) ->
-    tap_after(event(Type, Content, St, C), C).
-
-event(internal, gone, gone, none) ->
-    {stop, normal};
-%% Lockstep (toroco_lockstep): one message of the event path, or the hold
-%% timer, as a step; the step is done once the events it inserts are handled.
-event(info, ?WIRE_STEP(Token, ?WIRE_TIMER(Kind, Msg)), St, C) ->
-    toroco_wire:step_done(Token, event(Kind, Msg, St, C));
-event(info, ?WIRE_STEP(Token, Msg), St, C) ->
-    toroco_wire:step_done(Token, event(info, Msg, St, C));
-event(internal, ?WIRE_STEP_DONE(Token), _, _) ->
+handle_event(internal, ?WIRE_STEP_DONE(_) = Done, St, C) ->
     %% a monitor the step set on a process already gone has its DOWN here
     %% now: it is handed over before the step is done, not at a moment
     %% that depends on the schedulers
     hand_over_downs(),
-    toroco_lockstep:done(Token),
-    keep_state_and_data;
-%% The idle tick (toroco_wire:idle_arm/0); the first event after
-%% hibernating arms it again.
-event(info, ?WIRE_IDLE, _, C = #c{idle = Idle}) ->
-    {Idle1, Actions} = toroco_wire:idle_tick(Idle),
-    {keep_state, C#c{idle = Idle1}, Actions};
-event(Type, Content, St, C = #c{idle = off}) ->
-    event(Type, Content, St, C#c{idle = toroco_wire:idle_arm()});
+    toroco_shell:handle_event(internal, Done, St, C, ?HOST);
+handle_event(Type, Content, St, C) ->
+    toroco_shell:handle_event(Type, Content, St, C, ?HOST).
+
+shell(#c{shell = Sh}) -> Sh.
+
+shell(Sh, C) -> C#c{shell = Sh}.
+
+%% The event path.
 %% The event path.
 event(info, ?WIRE_EVENT(Src, Op), St, C = #c{heard = H}) when map_size(H) =:= 0 ->
     op(emitter, Src, Op, St, C);
@@ -265,9 +268,6 @@ event({call, From}, {rewire, Cfg, Caller}, ready, C) ->
     end;
 event({call, From}, ready, ready, _C) ->
     {keep_state_and_data, [{reply, From, ok}]};
-%% The kind's tapped events are due (toroco_tap:after_event/3).
-event({timeout, '$toroco_tap'}, flush, _, C = #c{mod = Mod, data = D}) ->
-    {keep_state, C#c{data = Mod:tap_batch(toroco_tap:flush(Mod:tap_batch(D)), D)}};
 %% The observer tap, and whatever is the kind's own.
 event(Type, Content, _, C) ->
     kind(Type, Content, C).
@@ -303,8 +303,8 @@ flush_downs() ->
 -spec terminate(term(), ready | syncing | gone, #c{} | none) -> ok.
 terminate(_Reason, gone, none) ->
     ok;
-terminate(_Reason, _, C = #c{links = L, mod = Mod, data = D}) ->
-    _ = toroco_tap:flush(Mod:tap_batch(D)),
+terminate(_Reason, _, C = #c{links = L, shell = Sh}) ->
+    _ = toroco_shell:flush(Sh),
     toroco_wire:detach_all(L, me(C)).
 
 %%====================================================================
@@ -331,63 +331,35 @@ late(Tag, Src, Pid, Latch, _St, C = #c{links = L, mod = Mod}) ->
         ignore -> keep_state_and_data
     end.
 
-kind(Type, Content, C = #c{mod = Mod, data = D}) ->
-    case Mod:handle(Type, Content, D) of
-        {events, Events, D1} -> steps(Events, C#c{data = D1});
-        {reply, Reply, Events, D1} ->
-            {call, From} = Type,
-            add_actions([{reply, From, Reply}], steps(Events, C#c{data = D1}));
+kind(Type, Content, C = #c{mod = Mod, data = D, shell = Sh}) ->
+    case Mod:handle(Type, Content, D, toroco_shell:batch(Sh)) of
+        {Events, [], D1, B} -> steps(Events, C#c{data = D1, shell = toroco_shell:batch(B, Sh)});
+        {Events, Actions, D1, B} ->
+            add_actions(Actions, steps(Events, C#c{data = D1, shell = toroco_shell:batch(B, Sh)}));
         unknown ->
             logger:warning("toroco: ~p ~p: unexpected ~p event ~p",
                            [Mod:kind(), C#c.key, Type, Content], #{domain => [toroco, wire]}),
             keep_state_and_data
     end.
 
-steps([Event], C = #c{mod = Mod, data = D0}) ->
+steps([Event], C = #c{run = Run, data = D0, shell = Sh}) ->
     %% the event path: one event at a time
-    settle(Mod:run(Event, toroco_clock:now_ms(), D0), C);
-steps(Events, C = #c{mod = Mod, data = D0}) ->
+    settle(Run(Event, toroco_clock:now_ms(), D0, toroco_shell:batch(Sh)), C);
+steps(Events, C = #c{run = Run, data = D0, shell = Sh}) ->
     Now = toroco_clock:now_ms(),
-    settle(lists:foldl(fun(E, Acc) -> Mod:run(E, Now, Acc) end, D0, Events), C).
+    settle(lists:foldl(fun(E, {D, B}) -> Run(E, Now, D, B) end, {D0, toroco_shell:batch(Sh)},
+                       Events), C).
 
-settle(D0, C = #c{mod = Mod}) ->
-    D = Mod:settled(D0),
-    case timer(C#c{data = D}) of
+settle({D0, B0}, C = #c{settled = Settled, shell = Sh}) ->
+    {D, B} = Settled(D0, B0),
+    case timer(C#c{data = D, shell = toroco_shell:batch(B, Sh)}) of
         {C1, []} -> {keep_state, C1};
         {C1, Actions} -> {keep_state, C1, Actions}
     end.
 
-timer(C = #c{mod = Mod, data = D, timer = T}) ->
-    {T1, Actions} = toroco_wire:hold_timer(Mod:deadline(D), T),
-    {C#c{timer = T1}, Actions}.
-
-%% After an event, with the data the result carries (or the data before
-%% the event if it carries none).
-tap_after({keep_state, C}, C0) -> tapped(none, C, [], C0, {keep_state, C});
-tap_after({keep_state, C, A}, C0) -> tapped(none, C, A, C0, {keep_state, C, A});
-tap_after({next_state, St, C}, C0) -> tapped(St, C, [], C0, {next_state, St, C});
-tap_after({next_state, St, C, A}, C0) -> tapped(St, C, A, C0, {next_state, St, C, A});
-tap_after(keep_state_and_data = R, C0 = #c{}) -> tapped(none, C0, [], C0, R);
-tap_after({keep_state_and_data, A} = R, C0 = #c{}) -> tapped(none, C0, A, C0, R);
-tap_after(R, _) -> R.
-
-tapped(St, C = #c{mod = Mod, data = D}, A0, C0, R) ->
-    case Mod:tap_batch(D) of
-        [] -> R;
-        B ->
-            case toroco_tap:after_event(Mod:tap_batch(C0#c.data) =/= [], B, false) of
-                keep -> R;
-                {B1, More} ->
-                    C1 = C#c{data = Mod:tap_batch(B1, D)},
-                    A = case is_list(A0) of true -> A0; false -> [A0] end,
-                    case St of
-                        none -> {keep_state, C1, More ++ A};
-                        _ -> {next_state, St, C1, More ++ A}
-                    end
-            end
-    end;
-tapped(_St, _C, _A, _C0, R) ->
-    R.
+timer(C = #c{deadline = Deadline, data = D, timer = T, shell = Sh}) ->
+    {T1, Actions, Sh1} = toroco_shell:hold(Deadline(D), T, Sh),
+    {C#c{timer = T1, shell = Sh1}, Actions}.
 
 add_actions(More, {keep_state, C}) -> {keep_state, C, More};
 add_actions(More, {keep_state, C, Actions}) -> {keep_state, C, More ++ Actions}.
@@ -415,10 +387,11 @@ maybe_finish(C = #c{sync = {Sync, _, _}}) ->
 
 %% The whole change enters the core at once; the wiring server's call is
 %% answered; postponed events follow (leaving `syncing' replays them).
-finish(C = #c{sync = {Sync, From, Cfg}, links = L, mod = Mod, data = D}) ->
+finish(C = #c{sync = {Sync, From, Cfg}, links = L, mod = Mod, data = D, shell = Sh}) ->
     {L1, Synced, Reset} = toroco_wire:finish_sync(Sync, L),
-    D1 = Mod:settled(Mod:rewired(Cfg, Synced, Reset, toroco_clock:now_ms(), D)),
-    {C1, Actions} = timer(C#c{links = L1, data = D1, sync = none,
+    {D1, B} = Mod:rewired(Cfg, Synced, Reset, toroco_clock:now_ms(), D, toroco_shell:batch(Sh)),
+    {D2, B1} = (C#c.settled)(D1, B),
+    {C1, Actions} = timer(C#c{links = L1, data = D2, sync = none, shell = toroco_shell:batch(B1, Sh),
                               ages = ages(Cfg), stale = C#c.stale -- Reset}),
     Reply = case From of
                 none -> [];
