@@ -114,9 +114,8 @@
             on_input :: fun((atom(), term(), term(), term()) -> result()) | undefined,
             on_event = none :: fun((gen_statem:event_type(), term(), term(), term()) -> result())
                              | none,
-            %% declared output -> the addresses of its consumers
-            outputs = #{} :: #{atom() => [toroco_wire:address()]},
-            latches = #{} :: #{atom() => term()},
+            %% the outputs: their consumers and latches
+            emitter :: toroco_emitter:emitter() | undefined,
             inputs = [] :: [atom()],
             suspended = false :: boolean(),
             queued = [] :: [{gen_statem:event_type(), term()}],
@@ -127,14 +126,11 @@
             %% names of the generic timeouts the callback module has set, so
             %% that a reset cancels them
             timers = [] :: [term()],
-            %% emissions on undeclared outputs: when last logged, how many since
-            undeclared = {never, 0} :: {never | integer(), non_neg_integer()},
-            %% open ports (interface/1's `open'): an output comes into being
-            %% when it is emitted on or subscribed to
+            %% open ports (interface/1's `open'): the wiring's inputs are its
+            %% inputs too
             open = false :: boolean()}).
 
 -define(LOG, #{domain => [toroco, engine]}).
--define(WARN_INTERVAL_MS, 1000).
 %% The runtime's own calls (toroco:inject/3, info/1, suspend/1, resume/1,
 %% reset_behavior/1).
 -define(IS_CONTROL(Req), (Req =:= '$toroco_info' orelse Req =:= '$toroco_suspend'
@@ -233,9 +229,11 @@ init(#{kind := Kind, name := Name, module := M, layer := Layer, args := Args}) -
             {Ins, Outs} = ports(Name, I, Planned),
             Subs = maps:from_list([{O, [toroco_wire:address(R) || R <- maps:get(O, Planned, [])]}
                                    || O <- Outs]),
+            Open = maps:get(open, I, false),
+            Tap = tap(toroco_tap:current(), Name),
             E = bind(#e{name = Name, kind = Kind, module = M, layer = Layer, args = Args,
-                        outputs = Subs, inputs = Ins, open = maps:get(open, I, false),
-                        tap = tap(toroco_tap:current(), Name), shell = toroco_shell:new()}),
+                        emitter = toroco_emitter:tap(Tap, toroco_emitter:new(Name, Subs, Open)),
+                        inputs = Ins, open = Open, tap = Tap, shell = toroco_shell:new()}),
             toroco_tap:lifecycle(E#e.tap, Name, toroco_restarts:started(Name)),
             ok = toroco_lockstep:up(Name, case Kind of
                                               behavior -> Layer;
@@ -277,11 +275,8 @@ bind(E = #e{module = M}) ->
 
 %% Announces this incarnation: consumers drop whatever they had of the last
 %% one; input routers re-deliver their latched winners.
-announce(#e{name = Name, outputs = Outs, inputs = Ins, kind = Kind}) ->
-    maps:foreach(fun(Out, Consumers) ->
-                         [toroco_wire:send(C, ?WIRE_HELLO(emitter, {Name, Out}, self()))
-                          || C <- Consumers]
-                 end, Outs),
+announce(#e{name = Name, emitter = Em, inputs = Ins, kind = Kind}) ->
+    toroco_emitter:announce(Em),
     receiver_up(Name, case Kind of behavior -> [?RESET | Ins]; device -> Ins end).
 
 %% The inputs: declared, and for open ports those the wiring names now.
@@ -327,8 +322,9 @@ shell(#e{shell = Sh}) -> Sh.
 shell(Sh, E) -> E#e{shell = Sh}.
 
 %% The observer tap changed: keep the sinks that concern this process.
-event(info, ?WIRE_TAP(Subs), _S, E = #e{name = Name}) ->
-    {keep_state, E#e{tap = tap(Subs, Name)}};
+event(info, ?WIRE_TAP(Subs), _S, E = #e{name = Name, emitter = Em}) ->
+    Tap = tap(Subs, Name),
+    {keep_state, E#e{tap = Tap, emitter = toroco_emitter:tap(Tap, Em)}};
 %% The event path: one input delivered by a router.
 event(info, ?WIRE_IN(Input, V), S, E) ->
     delivered(Input, V, none, S, E);
@@ -336,12 +332,13 @@ event(info, ?WIRE_IN(Input, V, Router), S, E) ->
     delivered(Input, V, Router, S, E);
 %% Wiring: consumers attach and detach (see toroco_wire); those on other
 %% nodes hear from each output now and then.
-event(info, ?WIRE_SUB(Src, Consumer), _S, E) ->
-    subscribed(Src, Consumer, E);
-event(info, ?WIRE_UNSUB(Src, Consumer), _S, E) ->
-    unsubscribed(Src, Consumer, E);
-event({timeout, '$toroco_alive'}, beat, _S, E) ->
-    beat(E);
+event(info, ?WIRE_SUB(Src, Consumer), _S, E = #e{emitter = Em}) ->
+    {Em1, Actions} = toroco_emitter:subscribed(Src, Consumer, Em),
+    {keep_state, E#e{emitter = Em1}, Actions};
+event(info, ?WIRE_UNSUB(Src, Consumer), _S, E = #e{emitter = Em}) ->
+    {keep_state, E#e{emitter = toroco_emitter:unsubscribed(Src, Consumer, Em)}};
+event({timeout, '$toroco_alive'}, beat, _S, #e{emitter = Em}) ->
+    {keep_state_and_data, toroco_emitter:beat(Em)};
 %% The runtime's calls.
 event({call, From}, Req, S, E) when ?IS_CONTROL(Req) ->
     control(Req, From, S, E);
@@ -358,49 +355,10 @@ delivered(Input, V, Router, S, E = #e{suspended = Suspended}) ->
     _ = Router =:= none orelse toroco_wire:send(Router, ?WIRE_ACK(Input)),
     R.
 
-subscribed({_, Out} = Src, Consumer, E = #e{outputs = Outs, open = true})
-  when not is_map_key(Out, Outs) ->
-    subscribed(Src, Consumer, E#e{outputs = Outs#{Out => []}});
-subscribed({_, Out} = Src, Consumer, E = #e{outputs = Outs}) ->
-    case Outs of
-        #{Out := Consumers} ->
-            toroco_wire:send(Consumer, ?WIRE_STATE(emitter, Src, self(), latch(Out, E))),
-            E1 = E#e{outputs = Outs#{Out := lists:usort([Consumer | Consumers])}},
-            case toroco_wire:remote(Consumer) andalso not has_remote(E) of
-                true -> {keep_state, E1, [alive_timer()]};
-                false -> {keep_state, E1}
-            end;
-        #{} ->
-            toroco_wire:send(Consumer, ?WIRE_STATE(emitter, Src, self(), none)),
-            keep_state_and_data
-    end.
-
-unsubscribed({_, Out}, Consumer, E = #e{outputs = Outs}) ->
-    case Outs of
-        #{Out := Consumers} ->
-            {keep_state, E#e{outputs = Outs#{Out := lists:delete(Consumer, Consumers)}}};
-        #{} -> keep_state_and_data
-    end.
-
-%% Consumers on other nodes hear from each output now and then, with its
-%% latch, so they can tell a silent node from a quiet output (SPEC §13).
-beat(E = #e{outputs = Outs, name = Name}) ->
-    maps:foreach(fun(Out, Consumers) ->
-                         Msg = ?WIRE_ALIVE(emitter, {Name, Out}, latch(Out, E)),
-                         [toroco_wire:send(C, Msg) || C <- Consumers, toroco_wire:remote(C)]
-                 end, Outs),
-    case has_remote(E) of
-        true -> {keep_state_and_data, [alive_timer()]};
-        false -> keep_state_and_data
-    end.
-
-control({'$toroco_inject', Out, Op}, From, S, E = #e{outputs = Outs, open = true})
-  when not is_map_key(Out, Outs), is_atom(Out) ->
-    control({'$toroco_inject', Out, Op}, From, S, E#e{outputs = Outs#{Out => []}});
-control({'$toroco_inject', Out, Op}, From, _S, E = #e{outputs = Outs, name = N}) ->
-    case Outs of
-        #{Out := _} -> {keep_state, emit(Out, Op, E), [{reply, From, ok}]};
-        #{} -> {keep_state_and_data, [{reply, From, {error, {unknown_output, {N, Out}}}}]}
+control({'$toroco_inject', Out, Op}, From, _S, E = #e{emitter = Em, name = N}) ->
+    case toroco_emitter:has(Out, Em) of
+        true -> {keep_state, emit(Out, Op, E), [{reply, From, ok}]};
+        false -> {keep_state_and_data, [{reply, From, {error, {unknown_output, {N, Out}}}}]}
     end;
 control('$toroco_reset', From, _S, E = #e{kind = behavior}) ->
     case reset(E) of
@@ -487,9 +445,9 @@ input(Input, V, S, E = #e{on_input = Handle, user = UD}) ->
 
 %% Brooks' reset: the behavior's latches and holds are cleared, then it starts
 %% again from init/1 in the same process.
-reset(E0 = #e{outputs = Outs}) ->
-    E = lifecycle(reset, E0),
-    E1 = lists:foldl(fun(Out, Acc) -> emit(Out, unset, Acc) end, E, maps:keys(Outs)),
+reset(E0) ->
+    E = #e{emitter = Em, shell = Sh} = lifecycle(reset, E0),
+    E1 = emitted(toroco_emitter:unset(all, Em, Sh), E),
     {Cancel, E1a} = actions([{state_timeout, cancel} | [{{timeout, T}, cancel} || T <- E1#e.timers]],
                             E1),
     case start_user(E1a#e{timers = []}) of
@@ -536,24 +494,23 @@ actions(A, E) -> actions([A], E, []).
 
 actions([], E, Acc) ->
     {lists:reverse(Acc), E};
-actions([{send, Map} | T], E, Acc) when is_map(Map) ->
-    actions(T, emit_all(Map, default, E), Acc);
+actions([{send, Map} | T], E = #e{emitter = Em, shell = Sh}, Acc) when is_map(Map) ->
+    actions(T, emitted(toroco_emitter:send(Map, default, Em, Sh), E), Acc);
 actions([{send, Map, Opts} = A | T], E, Acc) when is_map(Map), is_map(Opts) ->
     case maps:get(hold, Opts, default) of
         H when H =:= default; H =:= infinity; is_integer(H), H >= 0 ->
-            actions(T, emit_all(Map, H, E), Acc);
+            actions(T, emitted(toroco_emitter:send(Map, H, E#e.emitter, E#e.shell), E), Acc);
         H ->
             logger:error("toroco: ~p emitted ~p with a bad hold ~p; dropped",
                          [E#e.name, A, H], ?LOG#{name => E#e.name}),
             actions(T, E, Acc)
     end;
-actions([{set, Map} | T], E, Acc) when is_map(Map) ->
-    actions(T, emit_each(maps:to_list(Map), set, E), Acc);
-actions([{unset, Outs} | T], E, Acc) when is_list(Outs) ->
-    actions(T, lists:foldl(fun(Out, EAcc) -> emit(Out, unset, EAcc) end, E, Outs), Acc);
-actions([unset | T], E = #e{outputs = Outs}, Acc) ->
-    actions(T, lists:foldl(fun(Out, EAcc) -> emit(Out, unset, EAcc) end, E,
-                           maps:keys(Outs)), Acc);
+actions([{set, Map} | T], E = #e{emitter = Em, shell = Sh}, Acc) when is_map(Map) ->
+    actions(T, emitted(toroco_emitter:set(Map, Em, Sh), E), Acc);
+actions([{unset, Outs} | T], E = #e{emitter = Em, shell = Sh}, Acc) when is_list(Outs) ->
+    actions(T, emitted(toroco_emitter:unset(Outs, Em, Sh), E), Acc);
+actions([unset | T], E = #e{emitter = Em, shell = Sh}, Acc) ->
+    actions(T, emitted(toroco_emitter:unset(all, Em, Sh), E), Acc);
 actions([{redeliver, Ins} | T], E = #e{name = Name}, Acc) when is_list(Ins) ->
     Declared = inputs(E),
     receiver_up(Name, [I || I <- Ins, lists:member(I, Declared)]),
@@ -582,52 +539,13 @@ timer_named(Name, E = #e{timers = Ts}) ->
         false -> E#e{timers = [Name | Ts]}
     end.
 
-%% A list of the map's pairs, walked without a fun: an action's map has one
-%% or two outputs, where an iterator costs more than the walk.
-emit_all(Map, Hold, E) ->
-    emit_each(maps:to_list(Map), Hold, E).
+%% Emissions go through the emitter (toroco_emitter), their observer's
+%% events into the shell.
+emit(Out, Op, E = #e{emitter = Em, shell = Sh}) ->
+    emitted(toroco_emitter:emit(Out, Op, Em, Sh), E).
 
-emit_each([], _How, E) -> E;
-emit_each([{Out, V} | T], set, E) -> emit_each(T, set, emit(Out, {set, V}, E));
-emit_each([{Out, V} | T], Hold, E) -> emit_each(T, Hold, emit(Out, {send, V, Hold}, E)).
-
-%% One emission on one output: to every consumer, in order; the latch follows.
-emit(Out, Op, E = #e{outputs = Outs, name = Name}) ->
-    case Outs of
-        #{Out := Consumers} ->
-            send_all(Consumers, ?WIRE_EVENT({Name, Out}, Op)),
-            case E#e.tap of
-                #{emit := Sinks} ->
-                    Sh = toroco_shell:tap(Sinks, emit_event(Name, Out, Op), E#e.shell),
-                    relatch(Out, Op, E#e{shell = Sh});
-                #{} ->
-                    relatch(Out, Op, E)
-            end;
-        #{} when E#e.open, is_atom(Out) ->
-            emit(Out, Op, E#e{outputs = Outs#{Out => []}});
-        #{} ->
-            undeclared(Out, E)
-    end.
-
-%% An emission on an undeclared output is dropped, and said at most once a
-%% second per behavior, with how many were held back since.
-undeclared(Out, E = #e{name = Name, undeclared = {Last, Held}}) ->
-    Now = erlang:monotonic_time(millisecond),
-    case Last =:= never orelse Now - Last >= ?WARN_INTERVAL_MS of
-        true ->
-            logger:warning("toroco: ~p emitted on undeclared output ~p; dropped~ts",
-                           [Name, Out, case Held of
-                                           0 -> "";
-                                           _ -> io_lib:format(" (~b more since the last warning)", [Held])
-                                       end], ?LOG#{name => Name}),
-            E#e{undeclared = {Now, 0}};
-        false ->
-            E#e{undeclared = {Last, Held + 1}}
-    end.
-
-emit_event(Name, Out, {send, V, _Hold}) -> {emit, toroco_tap:timestamp(), {Name, Out}, send, V};
-emit_event(Name, Out, {set, V}) -> {emit, toroco_tap:timestamp(), {Name, Out}, set, V};
-emit_event(Name, Out, unset) -> {emit, toroco_tap:timestamp(), {Name, Out}, unset, none}.
+emitted({Em, Sh}, E) ->
+    E#e{emitter = Em, shell = Sh}.
 
 tap(Subs, Name) ->
     toroco_tap:select(Subs, [emit, lifecycle], Name).
@@ -640,40 +558,15 @@ lifecycle(What, E = #e{tap = Tap, name = Name, shell = Sh}) ->
 flushed(E = #e{shell = Sh}) ->
     E#e{shell = toroco_shell:flush(Sh)}.
 
-send_all([], _Msg) -> ok;
-send_all([C | Cs], Msg) ->
-    toroco_wire:send(C, Msg),
-    send_all(Cs, Msg).
-
-has_remote(#e{outputs = Outs}) ->
-    lists:any(fun toroco_wire:remote/1, lists:append(maps:values(Outs))).
-
-alive_timer() ->
-    {{timeout, '$toroco_alive'}, toroco_wire:keepalive_ms(), beat}.
-
-relatch(Out, {set, V}, E = #e{latches = L}) ->
-    E#e{latches = L#{Out => V}};
-relatch(Out, _, E = #e{latches = L}) ->
-    case L of
-        #{Out := _} -> E#e{latches = maps:remove(Out, L)};
-        #{} -> E
-    end.
-
-latch(Out, #e{latches = L}) ->
-    case L of
-        #{Out := V} -> {value, V};
-        #{} -> none
-    end.
-
-describe(S, #e{kind = Kind, module = M, layer = L, latches = Latches, suspended = Susp,
-               user = UD, open = Open, outputs = Outs}) ->
+describe(S, #e{kind = Kind, module = M, layer = L, emitter = Em, suspended = Susp,
+               user = UD, open = Open}) ->
     {message_queue_len, Q} = erlang:process_info(self(), message_queue_len),
-    Base0 = #{kind => Kind, module => M, layer => L, latches => Latches,
+    Base0 = #{kind => Kind, module => M, layer => L, latches => toroco_emitter:latches(Em),
               status => case Susp of true -> suspended; false -> running end,
               state => S, mailbox => Q},
     %% open ports: the outputs it has come to have
     Base = case Open of
-               true -> Base0#{outputs => maps:keys(Outs)};
+               true -> Base0#{outputs => toroco_emitter:outputs(Em)};
                false -> Base0
            end,
     case erlang:function_exported(M, info, 2) of

@@ -48,10 +48,10 @@
 -export_type([key/0]).
 -type core_event() :: term().
 -type kind_data() :: term().
--type batch() :: toroco_tap:batch().
+-type shell() :: toroco_shell:shell().
 %% What a kind does with an event of its own: core events to run, gen_statem
-%% actions (a call's reply among them), its data and the tap's batch.
--type handled() :: {[core_event()], [gen_statem:action()], kind_data(), batch()}.
+%% actions (a call's reply among them), its data and the shell.
+-type handled() :: {[core_event()], [gen_statem:action()], kind_data(), shell()}.
 
 %% The kind of consumer: `router' or `gate'.
 -callback kind() -> router | gate.
@@ -59,24 +59,24 @@
 -callback reg(key()) -> atom().
 %% Its data at start, from its configuration in the wiring table.
 -callback init(key(), Cfg :: map()) -> kind_data().
-%% One event into the core, and what comes out sent on; what it taps for
-%% the observer goes into the batch (the shell's, sent when the event is
-%% handled: toroco_tap:after_event/3).
--callback run(core_event(), Now :: integer(), kind_data(), batch()) -> {kind_data(), batch()}.
+%% One event into the core, and what comes out sent on. What it taps for
+%% the observer it taps into the shell (`toroco_shell:tap/3'), which sends
+%% it once the event is handled (toroco_tap:after_event/3).
+-callback run(core_event(), Now :: integer(), kind_data(), shell()) -> {kind_data(), shell()}.
 %% After a batch of events (a router reports its state to the tap here).
--callback settled(kind_data(), batch()) -> {kind_data(), batch()}.
+-callback settled(kind_data(), shell()) -> {kind_data(), shell()}.
 %% The core's earliest hold deadline.
 -callback deadline(kind_data()) -> infinity | integer().
 %% A finished re-wiring, into the core at once.
 -callback rewired(Cfg :: map(), Synced :: [{key(), toroco_router_core:latch()}],
-                  Reset :: [key()], Now :: integer(), kind_data(), batch()) ->
-    {kind_data(), batch()}.
+                  Reset :: [key()], Now :: integer(), kind_data(), shell()) ->
+    {kind_data(), shell()}.
 %% The core events of an answer that came after the wait (or from the
 %% caller of the wiring change).
 -callback late(key(), toroco_router_core:latch() | inhibited) -> [core_event()].
 %% Messages, calls (answered with a `reply' action) and timeouts of its
 %% own, or `unknown'.
--callback handle(gen_statem:event_type(), term(), kind_data(), batch()) -> handled() | unknown.
+-callback handle(gen_statem:event_type(), term(), kind_data(), shell()) -> handled() | unknown.
 %% The inspection view.
 -callback info(Now :: integer(), kind_data()) -> term().
 
@@ -85,8 +85,8 @@
             data :: kind_data(),
             %% the kind's event path callbacks, made once at start: external
             %% funs, so a code reload of the kind takes effect at the next call
-            run :: fun((core_event(), integer(), kind_data(), batch()) -> {kind_data(), batch()}),
-            settled :: fun((kind_data(), batch()) -> {kind_data(), batch()}),
+            run :: fun((core_event(), integer(), kind_data(), shell()) -> {kind_data(), shell()}),
+            settled :: fun((kind_data(), shell()) -> {kind_data(), shell()}),
             deadline :: fun((kind_data()) -> infinity | integer()),
             %% lockstep, the idle tick, the tap's batch, the simulated hold timer
             shell :: toroco_shell:shell(),
@@ -332,10 +332,10 @@ late(Tag, Src, Pid, Latch, _St, C = #c{links = L, mod = Mod}) ->
     end.
 
 kind(Type, Content, C = #c{mod = Mod, data = D, shell = Sh}) ->
-    case Mod:handle(Type, Content, D, toroco_shell:batch(Sh)) of
-        {Events, [], D1, B} -> steps(Events, C#c{data = D1, shell = toroco_shell:batch(B, Sh)});
-        {Events, Actions, D1, B} ->
-            add_actions(Actions, steps(Events, C#c{data = D1, shell = toroco_shell:batch(B, Sh)}));
+    case Mod:handle(Type, Content, D, Sh) of
+        {Events, [], D1, Sh1} -> steps(Events, C#c{data = D1, shell = Sh1});
+        {Events, Actions, D1, Sh1} ->
+            add_actions(Actions, steps(Events, C#c{data = D1, shell = Sh1}));
         unknown ->
             logger:warning("toroco: ~p ~p: unexpected ~p event ~p",
                            [Mod:kind(), C#c.key, Type, Content], #{domain => [toroco, wire]}),
@@ -344,15 +344,14 @@ kind(Type, Content, C = #c{mod = Mod, data = D, shell = Sh}) ->
 
 steps([Event], C = #c{run = Run, data = D0, shell = Sh}) ->
     %% the event path: one event at a time
-    settle(Run(Event, toroco_clock:now_ms(), D0, toroco_shell:batch(Sh)), C);
+    settle(Run(Event, toroco_clock:now_ms(), D0, Sh), C);
 steps(Events, C = #c{run = Run, data = D0, shell = Sh}) ->
     Now = toroco_clock:now_ms(),
-    settle(lists:foldl(fun(E, {D, B}) -> Run(E, Now, D, B) end, {D0, toroco_shell:batch(Sh)},
-                       Events), C).
+    settle(lists:foldl(fun(E, {D, Sh1}) -> Run(E, Now, D, Sh1) end, {D0, Sh}, Events), C).
 
-settle({D0, B0}, C = #c{settled = Settled, shell = Sh}) ->
-    {D, B} = Settled(D0, B0),
-    case timer(C#c{data = D, shell = toroco_shell:batch(B, Sh)}) of
+settle({D0, Sh0}, C = #c{settled = Settled}) ->
+    {D, Sh} = Settled(D0, Sh0),
+    case timer(C#c{data = D, shell = Sh}) of
         {C1, []} -> {keep_state, C1};
         {C1, Actions} -> {keep_state, C1, Actions}
     end.
@@ -389,9 +388,9 @@ maybe_finish(C = #c{sync = {Sync, _, _}}) ->
 %% answered; postponed events follow (leaving `syncing' replays them).
 finish(C = #c{sync = {Sync, From, Cfg}, links = L, mod = Mod, data = D, shell = Sh}) ->
     {L1, Synced, Reset} = toroco_wire:finish_sync(Sync, L),
-    {D1, B} = Mod:rewired(Cfg, Synced, Reset, toroco_clock:now_ms(), D, toroco_shell:batch(Sh)),
-    {D2, B1} = (C#c.settled)(D1, B),
-    {C1, Actions} = timer(C#c{links = L1, data = D2, sync = none, shell = toroco_shell:batch(B1, Sh),
+    {D1, Sh1} = Mod:rewired(Cfg, Synced, Reset, toroco_clock:now_ms(), D, Sh),
+    {D2, Sh2} = (C#c.settled)(D1, Sh1),
+    {C1, Actions} = timer(C#c{links = L1, data = D2, sync = none, shell = Sh2,
                               ages = ages(Cfg), stale = C#c.stale -- Reset}),
     Reply = case From of
                 none -> [];

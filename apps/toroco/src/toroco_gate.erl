@@ -58,57 +58,57 @@ init(_Key, #{subs := Subs}) ->
 
 %% @doc Feeds one event to the core and forwards what comes out. A gate
 %% taps nothing: the batch passes.
--spec run(term(), integer(), #g{}, toroco_tap:batch()) -> {#g{}, toroco_tap:batch()}.
-run(Event, Now, D = #g{core = C, subs = Subs}, B) ->
+-spec run(term(), integer(), #g{}, toroco_shell:shell()) -> {#g{}, toroco_shell:shell()}.
+run(Event, Now, D = #g{core = C, subs = Subs}, Sh) ->
     {C1, Fwd} = toroco_gate_core:handle(Event, Now, C),
     _ = [toroco_wire:send(R, ?WIRE_GATED(M, Op)) || {M, Op} <- Fwd, R <- maps:get(M, Subs, [])],
-    {D#g{core = C1}, B}.
+    {D#g{core = C1}, Sh}.
 
--spec settled(#g{}, toroco_tap:batch()) -> {#g{}, toroco_tap:batch()}.
-settled(D, B) -> {D, B}.
+-spec settled(#g{}, toroco_shell:shell()) -> {#g{}, toroco_shell:shell()}.
+settled(D, Sh) -> {D, Sh}.
 
 -spec deadline(#g{}) -> infinity | integer().
 deadline(#g{core = C}) -> toroco_gate_core:next_deadline(C).
 
 %% Subscribers that attached on their own stay; the planned ones are added.
 -spec rewired(map(), [{{atom(), atom()}, toroco_router_core:latch()}], [{atom(), atom()}],
-              integer(), #g{}, toroco_tap:batch()) -> {#g{}, toroco_tap:batch()}.
+              integer(), #g{}, toroco_shell:shell()) -> {#g{}, toroco_shell:shell()}.
 rewired(#{members := Members, entries := Entries, subs := Planned}, Synced, Reset, Now,
-        D = #g{subs = Old}, B) ->
+        D = #g{subs = Old}, Sh) ->
     Subs = maps:from_list(
              [{M, lists:usort([toroco_wire:address(R) || R <- maps:get(M, Planned, [])]
                               ++ maps:get(M, Old, []))}
               || M <- Members]),
-    run({rewire, Members, Entries, Synced, Reset}, Now, D#g{subs = Subs}, B).
+    run({rewire, Members, Entries, Synced, Reset}, Now, D#g{subs = Subs}, Sh).
 
 -spec late({atom(), atom()}, toroco_router_core:latch() | inhibited) -> [term()].
 late(Src, {value, V}) -> [{op, Src, {set, V}}];
 late(_Src, _NoLatch) -> [].
 
--spec handle(gen_statem:event_type(), term(), #g{}, toroco_tap:batch()) ->
-          {[], [gen_statem:action()], #g{}, toroco_tap:batch()} | unknown.
-handle(info, ?WIRE_SUB(Src, Consumer), D = #g{core = C, subs = Subs}, B) ->
+-spec handle(gen_statem:event_type(), term(), #g{}, toroco_shell:shell()) ->
+          {[], [gen_statem:action()], #g{}, toroco_shell:shell()} | unknown.
+handle(info, ?WIRE_SUB(Src, Consumer), D = #g{core = C, subs = Subs}, Sh) ->
     case lists:member(Src, toroco_gate_core:members(C)) of
         true ->
             State = member_state(Src, C),
             toroco_wire:send(Consumer, ?WIRE_STATE(gate, Src, self(), State)),
             D1 = D#g{subs = Subs#{Src => lists:usort([Consumer | maps:get(Src, Subs, [])])}},
-            beat(D1, B);
+            beat(D1, Sh);
         false ->
             toroco_wire:send(Consumer, ?WIRE_STATE(gate, Src, self(), none)),
-            {[], [], D, B}
+            {[], [], D, Sh}
     end;
-handle(info, ?WIRE_UNSUB(Src, Consumer), D = #g{subs = Subs}, B) ->
-    {[], [], D#g{subs = Subs#{Src => lists:delete(Consumer, maps:get(Src, Subs, []))}}, B};
-handle({timeout, '$toroco_alive'}, beat, D = #g{core = C, subs = Subs}, B) ->
+handle(info, ?WIRE_UNSUB(Src, Consumer), D = #g{subs = Subs}, Sh) ->
+    {[], [], D#g{subs = Subs#{Src => lists:delete(Consumer, maps:get(Src, Subs, []))}}, Sh};
+handle({timeout, '$toroco_alive'}, beat, D = #g{core = C, subs = Subs}, Sh) ->
     %% Remote subscribers hear from each member now and then, with what
     %% they would get on subscribing (SPEC §13).
     maps:foreach(fun(M, Consumers) ->
                          Msg = ?WIRE_ALIVE(gate, M, member_state(M, C)),
                          [toroco_wire:send(R, Msg) || R <- Consumers, toroco_wire:remote(R)]
                  end, Subs),
-    beat(D#g{beating = false}, B);
-handle(_Type, _Content, _D, _B) ->
+    beat(D#g{beating = false}, Sh);
+handle(_Type, _Content, _D, _Sh) ->
     unknown.
 
 member_state(M, C) ->
@@ -120,13 +120,13 @@ member_state(M, C) ->
 %% The keep-alive, while there are remote subscribers: a named gen_statem
 %% timeout in real time (as the emitters' is: it is about the network, not
 %% the robot's time), set once and again when it fires.
-beat(D = #g{beating = true}, B) -> {[], [], D, B};
-beat(D = #g{subs = Subs}, B) ->
+beat(D = #g{beating = true}, Sh) -> {[], [], D, Sh};
+beat(D = #g{subs = Subs}, Sh) ->
     case lists:any(fun toroco_wire:remote/1, lists:append(maps:values(Subs))) of
         true ->
             {[], [{{timeout, '$toroco_alive'}, toroco_wire:keepalive_ms(), beat}],
-             D#g{beating = true}, B};
-        false -> {[], [], D, B}
+             D#g{beating = true}, Sh};
+        false -> {[], [], D, Sh}
     end.
 
 -spec info(integer(), #g{}) -> #{{atom(), atom()} => map()}.

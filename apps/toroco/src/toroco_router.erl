@@ -72,55 +72,55 @@ init(Key = {R, I}, _Cfg) ->
     end.
 
 %% @doc Feeds one event to the core and delivers what comes out.
--spec run(term(), integer(), #r{}, toroco_tap:batch()) -> {#r{}, toroco_tap:batch()}.
-run(Event, Now, D = #r{core = C}, B) ->
+-spec run(term(), integer(), #r{}, toroco_shell:shell()) -> {#r{}, toroco_shell:shell()}.
+run(Event, Now, D = #r{core = C}, Sh) ->
     {C1, Out} = toroco_router_core:handle(Event, Now, C),
-    deliver(Out, D#r{core = C1}, B).
+    deliver(Out, D#r{core = C1}, Sh).
 
 %% @doc Tells the tap's subscribers when the winner, holds or latches changed.
--spec settled(#r{}, toroco_tap:batch()) -> {#r{}, toroco_tap:batch()}.
-settled(D = #r{tap = #{router := Sinks}, core = C, view = Old, key = Key}, B) ->
+-spec settled(#r{}, toroco_shell:shell()) -> {#r{}, toroco_shell:shell()}.
+settled(D = #r{tap = #{router := Sinks}, core = C, view = Old, key = Key}, Sh) ->
     case toroco_router_core:view(C) of
-        Old -> {D, B};
+        Old -> {D, Sh};
         View ->
             Info = toroco_router_core:info(C, toroco_clock:now_ms()),
-            Event = {router, toroco_tap:timestamp(), Key, maps:with([winner, holds, latches], Info)},
-            {D#r{view = View}, toroco_tap:tap(Sinks, Event, B)}
+            Event = {router, stamp, Key, maps:with([winner, holds, latches], Info)},
+            {D#r{view = View}, toroco_shell:tap(Sinks, Event, Sh)}
     end;
-settled(D, B) ->
-    {D, B}.
+settled(D, Sh) ->
+    {D, Sh}.
 
 -spec deadline(#r{}) -> infinity | integer().
 deadline(#r{core = C}) -> toroco_router_core:next_deadline(C).
 
 -spec rewired(map(), [{{atom(), atom()}, toroco_router_core:latch()}], [{atom(), atom()}],
-              integer(), #r{}, toroco_tap:batch()) -> {#r{}, toroco_tap:batch()}.
-rewired(#{sources := Srcs, buffer := Buf, idle := Idle}, Synced, Reset, Now, D, B) ->
-    run({rewire, Srcs, #{idle => Idle}, Synced, Reset}, Now, D#r{buffer = Buf}, B).
+              integer(), #r{}, toroco_shell:shell()) -> {#r{}, toroco_shell:shell()}.
+rewired(#{sources := Srcs, buffer := Buf, idle := Idle}, Synced, Reset, Now, D, Sh) ->
+    run({rewire, Srcs, #{idle => Idle}, Synced, Reset}, Now, D#r{buffer = Buf}, Sh).
 
 -spec late({atom(), atom()}, toroco_router_core:latch() | inhibited) -> [term()].
 late(_Src, inhibited) -> [];
 late(Src, Latch) -> [{sync, [{Src, Latch}]}].
 
--spec handle(gen_statem:event_type(), term(), #r{}, toroco_tap:batch()) ->
-          {[term()], [gen_statem:action()], #r{}, toroco_tap:batch()} | unknown.
-handle(info, ?WIRE_ACK(_Input), D = #r{pending = {value, V}, rx = Rx, input = I}, B)
+-spec handle(gen_statem:event_type(), term(), #r{}, toroco_shell:shell()) ->
+          {[term()], [gen_statem:action()], #r{}, toroco_shell:shell()} | unknown.
+handle(info, ?WIRE_ACK(_Input), D = #r{pending = {value, V}, rx = Rx, input = I}, Sh)
   when is_pid(Rx) ->
     toroco_wire:send(Rx, ?WIRE_IN(I, V, self())),
-    {[], [], D#r{pending = none}, delivered(D, V, B)};
-handle(info, ?WIRE_ACK(_Input), D, B) ->
-    {[], [], D#r{inflight = false}, B};
-handle(info, ?WIRE_RX(_Input, Pid), D, B) ->
-    {[receiver_up], [], attach_receiver(Pid, D), B};
-handle(info, {'DOWN', Ref, process, _, _}, D = #r{rx_mon = Ref}, B) ->
-    {[], [], D#r{rx = undefined, rx_mon = undefined, inflight = false, pending = none}, B};
-handle(info, ?WIRE_TAP(Subs), D = #r{key = {R, _}}, B) ->
-    {[], [], D#r{tap = tap(Subs, R), view = none}, B};
-handle(info, ?WIRE_UNSUB(_, _), D, B) ->
-    {[], [], D, B};
-handle({call, From}, unwire, D, B) ->
-    {[unwire], [{reply, From, ok}], D, B};
-handle(_Type, _Content, _D, _B) ->
+    {[], [], D#r{pending = none}, delivered(D, V, Sh)};
+handle(info, ?WIRE_ACK(_Input), D, Sh) ->
+    {[], [], D#r{inflight = false}, Sh};
+handle(info, ?WIRE_RX(_Input, Pid), D, Sh) ->
+    {[receiver_up], [], attach_receiver(Pid, D), Sh};
+handle(info, {'DOWN', Ref, process, _, _}, D = #r{rx_mon = Ref}, Sh) ->
+    {[], [], D#r{rx = undefined, rx_mon = undefined, inflight = false, pending = none}, Sh};
+handle(info, ?WIRE_TAP(Subs), D = #r{key = {R, _}}, Sh) ->
+    {[], [], D#r{tap = tap(Subs, R), view = none}, Sh};
+handle(info, ?WIRE_UNSUB(_, _), D, Sh) ->
+    {[], [], D, Sh};
+handle({call, From}, unwire, D, Sh) ->
+    {[unwire], [{reply, From, ok}], D, Sh};
+handle(_Type, _Content, _D, _Sh) ->
     unknown.
 
 -spec info(integer(), #r{}) -> map().
@@ -132,19 +132,19 @@ info(Now, #r{core = C, buffer = B, rx = Rx}) ->
 %% Internals
 %%====================================================================
 
-deliver([], D, B) ->
-    {D, B};
-deliver(_Values, D = #r{rx = undefined}, B) ->
-    {D, B};                                     % receiver down: lost, as specified
-deliver([V | Vs], D = #r{buffer = all, rx = Rx, input = I}, B) ->
+deliver([], D, Sh) ->
+    {D, Sh};
+deliver(_Values, D = #r{rx = undefined}, Sh) ->
+    {D, Sh};                                     % receiver down: lost, as specified
+deliver([V | Vs], D = #r{buffer = all, rx = Rx, input = I}, Sh) ->
     toroco_wire:send(Rx, ?WIRE_IN(I, V)),
-    deliver(Vs, D, delivered(D, V, B));
-deliver(Values, D = #r{buffer = latest, inflight = true}, B) ->
-    {D#r{pending = {value, lists:last(Values)}}, B};
-deliver(Values, D = #r{buffer = latest, rx = Rx, input = I}, B) ->
+    deliver(Vs, D, delivered(D, V, Sh));
+deliver(Values, D = #r{buffer = latest, inflight = true}, Sh) ->
+    {D#r{pending = {value, lists:last(Values)}}, Sh};
+deliver(Values, D = #r{buffer = latest, rx = Rx, input = I}, Sh) ->
     V = lists:last(Values),
     toroco_wire:send(Rx, ?WIRE_IN(I, V, self())),
-    {D#r{inflight = true}, delivered(D, V, B)}.
+    {D#r{inflight = true}, delivered(D, V, Sh)}.
 
 attach_receiver(Pid, D = #r{rx_mon = Old}) ->
     _ = Old =/= undefined andalso erlang:demonitor(Old, [flush]),
@@ -154,8 +154,8 @@ attach_receiver(Pid, D = #r{rx_mon = Old}) ->
 tap(Subs, Receiver) ->
     toroco_tap:select(Subs, [deliver, router], Receiver).
 
-%% The tap's batch with the delivery of `V'.
-delivered(#r{tap = #{deliver := Sinks}, key = Key}, V, B) ->
-    toroco_tap:tap(Sinks, {deliver, toroco_tap:timestamp(), Key, V}, B);
-delivered(_D, _V, B) ->
-    B.
+%% The delivery of `V' tapped into the shell.
+delivered(#r{tap = #{deliver := Sinks}, key = Key}, V, Sh) ->
+    toroco_shell:tap(Sinks, {deliver, stamp, Key, V}, Sh);
+delivered(_D, _V, Sh) ->
+    Sh.

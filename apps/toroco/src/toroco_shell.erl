@@ -16,7 +16,11 @@
 %%     hibernates, its next event arms the tick again;</li>
 %% <li>the observer tap's batch (`toroco_tap:after_event/3'): the events a
 %%     process tapped while handling an event go when it has handled it, as
-%%     the named timeout `'$toroco_tap'' or at once;</li>
+%%     the named timeout `'$toroco_tap'' or at once. Every event one
+%%     activation (the handling of one event) taps carries one time stamp,
+%%     read once, at its first tapped event (`toroco_clock:timestamp_ns/0'):
+%%     with no observer no clock is read; their order is their order in the
+%%     batch, which the tap keeps (SPEC §10);</li>
 %% <li>timeouts in simulated time: the gen_statem timeouts a host is asked
 %%     for go through `toroco_timeouts', and what lockstep must keep is told
 %%     to it here.</li>
@@ -30,13 +34,15 @@
 
 -include("toroco_wire.hrl").
 
--export([new/0, handle_event/5, tap/3, lifecycle/4, flush/1, batch/1, batch/2]).
+-export([new/0, handle_event/5, tap/3, lifecycle/4, flush/1]).
 -export([timeout/2, left/1, hold/3]).
 -export_type([shell/0, host/1]).
 
 -record(shell, {idle = off :: toroco_wire:idle(),
                 %% the observer tap's events not sent yet
                 batch = [] :: toroco_tap:batch(),
+                %% the time stamp of this activation's tapped events, once read
+                stamp = none :: none | integer(),
                 %% in lockstep, the timeouts set and their simulated deadlines
                 timers = #{} :: toroco_timeouts:timers()}).
 
@@ -82,7 +88,8 @@ event(info, ?WIRE_IDLE, _St, D, {Get, Put, _}) ->
     {keep_state, Put(Sh#shell{idle = Idle}, D), Actions};
 event(Type, Content, St, D, Host = {Get, Put, _}) ->
     case Get(D) of
-        Sh = #shell{idle = off} -> own(Type, Content, St, Put(Sh#shell{idle = toroco_wire:idle_arm()}, D), Host);
+        Sh = #shell{idle = off} ->
+            own(Type, Content, St, Put(Sh#shell{idle = toroco_wire:idle_arm()}, D), Host);
         #shell{} -> own(Type, Content, St, D, Host)
     end.
 
@@ -112,23 +119,21 @@ step(Msg, St, D, Host = {Get, Put, _}) ->
 %% The observer tap's batch
 %%====================================================================
 
-%% @doc Keeps `Event' for the tap's `Sinks' in the shell's batch.
--spec tap([term()], toroco_tap:event(), shell()) -> shell().
-tap(Sinks, Event, Sh = #shell{batch = B}) ->
-    Sh#shell{batch = toroco_tap:tap(Sinks, Event, B)}.
+%% @doc Keeps `Event' for the tap's `Sinks' in the shell's batch, stamped
+%% (its second element, the time, is set) with the activation's time.
+-spec tap([term()], tuple(), shell()) -> shell().
+tap(Sinks, Event, Sh = #shell{batch = B, stamp = none}) ->
+    T = toroco_clock:timestamp_ns(),
+    Sh#shell{batch = toroco_tap:tap(Sinks, setelement(2, Event, T), B), stamp = T};
+tap(Sinks, Event, Sh = #shell{batch = B, stamp = T}) ->
+    Sh#shell{batch = toroco_tap:tap(Sinks, setelement(2, Event, T), B)}.
 
-%% @doc A lifecycle event about `Name' into the shell's batch.
+%% @doc A lifecycle event about `Name' to the `lifecycle' sinks of `Tap'.
 -spec lifecycle(toroco_tap:sinks(), atom(), term(), shell()) -> shell().
-lifecycle(Sinks, Name, What, Sh = #shell{batch = B}) ->
-    Sh#shell{batch = toroco_tap:lifecycle(Sinks, Name, What, B)}.
-
-%% @doc The batch, handed to a callback that taps (a router's).
--spec batch(shell()) -> toroco_tap:batch().
-batch(#shell{batch = B}) -> B.
-
-%% @doc The batch the callback handed back.
--spec batch(toroco_tap:batch(), shell()) -> shell().
-batch(B, Sh) -> Sh#shell{batch = B}.
+lifecycle(#{lifecycle := Sinks}, Name, What, Sh) ->
+    tap(Sinks, {lifecycle, stamp, Name, What}, Sh);
+lifecycle(#{}, _Name, _What, Sh) ->
+    Sh.
 
 %% @doc Sends the batch now (at the end of `init', in `terminate').
 -spec flush(shell()) -> shell().
@@ -153,17 +158,23 @@ tap_after(R, D0, Host) ->
         _ -> R                                  % stopping: terminate/3 sends it
     end.
 
+%% The activation is over: its stamp goes.
 tapped(How, S, D, A0, D0, {Get, Put, _}, R) ->
     case Get(D) of
-        #shell{batch = []} ->
+        #shell{batch = [], stamp = none} ->
             R;
         Sh = #shell{batch = B} ->
             A = case is_list(A0) of true -> A0; false -> [A0] end,
             Was = (Get(D0))#shell.batch =/= [],
-            case toroco_tap:after_event(Was, B, lists:any(fun toroco_timeouts:event_timeout/1, A)) of
-                keep -> R;
-                {B1, More} when How =:= next_state -> {next_state, S, Put(Sh#shell{batch = B1}, D), More ++ A};
-                {B1, More} -> {How, Put(Sh#shell{batch = B1}, D), More ++ A}
+            Hurry = lists:any(fun toroco_timeouts:event_timeout/1, A),
+            {B1, More} = case toroco_tap:after_event(Was, B, Hurry) of
+                             keep -> {B, []};
+                             Due -> Due
+                         end,
+            D1 = Put(Sh#shell{batch = B1, stamp = none}, D),
+            case How of
+                next_state -> {next_state, S, D1, More ++ A};
+                _ -> {How, D1, More ++ A}
             end
     end.
 
