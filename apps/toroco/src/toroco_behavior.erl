@@ -111,8 +111,9 @@
             %% the callback module's handle_input/4 and handle_event/4 (or
             %% `none'), made once at start and again at a code change, so
             %% the event path calls no export looked up by name
-            on_input :: fun((atom(), term(), term(), term()) -> result()) | undefined,
-            on_event = none :: fun((gen_statem:event_type(), term(), term(), term()) -> result())
+            %% (what they return is checked: any term)
+            on_input :: fun((atom(), term(), term(), term()) -> term()) | undefined,
+            on_event = none :: fun((gen_statem:event_type(), term(), term(), term()) -> term())
                              | none,
             %% the outputs: their consumers and latches
             emitter :: toroco_emitter:emitter() | undefined,
