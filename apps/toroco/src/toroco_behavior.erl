@@ -36,6 +36,8 @@
 
 -export([start_link/1, child_spec/1]).
 -export([inject/3, info/1, suspend/1, resume/1, reset_behavior/1, interface/3, configured/1]).
+%% The shell's way into this module (toroco_shell:host()), not an API.
+-export([shell/1, shell/2, event/4]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3, code_change/4]).
 -export_type([spec/0, action/0, actions/0, result/0]).
 
@@ -137,8 +139,9 @@
 -define(IS_CONTROL(Req), (Req =:= '$toroco_info' orelse Req =:= '$toroco_suspend'
                           orelse Req =:= '$toroco_resume' orelse Req =:= '$toroco_reset'
                           orelse (is_tuple(Req) andalso element(1, Req) =:= '$toroco_inject'))).
-%% How the shell reaches this module's data and events (toroco_shell:host()).
--define(HOST, {fun shell/1, fun shell/2, fun event/4}).
+%% How the shell reaches this module's data and events (toroco_shell:host()):
+%% external funs of a constant module, so the tuple is a literal.
+-define(HOST, {fun ?MODULE:shell/1, fun ?MODULE:shell/2, fun ?MODULE:event/4}).
 
 %%====================================================================
 %% API
@@ -318,9 +321,17 @@ start_user(E = #e{kind = Kind, module = M, args = Args, name = Name}) ->
 handle_event(Type, Content, S, E) ->
     toroco_shell:handle_event(Type, Content, S, E, ?HOST).
 
+%% @private
+-spec shell(#e{}) -> toroco_shell:shell().
 shell(#e{shell = Sh}) -> Sh.
 
+%% @private
+-spec shell(toroco_shell:shell(), #e{}) -> #e{}.
 shell(Sh, E) -> E#e{shell = Sh}.
+
+%% @private Every event the shell does not handle itself.
+-spec event(gen_statem:event_type(), term(), term(), #e{}) ->
+          gen_statem:event_handler_result(term()).
 
 %% The observer tap changed: keep the sinks that concern this process.
 event(info, ?WIRE_TAP(Subs), _S, E = #e{name = Name, emitter = Em}) ->

@@ -38,10 +38,13 @@
 
 -include("toroco_wire.hrl").
 
-%% How the shell reaches this module's data and events (toroco_shell:host()).
--define(HOST, {fun shell/1, fun shell/2, fun event/4}).
+%% How the shell reaches this module's data and events (toroco_shell:host()):
+%% external funs of a constant module, so the tuple is a literal.
+-define(HOST, {fun ?MODULE:shell/1, fun ?MODULE:shell/2, fun ?MODULE:event/4}).
 
 -export([start_link/3, rewire/4, ready/2, info/2, call/4]).
+%% The shell's way into this module (toroco_shell:host()), not an API.
+-export([shell/1, shell/2, event/4]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3]).
 
 -type key() :: {atom(), atom()}.
@@ -186,9 +189,17 @@ handle_event(internal, ?WIRE_STEP_DONE(_) = Done, St, C) ->
 handle_event(Type, Content, St, C) ->
     toroco_shell:handle_event(Type, Content, St, C, ?HOST).
 
+%% @private
+-spec shell(#c{}) -> toroco_shell:shell().
 shell(#c{shell = Sh}) -> Sh.
 
+%% @private
+-spec shell(toroco_shell:shell(), #c{}) -> #c{}.
 shell(Sh, C) -> C#c{shell = Sh}.
+
+%% @private Every event the shell does not handle itself.
+-spec event(gen_statem:event_type(), term(), ready | syncing | gone, #c{}) ->
+          gen_statem:event_handler_result(ready | syncing | gone).
 
 %% The event path.
 %% The event path.
