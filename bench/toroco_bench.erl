@@ -56,6 +56,23 @@ section(tap, _Quick, N, Dir) ->
     table("Observer tap: the closed loop with no subscriber and with one subscriber reading every event "
           "(alternated, twice)", Tap, Dir, "tap");
 section(raw, Quick, N, Dir) ->
+    raw(Quick, N, Dir);
+section(scaling, Quick, N, Dir) ->
+    Sources = [sources_per_input(K, N, Dir) || K <- [1, 4, 16, 64]],
+    table("Sources per input (the others holding latches below the measured source)", Sources, Dir, "sources"),
+    Fanout = [fan_out(F, N div 2, Dir) || F <- [1, 8, 64]],
+    table("Fan-out: one output wired to F receivers", Fanout, Dir, "fanout"),
+    Alive = [alive(B, N, Dir) || B <- case Quick of true -> [10, 1000]; false -> [10, 1000, 10000] end],
+    table("Behaviors alive (each idle behavior has one wired input, so one router)", Alive, Dir, "alive"),
+    io:format("~n| behaviors alive | memory per idle behavior with its router (bytes) |~n|---:|---:|~n"),
+    [io:format("| ~w | ~w |~n", [B, M]) || #{label := B, mem_per := M} <- Alive];
+section(Other, _Quick, _N, _Dir) ->
+    io:format(standard_error, "toroco_bench: no section ~s~n", [Other]),
+    halt(2).
+
+%% The internal and external tests against their references, alternated
+%% before and after.
+raw(Quick, N, Dir) ->
     Intervals = [closed, 1, 2, 5, 10],
     TputN = case Quick of true -> 100000; false -> 500000 end,
     %% A quick run paces fewer events: at 10 ms, 2,000 take 20 s a row.
@@ -96,19 +113,7 @@ section(raw, Quick, N, Dir) ->
                [{"raw", RawTput}, {"gen_statem", StmTput}]),
     RawExt =/= [] andalso table("Raw reference: UDP sender → plain gen_udp echo → UDP receiver "
                                 "(mean of a run before and a run after)", RawExt, Dir, "raw_external"),
-    External =/= [] andalso table("External test: UDP sender → udp_link → behavior → udp_link → UDP receiver", External, Dir, "external", [{"raw", RawExt}]);
-section(scaling, Quick, N, Dir) ->
-    Sources = [sources_per_input(K, N, Dir) || K <- [1, 4, 16, 64]],
-    table("Sources per input (the others holding latches below the measured source)", Sources, Dir, "sources"),
-    Fanout = [fan_out(F, N div 2, Dir) || F <- [1, 8, 64]],
-    table("Fan-out: one output wired to F receivers", Fanout, Dir, "fanout"),
-    Alive = [alive(B, N, Dir) || B <- case Quick of true -> [10, 1000]; false -> [10, 1000, 10000] end],
-    table("Behaviors alive (each idle behavior has one wired input, so one router)", Alive, Dir, "alive"),
-    io:format("~n| behaviors alive | memory per idle behavior with its router (bytes) |~n|---:|---:|~n"),
-    [io:format("| ~w | ~w |~n", [B, M]) || #{label := B, mem_per := M} <- Alive];
-section(Other, _Quick, _N, _Dir) ->
-    io:format(standard_error, "toroco_bench: no section ~s~n", [Other]),
-    halt(2).
+    External =/= [] andalso table("External test: UDP sender → udp_link → behavior → udp_link → UDP receiver", External, Dir, "external", [{"raw", RawExt}]).
 
 machine() ->
     Cpu = case file:read_file("/proc/cpuinfo") of

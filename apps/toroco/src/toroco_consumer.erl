@@ -201,32 +201,52 @@ shell(Sh, C) -> C#c{shell = Sh}.
 -spec event(gen_statem:event_type(), term(), ready | syncing | gone, #c{}) ->
           gen_statem:event_handler_result(ready | syncing | gone).
 
-%% The event path.
-%% The event path.
-event(info, ?WIRE_EVENT(Src, Op), St, C = #c{heard = H}) when map_size(H) =:= 0 ->
-    op(emitter, Src, Op, St, C);
-event(info, ?WIRE_GATED(Src, Op), St, C = #c{heard = H}) when map_size(H) =:= 0 ->
-    op(gate, Src, Op, St, C);
+%% The event path, and the remote sources' keep-alives and timers.
 event(info, ?WIRE_EVENT(Src, Op), St, C) ->
-    with_heard(Src, fun(C1) -> op(emitter, Src, Op, St, C1) end, C);
+    path(emitter, Src, Op, St, C);
 event(info, ?WIRE_GATED(Src, Op), St, C) ->
-    with_heard(Src, fun(C1) -> op(gate, Src, Op, St, C1) end, C);
-event(info, ?WIRE_ALIVE(Tag, Src, Latch), _, C = #c{links = L, stale = Stale, mod = Mod}) ->
-    case toroco_wire:carries(Tag, Src, L) andalso lists:member(Src, Stale) of
-        %% Heard again after its silence: its latch comes back.
-        true -> with_heard(Src, fun(C1) -> steps(Mod:late(Src, Latch), C1) end, C);
-        false -> {keep_state, heard(Src, C)}
-    end;
+    path(gate, Src, Op, St, C);
+event({timeout, hold}, expire, _, C) ->
+    steps([tick], C#c{timer = infinity});
+event(info, ?WIRE_ALIVE(Tag, Src, Latch), _, C) ->
+    alive(Tag, Src, Latch, C);
 event({timeout, stale}, check, _, C) ->
     silent(C#c{stale_at = infinity});
 event({timeout, resub}, again, _, C) ->
     resubscribe(C);
 event(info, ?WIRE_RESUBSCRIBE, _, C) ->
     resubscribe(C#c{tries = 0});
-event({timeout, hold}, expire, _, C) ->
-    steps([tick], C#c{timer = infinity});
 %% Upstreams: answers, new incarnations, deaths.
-event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C = #c{sync = {Sync, From, Cfg}}) ->
+event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C) ->
+    state(Tag, Src, Pid, Latch, St, C);
+event(info, ?WIRE_HELLO(Tag, Src, Pid), St, C) ->
+    hello(Tag, Src, Pid, St, C);
+event(info, {'DOWN', _, process, _, _} = Down, _, C) ->
+    down(Down, C);
+event({timeout, sync}, expire, syncing, C = #c{sync = {Sync, From, Cfg}}) ->
+    {ready, C1, Actions} = finish(C#c{sync = {toroco_wire:sync_expire(Sync), From, Cfg}}),
+    {next_state, ready, C1, Actions};
+%% The wiring server, and inspection.
+event({call, From}, Req, St, C) ->
+    called(Req, From, St, C);
+%% The observer tap, and whatever is the kind's own.
+event(Type, Content, _, C) ->
+    kind(Type, Content, C).
+
+%% An event of a source: a remote one is heard.
+path(Tag, Src, Op, St, C = #c{heard = H}) when map_size(H) =:= 0 ->
+    op(Tag, Src, Op, St, C);
+path(Tag, Src, Op, St, C) ->
+    with_heard(Src, fun(C1) -> op(Tag, Src, Op, St, C1) end, C).
+
+alive(Tag, Src, Latch, C = #c{links = L, stale = Stale, mod = Mod}) ->
+    case toroco_wire:carries(Tag, Src, L) andalso lists:member(Src, Stale) of
+        %% Heard again after its silence: its latch comes back.
+        true -> with_heard(Src, fun(C1) -> steps(Mod:late(Src, Latch), C1) end, C);
+        false -> {keep_state, heard(Src, C)}
+    end.
+
+state(Tag, Src, Pid, Latch, St, C = #c{sync = {Sync, From, Cfg}}) ->
     case toroco_wire:sync_answer(Tag, Src, Pid, Latch, Sync) of
         {ok, Sync1} ->
             maybe_finish(C#c{sync = {Sync1, From, Cfg}});
@@ -238,9 +258,10 @@ event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C = #c{sync = {Sync, From, Cf
                 false -> late(Tag, Src, Pid, Latch, St, C)
             end
     end;
-event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C) ->
-    late(Tag, Src, Pid, Latch, St, C);
-event(info, ?WIRE_HELLO(Tag, Src, Pid), St, C = #c{links = L}) ->
+state(Tag, Src, Pid, Latch, St, C) ->
+    late(Tag, Src, Pid, Latch, St, C).
+
+hello(Tag, Src, Pid, St, C = #c{links = L}) ->
     case St =:= syncing andalso toroco_wire:sync_fresh(Tag, Src, element(1, C#c.sync)) of
         true ->
             {keep_state_and_data, [postpone]};
@@ -249,8 +270,9 @@ event(info, ?WIRE_HELLO(Tag, Src, Pid), St, C = #c{links = L}) ->
                 {ok, L1} -> steps([{op, Src, unset}], C#c{links = L1});
                 ignore -> keep_state_and_data
             end
-    end;
-event(info, {'DOWN', Ref, process, Pid, _} = Down, _, C = #c{links = L, sync = Sync}) ->
+    end.
+
+down({'DOWN', Ref, process, Pid, _} = Down, C = #c{links = L, sync = Sync}) ->
     case Sync =/= none andalso toroco_wire:sync_down(Ref, element(1, Sync)) of
         {ok, Sync1} ->
             maybe_finish(C#c{sync = setelement(1, Sync, Sync1)});
@@ -262,26 +284,23 @@ event(info, {'DOWN', Ref, process, Pid, _} = Down, _, C = #c{links = L, sync = S
                     remote(steps([{op, S, unset} || S <- Srcs], C#c{links = L1}));
                 ignore -> kind(info, Down, C)
             end
-    end;
-event({timeout, sync}, expire, syncing, C = #c{sync = {Sync, From, Cfg}}) ->
-    {ready, C1, Actions} = finish(C#c{sync = {toroco_wire:sync_expire(Sync), From, Cfg}}),
-    {next_state, ready, C1, Actions};
-%% The wiring server, and inspection: answered once the change is in (a
-%% consumer that just restarted answers with its sources' state recovered).
-event({call, _}, _Req, syncing, _C) ->
+    end.
+
+%% Answered once the change is in (a consumer that just restarted answers
+%% with its sources' state recovered); the kind's own calls too.
+called(_Req, _From, syncing, _C) ->
     {keep_state_and_data, [postpone]};
-event({call, From}, info, ready, #c{mod = Mod, data = D}) ->
+called(info, From, ready, #c{mod = Mod, data = D}) ->
     {keep_state_and_data, [{reply, From, Mod:info(toroco_clock:now_ms(), D)}]};
-event({call, From}, {rewire, Cfg, Caller}, ready, C) ->
+called({rewire, Cfg, Caller}, From, ready, C) ->
     case start_sync(Cfg, Caller, From, C) of
         {syncing, C1, Actions} -> {next_state, syncing, C1, Actions};
         {ready, C1, Actions} -> {keep_state, C1, Actions}
     end;
-event({call, From}, ready, ready, _C) ->
+called(ready, From, ready, _C) ->
     {keep_state_and_data, [{reply, From, ok}]};
-%% The observer tap, and whatever is the kind's own.
-event(Type, Content, _, C) ->
-    kind(Type, Content, C).
+called(Req, From, _St, C) ->
+    kind({call, From}, Req, C).
 
 hand_over_downs() ->
     {monitors, Mons} = erlang:process_info(self(), monitors),
