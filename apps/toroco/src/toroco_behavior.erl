@@ -11,19 +11,23 @@
 %% `state_timeout', `postpone' and the other gen_statem actions work as usual;
 %% the user's data is kept inside this module's data.
 %%
-%% The process is the emitter end of every wire it feeds: it keeps, per output,
-%% the registered names of the consumers (routers or a gate) to send to, and
-%% the output's latch. Consumers subscribe with a handshake (see
-%% `toroco_wire'), so the subscriber lists change without a central server
-%% on the event path. On start it announces itself to its consumers (`hello':
-%% nothing of the previous incarnation survives) and to its input routers
-%% (which re-deliver each input's latched winner).
+%% The process is the emitter end of every wire it feeds (`toroco_emitter':
+%% per output, its consumers and its latch). On start it announces itself to
+%% its consumers (`hello': nothing of the previous incarnation survives) and
+%% to its input routers (which re-deliver each input's latched winner).
+%% Lockstep, the idle tick and the observer tap's batch are the shell's
+%% (`toroco_shell', shared with the consumers); `event/4' dispatches the
+%% rest by concern: the tap's subscriptions, inputs, wiring, the runtime's
+%% calls, the callback module's own events. The callback module's
+%% `handle_input/4' and `handle_event/4' are called through funs made at
+%% start and again at a code change.
 %%
 %% Time: a callback module reads time only with `toroco_clock:now_ms/0' and
 %% sets timers only with gen_statem's timeout actions (`state_timeout',
 %% `{timeout, Name}', event timeouts, relative times): the engine turns them
-%% into the runtime's clock, scaled by the simulated lab's speed, or kept by
-%% `toroco_lockstep' in simulated time when a world is the clock (SPEC §14).
+%% (`toroco_timeouts') into the runtime's clock, scaled by the simulated
+%% lab's speed, or kept by `toroco_lockstep' in simulated time when a world
+%% is the clock (SPEC §14).
 %% A module that reads the OS clock, calls `erlang:send_after' or sends
 %% itself messages to time things cannot run in lockstep. Absolute timeouts
 %% (`{abs, true}') stay in real time: they are for real hardware.
