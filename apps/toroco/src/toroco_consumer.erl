@@ -8,7 +8,12 @@
 %% changes), a new incarnation's hello, an upstream's death, and the calls
 %% of the wiring server. The callback module owns its pure core and what
 %% goes out: a router's deliveries to its receiver, a gate's forwarding to
-%% its own subscribers.
+%% its own subscribers. What every process of the event path does alike
+%% (a lockstep step, the idle tick, the observer tap's batch, which a
+%% callback taps into through `toroco_shell:tap/3', timeouts in simulated
+%% time) is `toroco_shell''s. The callback module's `run/4', `settled/2' and
+%% `deadline/1' are called through funs made at start (external funs: a
+%% reload of the module takes effect at the next call).
 %%
 %% A consumer reads its configuration from the wiring table when it
 %% (re)starts, and is handed the new one with the wiring server's `rewire'.
