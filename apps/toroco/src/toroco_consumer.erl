@@ -11,7 +11,7 @@
 %% its own subscribers. What every process of the event path does alike
 %% (a lockstep step, the idle tick, the observer tap's batch, which a
 %% callback taps into through `toroco_shell:tap/3', timeouts in simulated
-%% time) is `toroco_shell''s. The callback module's `run/4', `settled/2' and
+%% time) is the shell's (`toroco_shell'). The callback module's `run/4', `settled/2' and
 %% `deadline/1' are called through funs made at start (external funs: a
 %% reload of the module takes effect at the next call).
 %%
