@@ -34,9 +34,10 @@
 
 -export([now_ms/0, speed/0, set_speed/1, real_ms/1, real_deadline/1]).
 -export([timebase/0, real_ms/2, real_deadline/2]).
+-export_type([timebase/0, scale/0]).
 -export([mode/0, lockstep/1, realtime/0, tick/2, tick/3, settle/0, timestamp_ns/0]).
 -export([lockstep_cell/1, lockstep_server/0, set_timer/3, cancel_timer/1]).
--export_type([speed/0, stimulus/0, timebase/0, scale/0]).
+-export_type([speed/0, stimulus/0]).
 
 -type stimulus() :: toroco_lockstep:stimulus().
 
