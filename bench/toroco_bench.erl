@@ -56,37 +56,7 @@ section(tap, _Quick, N, Dir) ->
     table("Observer tap: the closed loop with no subscriber and with one subscriber reading every event "
           "(alternated, twice)", Tap, Dir, "tap");
 section(raw, Quick, N, Dir) ->
-    Intervals = [closed, 1, 2, 5, 10],
-    TputN = case Quick of true -> 100000; false -> 500000 end,
-    %% A quick run paces fewer events: at 10 ms, 2,000 take 20 s a row.
-    NOf = fun(closed) -> N; (_) when Quick -> 500; (_) -> N end,
-    ExtN = case Quick of true -> 500; false -> N end,
-    %% The raw references run before and after the runtime's tests; the
-    %% "× raw" columns divide by the mean of the two.
-    RawBefore = [raw_internal(I, NOf(I), Dir) || I <- Intervals],
-    RawTputBefore = raw_throughput(1000, TputN),
-    RawExtBefore = external(raw, ExtN, Dir),
-    Internal = [internal(I, NOf(I), Dir) || I <- Intervals],
-    Tput = [throughput(W, TputN) || W <- [1000]],
-    External = external(toroco, ExtN, Dir),
-    RawAfter = [raw_internal(I, NOf(I), Dir) || I <- Intervals],
-    RawTputAfter = raw_throughput(1000, TputN),
-    RawExtAfter = external(raw, ExtN, Dir),
-    Raw = mean_rows(RawBefore, RawAfter),
-    RawExt = mean_rows(RawExtBefore, RawExtAfter),
-    Events = integer_to_list(N) ++ " events" ++ case Quick of
-                                                    true -> " (paced rows 500)";
-                                                    false -> ""
-                                                end,
-    table("Raw reference: five plain processes, source → … → sink, " ++ Events
-          ++ " (mean of a run before and a run after the runtime's)", Raw, Dir, "raw_internal"),
-    table("Internal test: behavior → router → behavior → router → actuator, " ++ Events,
-          Internal, Dir, "internal", Raw),
-    RawTput = mean_rate(RawTputBefore, RawTputAfter),
-    tput_table("Throughput, open loop with a bounded window", Tput, Dir, "throughput", RawTput),
-    RawExt =/= [] andalso table("Raw reference: UDP sender → plain gen_udp echo → UDP receiver "
-                                "(mean of a run before and a run after)", RawExt, Dir, "raw_external"),
-    External =/= [] andalso table("External test: UDP sender → udp_link → behavior → udp_link → UDP receiver", External, Dir, "external", RawExt);
+    raw(Quick, N, Dir);
 section(scaling, Quick, N, Dir) ->
     Sources = [sources_per_input(K, N, Dir) || K <- [1, 4, 16, 64]],
     table("Sources per input (the others holding latches below the measured source)", Sources, Dir, "sources"),
@@ -99,6 +69,51 @@ section(scaling, Quick, N, Dir) ->
 section(Other, _Quick, _N, _Dir) ->
     io:format(standard_error, "toroco_bench: no section ~s~n", [Other]),
     halt(2).
+
+%% The internal and external tests against their references, alternated
+%% before and after.
+raw(Quick, N, Dir) ->
+    Intervals = [closed, 1, 2, 5, 10],
+    TputN = case Quick of true -> 100000; false -> 500000 end,
+    %% A quick run paces fewer events: at 10 ms, 2,000 take 20 s a row.
+    NOf = fun(closed) -> N; (_) when Quick -> 500; (_) -> N end,
+    ExtN = case Quick of true -> 500; false -> N end,
+    %% The raw references run before and after the runtime's tests; the
+    %% "× raw" columns divide by the mean of the two.
+    RawBefore = [raw_internal(toroco_bench_raw, I, NOf(I), Dir) || I <- Intervals],
+    RawTputBefore = raw_throughput(toroco_bench_raw, 1000, TputN),
+    StmBefore = [raw_internal(toroco_bench_statem, I, NOf(I), Dir) || I <- Intervals],
+    StmTputBefore = raw_throughput(toroco_bench_statem, 1000, TputN),
+    RawExtBefore = external(raw, ExtN, Dir),
+    Internal = [internal(I, NOf(I), Dir) || I <- Intervals],
+    Tput = [throughput(W, TputN) || W <- [1000]],
+    External = external(toroco, ExtN, Dir),
+    RawAfter = [raw_internal(toroco_bench_raw, I, NOf(I), Dir) || I <- Intervals],
+    RawTputAfter = raw_throughput(toroco_bench_raw, 1000, TputN),
+    StmAfter = [raw_internal(toroco_bench_statem, I, NOf(I), Dir) || I <- Intervals],
+    StmTputAfter = raw_throughput(toroco_bench_statem, 1000, TputN),
+    RawExtAfter = external(raw, ExtN, Dir),
+    Raw = mean_rows(RawBefore, RawAfter),
+    Stm = mean_rows(StmBefore, StmAfter),
+    RawExt = mean_rows(RawExtBefore, RawExtAfter),
+    Events = integer_to_list(N) ++ " events" ++ case Quick of
+                                                    true -> " (paced rows 500)";
+                                                    false -> ""
+                                                end,
+    table("Raw reference: five plain processes, source → … → sink, " ++ Events
+          ++ " (mean of a run before and a run after the runtime's)", Raw, Dir, "raw_internal"),
+    table("Structural reference: five plain gen_statems, source → … → sink, " ++ Events
+          ++ " (mean of a run before and a run after the runtime's)", Stm, Dir, "statem_internal",
+          [{"raw", Raw}]),
+    table("Internal test: behavior → router → behavior → router → actuator, " ++ Events,
+          Internal, Dir, "internal", [{"raw", Raw}, {"gen_statem", Stm}]),
+    RawTput = mean_rate(RawTputBefore, RawTputAfter),
+    StmTput = mean_rate(StmTputBefore, StmTputAfter),
+    tput_table("Throughput, open loop with a bounded window", Tput, Dir, "throughput",
+               [{"raw", RawTput}, {"gen_statem", StmTput}]),
+    RawExt =/= [] andalso table("Raw reference: UDP sender → plain gen_udp echo → UDP receiver "
+                                "(mean of a run before and a run after)", RawExt, Dir, "raw_external"),
+    External =/= [] andalso table("External test: UDP sender → udp_link → behavior → udp_link → UDP receiver", External, Dir, "external", [{"raw", RawExt}]).
 
 machine() ->
     Cpu = case file:read_file("/proc/cpuinfo") of
@@ -193,18 +208,19 @@ tap_read(Ref, Count) ->
         {stop, From} -> From ! {self(), Count}
     end.
 
-%% The same loads on the raw chain of toroco_bench_raw.
-raw_internal(Interval, N, Dir) ->
+%% The same loads on a reference chain: toroco_bench_raw's plain processes
+%% or toroco_bench_statem's plain gen_statems.
+raw_internal(Ref, Interval, N, Dir) ->
     Mode = case Interval of closed -> closed; Ms -> {paced, Ms} end,
-    Chain = {Src, _} = toroco_bench_raw:chain(case Mode of closed -> closed; _ -> none end, N, self()),
+    Chain = {Src, _} = Ref:chain(case Mode of closed -> closed; _ -> none end, N, self()),
     R = measure(Src, Mode, N, N * 20 + 10000),
-    toroco_bench_raw:stop(Chain),
-    row(label(Interval), R, Dir, "raw_internal_" ++ label(Interval)).
+    Ref:stop(Chain),
+    row(label(Interval), R, Dir, atom_to_list(Ref) ++ "_" ++ label(Interval)).
 
-raw_throughput(W, N) ->
-    Chain = {Src, _} = toroco_bench_raw:chain({window, 100}, N, self()),
+raw_throughput(Ref, W, N) ->
+    Chain = {Src, _} = Ref:chain({window, 100}, N, self()),
     #{wall_ns := Ns} = measure(Src, {window, W}, N, 120000),
-    toroco_bench_raw:stop(Chain),
+    Ref:stop(Chain),
     round(N / (Ns / 1.0e9)).
 
 mean_rows(As, Bs) ->
@@ -420,17 +436,19 @@ pct(Sorted, P) -> lists:nth(max(1, round(P * length(Sorted))), Sorted).
 table(Title, Rows, Dir, File) ->
     table(Title, Rows, Dir, File, none).
 
-%% With `Raw' (rows of the same labels from a raw reference), a last column
-%% "× raw": this row's p50 over the raw p50.
-table(Title, Rows, Dir, File, Raw) ->
+%% With references (`[{Name, Rows}]', rows of the same labels from a
+%% reference chain), a column per reference "× Name p50": this row's p50
+%% over the reference's p50.
+table(Title, Rows, Dir, File, none) ->
+    table(Title, Rows, Dir, File, []);
+table(Title, Rows, Dir, File, Refs) ->
     Header = ["| test | max µs | avg µs | min µs | p50 µs | p99 µs | mean interval µs | events/s | CPU % | lost |",
-              case Raw of none -> ""; _ -> " × raw p50 |" end],
+              [[" × ", Name, " p50 |"] || {Name, _} <- Refs]],
     Ratio = fun(L, P50) ->
-                    case Raw =/= none andalso [R || #{label := RL, p50 := R} <- Raw, RL =:= L] of
-                        [R | _] when R > 0 -> io_lib:format(" ~.2f |", [P50 / R]);
-                        [_ | _] -> " - |";
-                        _ -> ""
-                    end
+                    [case [R || #{label := RL, p50 := R} <- Ref, RL =:= L] of
+                         [R | _] when R > 0 -> io_lib:format(" ~.2f |", [P50 / R]);
+                         _ -> " - |"
+                     end || {_, Ref} <- Refs]
             end,
     Lines = [[io_lib:format("| ~ts | ~.1f | ~.1f | ~.1f | ~.1f | ~.1f | ~.1f | ~w | ~w | ~w |",
                             [to_s(L), float(Max), float(Avg), float(Min), float(P50), float(P99),
@@ -438,16 +456,20 @@ table(Title, Rows, Dir, File, Raw) ->
              || #{label := L, max := Max, avg := Avg, min := Min, p50 := P50, p99 := P99,
                   interval_us := Iv, rate := Rate, cpu := Cpu, lost := Lost} <- Rows],
     Text = ["\n### ", Title, "\n\n", Header, "\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
-            case Raw of none -> ""; _ -> "---:|" end, "\n",
+            ["---:|" || _ <- Refs], "\n",
             lists:join("\n", Lines), "\n"],
     io:put_chars(Text),
     ok = file:write_file(filename:join(Dir, File ++ ".md"), unicode:characters_to_binary(Text)).
 
-tput_table(Title, Rows, Dir, File, RawRate) ->
-    Text = ["\n### ", Title, "\n\n| window | events | events/s | CPU % | lost | raw events/s | × raw |\n"
-            "|---:|---:|---:|---:|---:|---:|---:|\n",
-            [io_lib:format("| ~w | ~w | ~w | ~w | ~w | ~w | ~.2f |~n",
-                           [W, N, Rate, round(Cpu), Lost, RawRate, Rate / max(1, RawRate)])
+%% With a column pair per reference (`[{Name, Rate}]'): its events/s and
+%% this row's rate over it.
+tput_table(Title, Rows, Dir, File, Refs) ->
+    Text = ["\n### ", Title, "\n\n| window | events | events/s | CPU % | lost |",
+            [[" ", Name, " events/s | × ", Name, " |"] || {Name, _} <- Refs], "\n"
+            "|---:|---:|---:|---:|---:|", ["---:|---:|" || _ <- Refs], "\n",
+            [[io_lib:format("| ~w | ~w | ~w | ~w | ~w |", [W, N, Rate, round(Cpu), Lost]),
+              [io_lib:format(" ~w | ~.2f |", [RefRate, Rate / max(1, RefRate)])
+               || {_, RefRate} <- Refs], "\n"]
              || #{label := W, n := N, rate := Rate, cpu := Cpu, lost := Lost} <- Rows]],
     io:put_chars(Text),
     ok = file:write_file(filename:join(Dir, File ++ ".md"), unicode:characters_to_binary(Text)).

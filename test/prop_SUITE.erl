@@ -12,13 +12,14 @@
          gate_core_matches_oracle/0, gate_core_matches_oracle/1,
          gate_core_untimed_matches_oracle/0, gate_core_untimed_matches_oracle/1,
          network_matches_model/0, network_matches_model/1,
-         gate_attach_keeps_send_hold/0, gate_attach_keeps_send_hold/1]).
+         gate_attach_keeps_send_hold/0, gate_attach_keeps_send_hold/1,
+         activation_stamp_keeps_order/0, activation_stamp_keeps_order/1]).
 
 suite() -> [{timetrap, {minutes, 10}}].
 
 all() ->
     [router_core_matches_oracle, gate_core_matches_oracle, gate_core_untimed_matches_oracle,
-     network_matches_model, gate_attach_keeps_send_hold].
+     network_matches_model, gate_attach_keeps_send_hold, activation_stamp_keeps_order].
 
 init_per_suite(Config) ->
     Config.
@@ -99,6 +100,14 @@ gate_attach_keeps_send_hold(_Config) ->
         Other -> ct:fail({send_hold_dropped_by_set_inhibitors,
                           #{winner_and_history => Other, input => In}})
     end.
+
+activation_stamp_keeps_order() ->
+    [{doc, "The emit events of one activation carry one time stamp and reach a subscriber "
+           "in the order the callback returned its actions, while another emitter's "
+           "activations run at once (200 random runs, SPEC §10)."}].
+activation_stamp_keeps_order(_Config) ->
+    ok = prop_tap:setup(),
+    check(prop_tap:prop_activation_order(), 200, 20).
 
 %%====================================================================
 %% Running a property

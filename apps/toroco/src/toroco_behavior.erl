@@ -11,19 +11,23 @@
 %% `state_timeout', `postpone' and the other gen_statem actions work as usual;
 %% the user's data is kept inside this module's data.
 %%
-%% The process is the emitter end of every wire it feeds: it keeps, per output,
-%% the registered names of the consumers (routers or a gate) to send to, and
-%% the output's latch. Consumers subscribe with a handshake (see
-%% `toroco_wire'), so the subscriber lists change without a central server
-%% on the event path. On start it announces itself to its consumers (`hello':
-%% nothing of the previous incarnation survives) and to its input routers
-%% (which re-deliver each input's latched winner).
+%% The process is the emitter end of every wire it feeds (`toroco_emitter':
+%% per output, its consumers and its latch). On start it announces itself to
+%% its consumers (`hello': nothing of the previous incarnation survives) and
+%% to its input routers (which re-deliver each input's latched winner).
+%% Lockstep, the idle tick and the observer tap's batch are the shell's
+%% (`toroco_shell', shared with the consumers); `event/4' dispatches the
+%% rest by concern: the tap's subscriptions, inputs, wiring, the runtime's
+%% calls, the callback module's own events. The callback module's
+%% `handle_input/4' and `handle_event/4' are called through funs made at
+%% start and again at a code change.
 %%
 %% Time: a callback module reads time only with `toroco_clock:now_ms/0' and
 %% sets timers only with gen_statem's timeout actions (`state_timeout',
 %% `{timeout, Name}', event timeouts, relative times): the engine turns them
-%% into the runtime's clock, scaled by the simulated lab's speed, or kept by
-%% `toroco_lockstep' in simulated time when a world is the clock (SPEC §14).
+%% (`toroco_timeouts') into the runtime's clock, scaled by the simulated
+%% lab's speed, or kept by `toroco_lockstep' in simulated time when a world
+%% is the clock (SPEC §14).
 %% A module that reads the OS clock, calls `erlang:send_after' or sends
 %% itself messages to time things cannot run in lockstep. Absolute timeouts
 %% (`{abs, true}') stay in real time: they are for real hardware.
@@ -36,6 +40,8 @@
 
 -export([start_link/1, child_spec/1]).
 -export([inject/3, info/1, suspend/1, resume/1, reset_behavior/1, interface/3, configured/1]).
+%% The shell's way into this module (toroco_shell:host()), not an API.
+-export([shell/1, shell/2, event/4]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3, code_change/4]).
 -export_type([spec/0, action/0, actions/0, result/0]).
 
@@ -108,34 +114,38 @@
             layer :: non_neg_integer(),
             args :: term(),
             user :: term(),
-            %% declared output -> the addresses of its consumers
-            outputs = #{} :: #{atom() => [toroco_wire:address()]},
-            latches = #{} :: #{atom() => term()},
+            %% the callback module's handle_input/4 and handle_event/4 (or
+            %% `none'), made once at start and again at a code change, so
+            %% the event path calls no export looked up by name
+            %% (what they return is checked: any term)
+            on_input :: fun((atom(), term(), term(), term()) -> term()) | undefined,
+            on_event = none :: fun((gen_statem:event_type(), term(), term(), term()) -> term())
+                             | none,
+            %% the outputs: their consumers and latches
+            emitter :: toroco_emitter:emitter() | undefined,
             inputs = [] :: [atom()],
             suspended = false :: boolean(),
             queued = [] :: [{gen_statem:event_type(), term()}],
-            user_events = false :: boolean(),
-            %% in lockstep, the timeouts set with toroco_lockstep and their
-            %% simulated deadlines (gen_statem keeps none of them)
-            vtimers = #{} :: #{term() => integer()},
             %% the observer tap's sinks that concern this process (SPEC §10)
             tap = #{} :: toroco_tap:sinks(),
-            %% the tapped events not sent yet (toroco_tap:after_event/3)
-            batch = [] :: toroco_tap:batch(),
-            idle = off :: toroco_wire:idle(),
+            %% lockstep, the idle tick, the tap's batch, simulated timeouts
+            shell :: toroco_shell:shell() | undefined,
             %% names of the generic timeouts the callback module has set, so
             %% that a reset cancels them
             timers = [] :: [term()],
-            %% emissions on undeclared outputs: when last logged, how many since
-            undeclared = {never, 0} :: {never | integer(), non_neg_integer()},
-            %% open ports (interface/1's `open'): an output comes into being
-            %% when it is emitted on or subscribed to
+            %% open ports (interface/1's `open'): the wiring's inputs are its
+            %% inputs too
             open = false :: boolean()}).
 
 -define(LOG, #{domain => [toroco, engine]}).
--define(IS_TIMEOUT(K), (K =:= state_timeout orelse K =:= timeout orelse
-                        (is_tuple(K) andalso tuple_size(K) =:= 2 andalso element(1, K) =:= timeout))).
--define(WARN_INTERVAL_MS, 1000).
+%% The runtime's own calls (toroco:inject/3, info/1, suspend/1, resume/1,
+%% reset_behavior/1).
+-define(IS_CONTROL(Req), (Req =:= '$toroco_info' orelse Req =:= '$toroco_suspend'
+                          orelse Req =:= '$toroco_resume' orelse Req =:= '$toroco_reset'
+                          orelse (is_tuple(Req) andalso element(1, Req) =:= '$toroco_inject'))).
+%% How the shell reaches this module's data and events (toroco_shell:host()):
+%% external funs of a constant module, so the tuple is a literal.
+-define(HOST, {fun ?MODULE:shell/1, fun ?MODULE:shell/2, fun ?MODULE:event/4}).
 
 %%====================================================================
 %% API
@@ -221,25 +231,17 @@ callback_mode() -> handle_event_function.
 init(#{kind := Kind, name := Name, module := M, layer := Layer, args := Args}) ->
     process_flag(trap_exit, true),
     case interface(Kind, M, Args) of
-        {ok, I = #{inputs := Ins0, outputs := Outs0}} ->
+        {ok, I} ->
             ok = toroco_tap:join(),
             Planned = toroco_wiring:subs_of(Name),
-            Open = maps:get(open, I, false),
-            %% open ports: those the wiring named before this start too
-            {Ins, Outs} = case Open of
-                              true ->
-                                  Wired = toroco_wiring:ports_of(Name),
-                                  {lists:usort(Ins0 ++ maps:get(inputs, Wired, [])),
-                                   lists:usort(Outs0 ++ maps:get(outputs, Wired, [])
-                                               ++ maps:keys(Planned))};
-                              false -> {Ins0, Outs0}
-                          end,
+            {Ins, Outs} = ports(Name, I, Planned),
             Subs = maps:from_list([{O, [toroco_wire:address(R) || R <- maps:get(O, Planned, [])]}
                                    || O <- Outs]),
-            E = #e{name = Name, kind = Kind, module = M, layer = Layer, args = Args,
-                   outputs = Subs, inputs = Ins, open = Open,
-                   user_events = erlang:function_exported(M, handle_event, 4),
-                   tap = tap(toroco_tap:current(), Name), idle = toroco_wire:idle_arm()},
+            Open = maps:get(open, I, false),
+            Tap = tap(toroco_tap:current(), Name),
+            E = bind(#e{name = Name, kind = Kind, module = M, layer = Layer, args = Args,
+                        emitter = toroco_emitter:tap(Tap, toroco_emitter:new(Name, Subs, Open)),
+                        inputs = Ins, open = Open, tap = Tap, shell = toroco_shell:new()}),
             toroco_tap:lifecycle(E#e.tap, Name, toroco_restarts:started(Name)),
             ok = toroco_lockstep:up(Name, case Kind of
                                               behavior -> Layer;
@@ -249,23 +251,40 @@ init(#{kind := Kind, name := Name, module := M, layer := Layer, args := Args}) -
             case start_user(E) of
                 {ok, S, E1} ->
                     toroco_lockstep:ready(Name),
-                    {ok, S, E1#e{batch = toroco_tap:flush(E1#e.batch)}};
+                    {ok, S, flushed(E1)};
                 {ok, S, E1, A} ->
                     toroco_lockstep:ready(Name),
-                    {ok, S, E1#e{batch = toroco_tap:flush(E1#e.batch)}, A};
+                    {ok, S, flushed(E1), A};
                 Stop -> Stop
             end;
         {error, Reason} ->
             {stop, Reason}
     end.
 
+%% The ports: declared, and with open ports those the wiring named before
+%% this start too.
+ports(Name, I = #{inputs := Ins, outputs := Outs}, Planned) ->
+    case maps:get(open, I, false) of
+        true ->
+            Wired = toroco_wiring:ports_of(Name),
+            {lists:usort(Ins ++ maps:get(inputs, Wired, [])),
+             lists:usort(Outs ++ maps:get(outputs, Wired, []) ++ maps:keys(Planned))};
+        false ->
+            {Ins, Outs}
+    end.
+
+%% The callback module's event path functions, as funs (see `on_input').
+bind(E = #e{module = M}) ->
+    E#e{on_input = fun M:handle_input/4,
+        on_event = case erlang:function_exported(M, handle_event, 4) of
+                       true -> fun M:handle_event/4;
+                       false -> none
+                   end}.
+
 %% Announces this incarnation: consumers drop whatever they had of the last
 %% one; input routers re-deliver their latched winners.
-announce(#e{name = Name, outputs = Outs, inputs = Ins, kind = Kind}) ->
-    maps:foreach(fun(Out, Consumers) ->
-                         [toroco_wire:send(C, ?WIRE_HELLO(emitter, {Name, Out}, self()))
-                          || C <- Consumers]
-                 end, Outs),
+announce(#e{name = Name, emitter = Em, inputs = Ins, kind = Kind}) ->
+    toroco_emitter:announce(Em),
     receiver_up(Name, case Kind of behavior -> [?RESET | Ins]; device -> Ins end).
 
 %% The inputs: declared, and for open ports those the wiring names now.
@@ -301,113 +320,86 @@ start_user(E = #e{kind = Kind, module = M, args = Args, name = Name}) ->
 
 -spec handle_event(gen_statem:event_type(), term(), term(), #e{}) ->
           gen_statem:event_handler_result(term()).
-%% Every event, then what becomes of the observer tap's batch
-%% (toroco_tap:after_event/3); a lockstep barrier is answered at once.
-handle_event(info, ?WIRE_BARRIER(Ref), _S, _E) ->
-    toroco_lockstep:synced(Ref),
-    keep_state_and_data;
+%% Lockstep, the idle tick and the tap's batch are the shell's
+%% (toroco_shell); the rest comes to event/4.
 handle_event(Type, Content, S, E) ->
-    tap_after(event(Type, Content, S, E), E).
+    toroco_shell:handle_event(Type, Content, S, E, ?HOST).
 
-%% Lockstep (toroco_lockstep): one message of the event path, or a timer,
-%% handled as it would be in real time; the step is done once the events
-%% it inserts are handled too.
-event(info, ?WIRE_STEP(Token, Msg), S, E) ->
-    toroco_wire:step_done(Token, step(Msg, S, E));
-%% A step whose work is still out of the process (a Lua behavior's
-%% activation, answered by a message): done once the callback module
-%% leaves state `step_pending' (gen_statem retries a postponed event then).
-event(internal, ?WIRE_STEP_DONE(_), step_pending, _E) ->
-    {keep_state_and_data, [postpone]};
-event(internal, ?WIRE_STEP_DONE(Token), _S, _E) ->
-    toroco_lockstep:done(Token),
-    keep_state_and_data;
-%% The idle tick (toroco_wire:idle_arm/0), whatever the callback module's
-%% state; the first event after hibernating arms it again.
-event(info, ?WIRE_IDLE, _S, E = #e{idle = Idle}) ->
-    {Idle1, Actions} = toroco_wire:idle_tick(Idle),
-    {keep_state, E#e{idle = Idle1}, Actions};
-event(Type, Content, S, E = #e{idle = off}) ->
-    event(Type, Content, S, E#e{idle = toroco_wire:idle_arm()});
-%% The observer tap's batch is due (toroco_tap:after_event/3).
-event({timeout, '$toroco_tap'}, flush, _S, E = #e{batch = B}) ->
-    {keep_state, E#e{batch = toroco_tap:flush(B)}};
+%% @private
+-spec shell(#e{}) -> toroco_shell:shell().
+shell(#e{shell = Sh}) -> Sh.
+
+%% @private
+-spec shell(toroco_shell:shell(), #e{}) -> #e{}.
+shell(Sh, E) -> E#e{shell = Sh}.
+
+%% @private Every event the shell does not handle itself.
+-spec event(gen_statem:event_type(), term(), term(), #e{}) ->
+          gen_statem:event_handler_result(term()).
+
 %% The observer tap changed: keep the sinks that concern this process.
-event(info, ?WIRE_TAP(Subs), _S, E = #e{name = Name}) ->
-    {keep_state, E#e{tap = tap(Subs, Name)}};
+event(info, ?WIRE_TAP(Subs), _S, E = #e{name = Name, emitter = Em}) ->
+    Tap = tap(Subs, Name),
+    {keep_state, E#e{tap = Tap, emitter = toroco_emitter:tap(Tap, Em)}};
 %% The event path: one input delivered by a router.
-event(info, ?WIRE_IN(Input, V), S, E = #e{suspended = false}) ->
-    input(Input, V, S, E);
-event(info, ?WIRE_IN(Input, V, Router), S, E = #e{suspended = false}) ->
-    Result = input(Input, V, S, E),
-    toroco_wire:send(Router, ?WIRE_ACK(Input)),
-    Result;
-event(info, ?WIRE_IN(_Input, _V), _S, _E) ->
-    keep_state_and_data;                      % suspended: inputs are dropped
-event(info, ?WIRE_IN(Input, _V, Router), _S, _E) ->
-    toroco_wire:send(Router, ?WIRE_ACK(Input)),
-    keep_state_and_data;
-%% Wiring: consumers attach and detach (see toroco_wire).
-event(info, ?WIRE_SUB({_, Out} = Src, Consumer), S, E = #e{outputs = Outs, open = true})
-  when not is_map_key(Out, Outs) ->
-    event(info, ?WIRE_SUB(Src, Consumer), S, E#e{outputs = Outs#{Out => []}});
-event(info, ?WIRE_SUB({_, Out} = Src, Consumer), _S, E = #e{outputs = Outs}) ->
-    case Outs of
-        #{Out := Consumers} ->
-            toroco_wire:send(Consumer, ?WIRE_STATE(emitter, Src, self(), latch(Out, E))),
-            E1 = E#e{outputs = Outs#{Out := lists:usort([Consumer | Consumers])}},
-            case toroco_wire:remote(Consumer) andalso not has_remote(E) of
-                true -> {keep_state, E1, [alive_timer()]};
-                false -> {keep_state, E1}
-            end;
-        #{} ->
-            toroco_wire:send(Consumer, ?WIRE_STATE(emitter, Src, self(), none)),
-            keep_state_and_data
+event(info, ?WIRE_IN(Input, V), S, E) ->
+    delivered(Input, V, none, S, E);
+event(info, ?WIRE_IN(Input, V, Router), S, E) ->
+    delivered(Input, V, Router, S, E);
+%% Wiring: consumers attach and detach (see toroco_wire); those on other
+%% nodes hear from each output now and then.
+event(info, ?WIRE_SUB(Src, Consumer), _S, E = #e{emitter = Em}) ->
+    {Em1, Actions} = toroco_emitter:subscribed(Src, Consumer, Em),
+    {keep_state, E#e{emitter = Em1}, Actions};
+event(info, ?WIRE_UNSUB(Src, Consumer), _S, E = #e{emitter = Em}) ->
+    {keep_state, E#e{emitter = toroco_emitter:unsubscribed(Src, Consumer, Em)}};
+event({timeout, '$toroco_alive'}, beat, _S, #e{emitter = Em}) ->
+    {keep_state_and_data, toroco_emitter:beat(Em)};
+%% The runtime's calls.
+event({call, From}, Req, S, E) when ?IS_CONTROL(Req) ->
+    control(Req, From, S, E);
+%% Everything else belongs to the callback module.
+event(Type, Content, S, E) ->
+    user(Type, Content, S, E).
+
+%% An input, unless suspended (then it is dropped); a `latest' one is acked.
+delivered(Input, V, Router, S, E = #e{suspended = Suspended}) ->
+    R = case Suspended of
+            false -> input(Input, V, S, E);
+            true -> keep_state_and_data
+        end,
+    _ = Router =:= none orelse toroco_wire:send(Router, ?WIRE_ACK(Input)),
+    R.
+
+control({'$toroco_inject', Out, Op}, From, _S, E = #e{emitter = Em, name = N}) ->
+    case toroco_emitter:has(Out, Em) of
+        true -> {keep_state, emit(Out, Op, E), [{reply, From, ok}]};
+        false -> {keep_state_and_data, [{reply, From, {error, {unknown_output, {N, Out}}}}]}
     end;
-event(info, ?WIRE_UNSUB({_, Out}, Consumer), _S, E = #e{outputs = Outs}) ->
-    case Outs of
-        #{Out := Consumers} ->
-            {keep_state, E#e{outputs = Outs#{Out := lists:delete(Consumer, Consumers)}}};
-        #{} -> keep_state_and_data
-    end;
-%% Consumers on other nodes hear from each output now and then, with its
-%% latch, so they can tell a silent node from a quiet output (SPEC §13).
-event({timeout, '$toroco_alive'}, beat, _S, E = #e{outputs = Outs, name = Name}) ->
-    maps:foreach(fun(Out, Consumers) ->
-                         Msg = ?WIRE_ALIVE(emitter, {Name, Out}, latch(Out, E)),
-                         [toroco_wire:send(C, Msg) || C <- Consumers, toroco_wire:remote(C)]
-                 end, Outs),
-    case has_remote(E) of
-        true -> {keep_state_and_data, [alive_timer()]};
-        false -> keep_state_and_data
-    end;
-event({call, From}, {'$toroco_inject', Out, Op}, S, E = #e{outputs = Outs, open = true})
-  when not is_map_key(Out, Outs), is_atom(Out) ->
-    event({call, From}, {'$toroco_inject', Out, Op}, S, E#e{outputs = Outs#{Out => []}});
-event({call, From}, {'$toroco_inject', Out, Op}, _S, E = #e{outputs = Outs, name = N}) ->
-    case Outs of
-        #{Out := _} -> {keep_state, emit(Out, Op, E), [{reply, From, ok}]};
-        #{} -> {keep_state_and_data, [{reply, From, {error, {unknown_output, {N, Out}}}}]}
-    end;
-event({call, From}, '$toroco_reset', _S, E = #e{kind = behavior}) ->
+control('$toroco_reset', From, _S, E = #e{kind = behavior}) ->
     case reset(E) of
         {next_state, S1, E1, Actions} -> {next_state, S1, E1, [{reply, From, ok} | Actions]};
         {stop, Reason, E1} -> {stop_and_reply, Reason, [{reply, From, ok}], E1}
     end;
-event({call, From}, '$toroco_info', S, E) ->
+control('$toroco_info', From, S, E) ->
     {keep_state_and_data, [{reply, From, describe(S, E)}]};
-event({call, From}, '$toroco_suspend', _S, E) ->
+control('$toroco_suspend', From, _S, E) ->
     {keep_state, lifecycle(suspended, E#e{suspended = true}), [{reply, From, ok}]};
-event({call, From}, '$toroco_resume', _S, E = #e{suspended = false}) ->
+control('$toroco_resume', From, _S, E = #e{suspended = false}) ->
     {keep_state, E, [{reply, From, ok}]};
-event({call, From}, '$toroco_resume', _S, E = #e{name = Name, queued = Q}) ->
+control('$toroco_resume', From, _S, E = #e{name = Name, queued = Q}) ->
     %% Routers forget the last value and re-deliver each input's winner; the
     %% callbacks held back while suspended run now, in order.
     receiver_up(Name, inputs(E)),
     {keep_state, lifecycle(resumed, E#e{suspended = false, queued = []}),
      [{reply, From, ok} | [{next_event, T, C} || {T, C} <- lists:reverse(Q)]]};
-%% Everything else belongs to the user module.
-event(Type, Content, _S, E = #e{suspended = true, queued = Q, name = Name}) ->
+control(Req, From, S, E) ->
+    user({call, From}, Req, S, E).              % a device's reset is its module's
+
+%% The callback module's events: held back while suspended; a module
+%% without handle_event/4, or whose handle_event/4 has no clause for the
+%% event, gets the engine's default.
+user(Type, Content, _S, E = #e{suspended = true, queued = Q, name = Name}) ->
     case length(Q) < ?MAX_QUEUED of
         true -> {keep_state, E#e{queued = [{Type, Content} | Q]}};
         false ->
@@ -415,10 +407,10 @@ event(Type, Content, _S, E = #e{suspended = true, queued = Q, name = Name}) ->
                            ?LOG#{name => Name}),
             keep_state_and_data
     end;
-event(Type, Content, S, E = #e{user_events = true, module = M, user = UD}) ->
-    %% A callback module's handle_event/4 with no clause for this event
-    %% falls through to the engine's default below.
-    try M:handle_event(Type, Content, S, UD) of
+user(Type, Content, _S, E = #e{on_event = none}) ->
+    default_event(Type, Content, E);
+user(Type, Content, S, E = #e{on_event = Handle, module = M, user = UD}) ->
+    try Handle(Type, Content, S, UD) of
         R -> result(R, S, E)
     catch
         error:function_clause:Stack ->
@@ -426,9 +418,7 @@ event(Type, Content, S, E = #e{user_events = true, module = M, user = UD}) ->
                 [{M, handle_event, [Type, Content, S, UD], _} | _] -> default_event(Type, Content, E);
                 _ -> erlang:raise(error, function_clause, Stack)
             end
-    end;
-event(Type, Content, _S, E) ->
-    default_event(Type, Content, E).
+    end.
 
 %% What the engine does with an event nobody handles: a call is answered
 %% with an error naming the process, anything else is logged and ignored.
@@ -444,10 +434,10 @@ default_event(Type, Content, #e{name = Name}) ->
 %% when it is gone, whatever it said last.
 -spec terminate(term(), term(), #e{}) -> any().
 terminate(Reason, S, E = #e{module = M, user = UD, name = Name}) ->
-    case erlang:function_exported(M, terminate, 3) andalso M:terminate(Reason, S, UD) of
-        {emit, Actions} -> {_, E1} = actions(Actions, E), toroco_tap:flush(E1#e.batch);
-        _ -> toroco_tap:flush(E#e.batch)
-    end,
+    _ = case erlang:function_exported(M, terminate, 3) andalso M:terminate(Reason, S, UD) of
+            {emit, Actions} -> {_, E1} = actions(Actions, E), flushed(E1);
+            _ -> flushed(E)
+        end,
     toroco_tap:lifecycle(E#e.tap, Name, stopped).
 
 -spec code_change(term(), term(), #e{}, term()) -> {ok, term(), #e{}}.
@@ -455,9 +445,9 @@ code_change(OldVsn, S, E = #e{module = M, user = UD}, Extra) ->
     case erlang:function_exported(M, code_change, 4) of
         true ->
             {ok, S1, UD1} = M:code_change(OldVsn, S, UD, Extra),
-            {ok, S1, E#e{user = UD1, user_events = erlang:function_exported(M, handle_event, 4)}};
+            {ok, S1, bind(E#e{user = UD1})};
         false ->
-            {ok, S, E}
+            {ok, S, bind(E)}
     end.
 
 %%====================================================================
@@ -466,27 +456,14 @@ code_change(OldVsn, S, E = #e{module = M, user = UD}, Extra) ->
 
 input(?RESET, _V, _S, E) ->
     reset(E);
-input(Input, V, S, E = #e{module = M, user = UD}) ->
-    result(M:handle_input(Input, V, S, UD), S, E).
-
-%% A step of lockstep: a simulated timer that is still set fires; any other
-%% event ends an event timeout, as gen_statem's own would end.
-step(?WIRE_TIMER(Kind, Msg), S, E = #e{vtimers = VT}) ->
-    case VT of
-        #{Kind := _} -> event(Kind, Msg, S, E#e{vtimers = maps:remove(Kind, VT)});
-        #{} -> keep_state_and_data
-    end;
-step(Msg, S, E = #e{vtimers = #{timeout := _}}) ->
-    {none, E1} = virtual({timeout, cancel}, E),
-    event(info, Msg, S, E1);
-step(Msg, S, E) ->
-    event(info, Msg, S, E).
+input(Input, V, S, E = #e{on_input = Handle, user = UD}) ->
+    result(Handle(Input, V, S, UD), S, E).
 
 %% Brooks' reset: the behavior's latches and holds are cleared, then it starts
 %% again from init/1 in the same process.
-reset(E0 = #e{outputs = Outs}) ->
-    E = lifecycle(reset, E0),
-    E1 = lists:foldl(fun(Out, Acc) -> emit(Out, unset, Acc) end, E, maps:keys(Outs)),
+reset(E0) ->
+    E = #e{emitter = Em, shell = Sh} = lifecycle(reset, E0),
+    E1 = emitted(toroco_emitter:unset(all, Em, Sh), E),
     {Cancel, E1a} = actions([{state_timeout, cancel} | [{{timeout, T}, cancel} || T <- E1#e.timers]],
                             E1),
     case start_user(E1a#e{timers = []}) of
@@ -517,10 +494,7 @@ result(R, S0, E) ->
 %% Leaving a state ends its state timeout; gen_statem does it for its own,
 %% the engine for a simulated one.
 left(S, S, E) -> E;
-left(_S0, _S, E = #e{vtimers = #{state_timeout := _}}) ->
-    {none, E1} = virtual({state_timeout, cancel}, E),
-    E1;
-left(_S0, _S, E) -> E.
+left(_S0, _S, E = #e{shell = Sh}) -> E#e{shell = toroco_shell:left(Sh)}.
 
 with_actions(next_state, S, A, E) ->
     {A1, E1} = actions(A, E),
@@ -536,24 +510,23 @@ actions(A, E) -> actions([A], E, []).
 
 actions([], E, Acc) ->
     {lists:reverse(Acc), E};
-actions([{send, Map} | T], E, Acc) when is_map(Map) ->
-    actions(T, emit_all(Map, default, E), Acc);
+actions([{send, Map} | T], E = #e{emitter = Em, shell = Sh}, Acc) when is_map(Map) ->
+    actions(T, emitted(toroco_emitter:send(Map, default, Em, Sh), E), Acc);
 actions([{send, Map, Opts} = A | T], E, Acc) when is_map(Map), is_map(Opts) ->
     case maps:get(hold, Opts, default) of
         H when H =:= default; H =:= infinity; is_integer(H), H >= 0 ->
-            actions(T, emit_all(Map, H, E), Acc);
+            actions(T, emitted(toroco_emitter:send(Map, H, E#e.emitter, E#e.shell), E), Acc);
         H ->
             logger:error("toroco: ~p emitted ~p with a bad hold ~p; dropped",
                          [E#e.name, A, H], ?LOG#{name => E#e.name}),
             actions(T, E, Acc)
     end;
-actions([{set, Map} | T], E, Acc) when is_map(Map) ->
-    actions(T, emit_each(maps:to_list(Map), set, E), Acc);
-actions([{unset, Outs} | T], E, Acc) when is_list(Outs) ->
-    actions(T, lists:foldl(fun(Out, EAcc) -> emit(Out, unset, EAcc) end, E, Outs), Acc);
-actions([unset | T], E = #e{outputs = Outs}, Acc) ->
-    actions(T, lists:foldl(fun(Out, EAcc) -> emit(Out, unset, EAcc) end, E,
-                           maps:keys(Outs)), Acc);
+actions([{set, Map} | T], E = #e{emitter = Em, shell = Sh}, Acc) when is_map(Map) ->
+    actions(T, emitted(toroco_emitter:set(Map, Em, Sh), E), Acc);
+actions([{unset, Outs} | T], E = #e{emitter = Em, shell = Sh}, Acc) when is_list(Outs) ->
+    actions(T, emitted(toroco_emitter:unset(Outs, Em, Sh), E), Acc);
+actions([unset | T], E = #e{emitter = Em, shell = Sh}, Acc) ->
+    actions(T, emitted(toroco_emitter:unset(all, Em, Sh), E), Acc);
 actions([{redeliver, Ins} | T], E = #e{name = Name}, Acc) when is_list(Ins) ->
     Declared = inputs(E),
     receiver_up(Name, [I || I <- Ins, lists:member(I, Declared)]),
@@ -570,15 +543,11 @@ actions([{{timeout, Name}, _, _, _} = A | T], E, Acc) ->
 actions([A | T], E, Acc) ->
     timer_action(A, T, E, Acc).
 
-timer_action(A, T, E, Acc) ->
-    case toroco_clock:lockstep_server() of
-        none -> actions(T, E, [clock(A) | Acc]);
-        _ ->
-            case virtual(A, E) of
-                {none, E1} -> actions(T, E1, Acc);
-                {A1, E1} -> actions(T, E1, [A1 | Acc])
-            end
-    end.
+%% A timeout counts simulated milliseconds (toroco_timeouts); the other
+%% gen_statem actions pass.
+timer_action(A, T, E = #e{shell = Sh}, Acc) ->
+    {As, Sh1} = toroco_shell:timeout(A, Sh),
+    actions(T, E#e{shell = Sh1}, lists:reverse(As, Acc)).
 
 timer_named(Name, E = #e{timers = Ts}) ->
     case lists:member(Name, Ts) of
@@ -586,175 +555,34 @@ timer_named(Name, E = #e{timers = Ts}) ->
         false -> E#e{timers = [Name | Ts]}
     end.
 
-%% A callback module's timeouts count simulated milliseconds (toroco_clock):
-%% relative times are turned into real ones; absolute ones and cancels pass.
-clock({Kind, T, Msg}) when ?IS_TIMEOUT(Kind), is_integer(T) ->
-    {Kind, toroco_clock:real_ms(T), Msg};
-clock({Kind, T, Msg, Opts}) when ?IS_TIMEOUT(Kind), is_integer(T), is_list(Opts) ->
-    case proplists:get_value(abs, Opts, false) of
-        false -> {Kind, toroco_clock:real_ms(T), Msg, Opts};
-        true -> {Kind, T, Msg, Opts}
-    end;
-clock(T) when is_integer(T) -> toroco_clock:real_ms(T);
-clock(A) -> A.
+%% Emissions go through the emitter (toroco_emitter), their observer's
+%% events into the shell.
+emit(Out, Op, E = #e{emitter = Em, shell = Sh}) ->
+    emitted(toroco_emitter:emit(Out, Op, Em, Sh), E).
 
-%% In lockstep a callback module's timeouts are set with toroco_lockstep,
-%% in simulated time, and gen_statem sees none of them (`none'); absolute
-%% ones stay gen_statem's, in real time (the servos' keepalive).
-virtual({Kind, T, Msg}, E) when ?IS_TIMEOUT(Kind), is_integer(T) ->
-    vset(Kind, T, Msg, E);
-virtual({Kind, infinity, _Msg}, E) when ?IS_TIMEOUT(Kind) ->
-    virtual({Kind, cancel}, E);
-virtual({Kind, T, Msg, Opts} = A, E) when ?IS_TIMEOUT(Kind), is_integer(T), is_list(Opts) ->
-    case proplists:get_value(abs, Opts, false) of
-        false -> vset(Kind, T, Msg, E);
-        true -> {A, E}
-    end;
-virtual({Kind, cancel}, E = #e{vtimers = VT}) when ?IS_TIMEOUT(Kind) ->
-    case VT of
-        #{Kind := _} ->
-            toroco_clock:cancel_timer(Kind),
-            {none, E#e{vtimers = maps:remove(Kind, VT)}};
-        #{} ->
-            {none, E}
-    end;
-virtual({Kind, update, Msg}, E = #e{vtimers = VT}) when ?IS_TIMEOUT(Kind) ->
-    case VT of
-        #{Kind := Deadline} -> toroco_clock:set_timer(Kind, Deadline, Msg);
-        #{} -> ok
-    end,
-    {none, E};
-virtual(T, E) when is_integer(T) ->
-    vset(timeout, T, T, E);
-virtual(A, E) ->
-    {A, E}.
-
-vset(Kind, T, Msg, E = #e{vtimers = VT}) ->
-    Deadline = toroco_clock:now_ms() + T,
-    toroco_clock:set_timer(Kind, Deadline, Msg),
-    {none, E#e{vtimers = VT#{Kind => Deadline}}}.
-
-%% A list of the map's pairs, walked without a fun: an action's map has one
-%% or two outputs, where an iterator costs more than the walk.
-emit_all(Map, Hold, E) ->
-    emit_each(maps:to_list(Map), Hold, E).
-
-emit_each([], _How, E) -> E;
-emit_each([{Out, V} | T], set, E) -> emit_each(T, set, emit(Out, {set, V}, E));
-emit_each([{Out, V} | T], Hold, E) -> emit_each(T, Hold, emit(Out, {send, V, Hold}, E)).
-
-%% One emission on one output: to every consumer, in order; the latch follows.
-emit(Out, Op, E = #e{outputs = Outs, name = Name}) ->
-    case Outs of
-        #{Out := Consumers} ->
-            send_all(Consumers, ?WIRE_EVENT({Name, Out}, Op)),
-            case E#e.tap of
-                #{emit := Sinks} ->
-                    relatch(Out, Op, E#e{batch = toroco_tap:tap(Sinks, emit_event(Name, Out, Op),
-                                                                E#e.batch)});
-                #{} ->
-                    relatch(Out, Op, E)
-            end;
-        #{} when E#e.open, is_atom(Out) ->
-            emit(Out, Op, E#e{outputs = Outs#{Out => []}});
-        #{} ->
-            undeclared(Out, E)
-    end.
-
-%% An emission on an undeclared output is dropped, and said at most once a
-%% second per behavior, with how many were held back since.
-undeclared(Out, E = #e{name = Name, undeclared = {Last, Held}}) ->
-    Now = erlang:monotonic_time(millisecond),
-    case Last =:= never orelse Now - Last >= ?WARN_INTERVAL_MS of
-        true ->
-            logger:warning("toroco: ~p emitted on undeclared output ~p; dropped~ts",
-                           [Name, Out, case Held of
-                                           0 -> "";
-                                           _ -> io_lib:format(" (~b more since the last warning)", [Held])
-                                       end], ?LOG#{name => Name}),
-            E#e{undeclared = {Now, 0}};
-        false ->
-            E#e{undeclared = {Last, Held + 1}}
-    end.
-
-emit_event(Name, Out, {send, V, _Hold}) -> {emit, toroco_tap:timestamp(), {Name, Out}, send, V};
-emit_event(Name, Out, {set, V}) -> {emit, toroco_tap:timestamp(), {Name, Out}, set, V};
-emit_event(Name, Out, unset) -> {emit, toroco_tap:timestamp(), {Name, Out}, unset, none}.
+emitted({Em, Sh}, E) ->
+    E#e{emitter = Em, shell = Sh}.
 
 tap(Subs, Name) ->
     toroco_tap:select(Subs, [emit, lifecycle], Name).
 
 %% A lifecycle event of this process into its batch.
-lifecycle(What, E = #e{tap = Tap, name = Name, batch = B}) ->
-    E#e{batch = toroco_tap:lifecycle(Tap, Name, What, B)}.
+lifecycle(What, E = #e{tap = Tap, name = Name, shell = Sh}) ->
+    E#e{shell = toroco_shell:lifecycle(Tap, Name, What, Sh)}.
 
-%% After an event, with the data the result carries (or the data before
-%% the event if it carries none): what becomes of the batch
-%% (toroco_tap:after_event/3).
-tap_after(R, E0) ->
-    case R of
-        {keep_state, E} -> tapped(keep_state, none, E, [], E0, R);
-        {keep_state, E, A} -> tapped(keep_state, none, E, A, E0, R);
-        {next_state, S, E} -> tapped(next_state, S, E, [], E0, R);
-        {next_state, S, E, A} -> tapped(next_state, S, E, A, E0, R);
-        {repeat_state, E} -> tapped(repeat_state, none, E, [], E0, R);
-        {repeat_state, E, A} -> tapped(repeat_state, none, E, A, E0, R);
-        keep_state_and_data -> tapped(keep_state, none, E0, [], E0, R);
-        {keep_state_and_data, A} -> tapped(keep_state, none, E0, A, E0, R);
-        repeat_state_and_data -> tapped(repeat_state, none, E0, [], E0, R);
-        {repeat_state_and_data, A} -> tapped(repeat_state, none, E0, A, E0, R);
-        _ -> R                                  % stopping: terminate/3 sends it
-    end.
+%% The tap's batch sent now.
+flushed(E = #e{shell = Sh}) ->
+    E#e{shell = toroco_shell:flush(Sh)}.
 
-tapped(_How, _S, #e{batch = []}, _A, _E0, R) ->
-    R;
-tapped(How, S, E = #e{batch = B}, A0, #e{batch = B0}, R) ->
-    A = case is_list(A0) of true -> A0; false -> [A0] end,
-    case toroco_tap:after_event(B0 =/= [], B, lists:any(fun event_timeout/1, A)) of
-        keep -> R;
-        {B1, More} when How =:= next_state -> {next_state, S, E#e{batch = B1}, More ++ A};
-        {B1, More} -> {How, E#e{batch = B1}, More ++ A}
-    end.
-
-event_timeout(T) when is_integer(T) -> true;
-event_timeout({timeout, _, _}) -> true;
-event_timeout({timeout, _, _, _}) -> true;
-event_timeout(_) -> false.
-
-send_all([], _Msg) -> ok;
-send_all([C | Cs], Msg) ->
-    toroco_wire:send(C, Msg),
-    send_all(Cs, Msg).
-
-has_remote(#e{outputs = Outs}) ->
-    lists:any(fun toroco_wire:remote/1, lists:append(maps:values(Outs))).
-
-alive_timer() ->
-    {{timeout, '$toroco_alive'}, toroco_wire:keepalive_ms(), beat}.
-
-relatch(Out, {set, V}, E = #e{latches = L}) ->
-    E#e{latches = L#{Out => V}};
-relatch(Out, _, E = #e{latches = L}) ->
-    case L of
-        #{Out := _} -> E#e{latches = maps:remove(Out, L)};
-        #{} -> E
-    end.
-
-latch(Out, #e{latches = L}) ->
-    case L of
-        #{Out := V} -> {value, V};
-        #{} -> none
-    end.
-
-describe(S, #e{kind = Kind, module = M, layer = L, latches = Latches, suspended = Susp,
-               user = UD, open = Open, outputs = Outs}) ->
+describe(S, #e{kind = Kind, module = M, layer = L, emitter = Em, suspended = Susp,
+               user = UD, open = Open}) ->
     {message_queue_len, Q} = erlang:process_info(self(), message_queue_len),
-    Base0 = #{kind => Kind, module => M, layer => L, latches => Latches,
+    Base0 = #{kind => Kind, module => M, layer => L, latches => toroco_emitter:latches(Em),
               status => case Susp of true -> suspended; false -> running end,
               state => S, mailbox => Q},
     %% open ports: the outputs it has come to have
     Base = case Open of
-               true -> Base0#{outputs => maps:keys(Outs)};
+               true -> Base0#{outputs => toroco_emitter:outputs(Em)};
                false -> Base0
            end,
     case erlang:function_exported(M, info, 2) of

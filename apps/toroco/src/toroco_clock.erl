@@ -33,6 +33,8 @@
 -module(toroco_clock).
 
 -export([now_ms/0, speed/0, set_speed/1, real_ms/1, real_deadline/1]).
+-export([timebase/0, real_ms/2, real_deadline/2]).
+-export_type([timebase/0, scale/0]).
 -export([mode/0, lockstep/1, realtime/0, tick/2, tick/3, settle/0, timestamp_ns/0]).
 -export([lockstep_cell/1, lockstep_server/0, set_timer/3, cancel_timer/1, notify/2, notify/3]).
 -export_type([speed/0, stimulus/0]).
@@ -40,6 +42,13 @@
 -type stimulus() :: toroco_lockstep:stimulus().
 
 -type speed() :: number().
+%% How real time relates to simulated time outside lockstep: the identity,
+%% or a speed with the real and simulated times it was set at (while
+%% lockstep starts or ends, its cell: the identity too).
+-type scale() :: 1 | {speed(), integer(), integer()} | {lockstep, atomics:atomics_ref()}.
+%% What a timeout is set against: simulated time now, in lockstep, or
+%% the scale of real time (see `toroco_timeouts').
+-type timebase() :: {lockstep, integer()} | {realtime, scale()}.
 
 -define(KEY, toroco_clock).
 
@@ -82,20 +91,34 @@ scale(Speed) ->
 %% @doc A duration of simulated milliseconds as real milliseconds (rounded
 %% up, so a timer never fires early).
 -spec real_ms(timeout()) -> timeout().
-real_ms(infinity) -> infinity;
 real_ms(Ms) ->
-    case persistent_term:get(?KEY, 1) of
-        {Speed, _, _} -> ceil(Ms / Speed);
-        _ -> Ms
-    end.
+    real_ms(Ms, persistent_term:get(?KEY, 1)).
+
+%% @doc {@link real_ms/1} against a scale read before (`timebase/0').
+-spec real_ms(timeout(), scale()) -> timeout().
+real_ms(infinity, _Scale) -> infinity;
+real_ms(Ms, {Speed, _, _}) -> ceil(Ms / Speed);
+real_ms(Ms, _Scale) -> Ms.
 
 %% @doc A simulated monotonic deadline as a real monotonic one, in ms (for
 %% gen_statem's absolute timeouts).
 -spec real_deadline(integer()) -> integer().
 real_deadline(SimMs) ->
-    case persistent_term:get(?KEY, 1) of
-        {Speed, RealBase, SimBase} -> RealBase + ceil((SimMs - SimBase) / Speed);
-        _ -> SimMs
+    real_deadline(SimMs, persistent_term:get(?KEY, 1)).
+
+%% @doc {@link real_deadline/1} against a scale read before (`timebase/0').
+-spec real_deadline(integer(), scale()) -> integer().
+real_deadline(SimMs, {Speed, RealBase, SimBase}) -> RealBase + ceil((SimMs - SimBase) / Speed);
+real_deadline(SimMs, _Scale) -> SimMs.
+
+%% @doc What the timeouts a process sets now are set against: in lockstep
+%% (a lockstep process runs), simulated time now; else the scale of real
+%% time. Read once per callback result that sets a timeout.
+-spec timebase() -> timebase().
+timebase() ->
+    case lockstep_server() of
+        none -> {realtime, persistent_term:get(?KEY, 1)};
+        _ -> {lockstep, now_ms()}
     end.
 
 real_now() ->

@@ -8,7 +8,12 @@
 %% changes), a new incarnation's hello, an upstream's death, and the calls
 %% of the wiring server. The callback module owns its pure core and what
 %% goes out: a router's deliveries to its receiver, a gate's forwarding to
-%% its own subscribers.
+%% its own subscribers. What every process of the event path does alike
+%% (a lockstep step, the idle tick, the observer tap's batch, which a
+%% callback taps into through `toroco_shell:tap/3', timeouts in simulated
+%% time) is the shell's (`toroco_shell'). The callback module's `run/4', `settled/2' and
+%% `deadline/1' are called through funs made at start (external funs: a
+%% reload of the module takes effect at the next call).
 %%
 %% A consumer reads its configuration from the wiring table when it
 %% (re)starts, and is handed the new one with the wiring server's `rewire'.
@@ -38,13 +43,23 @@
 
 -include("toroco_wire.hrl").
 
+%% How the shell reaches this module's data and events (toroco_shell:host()):
+%% external funs of a constant module, so the tuple is a literal.
+-define(HOST, {fun ?MODULE:shell/1, fun ?MODULE:shell/2, fun ?MODULE:event/4}).
+
 -export([start_link/3, rewire/4, ready/2, info/2, call/4]).
+%% The shell's way into this module (toroco_shell:host()), not an API.
+-export([shell/1, shell/2, event/4]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3]).
 
 -type key() :: {atom(), atom()}.
 -export_type([key/0]).
 -type core_event() :: term().
 -type kind_data() :: term().
+-type shell() :: toroco_shell:shell().
+%% What a kind does with an event of its own: core events to run, gen_statem
+%% actions (a call's reply among them), its data and the shell.
+-type handled() :: {[core_event()], [gen_statem:action()], kind_data(), shell()}.
 
 %% The kind of consumer: `router' or `gate'.
 -callback kind() -> router | gate.
@@ -52,31 +67,37 @@
 -callback reg(key()) -> atom().
 %% Its data at start, from its configuration in the wiring table.
 -callback init(key(), Cfg :: map()) -> kind_data().
-%% One event into the core, and what comes out sent on.
--callback run(core_event(), Now :: integer(), kind_data()) -> kind_data().
+%% One event into the core, and what comes out sent on. What it taps for
+%% the observer it taps into the shell (`toroco_shell:tap/3'), which sends
+%% it once the event is handled (toroco_tap:after_event/3).
+-callback run(core_event(), Now :: integer(), kind_data(), shell()) -> {kind_data(), shell()}.
 %% After a batch of events (a router reports its state to the tap here).
--callback settled(kind_data()) -> kind_data().
+-callback settled(kind_data(), shell()) -> {kind_data(), shell()}.
 %% The core's earliest hold deadline.
 -callback deadline(kind_data()) -> infinity | integer().
 %% A finished re-wiring, into the core at once.
 -callback rewired(Cfg :: map(), Synced :: [{key(), toroco_router_core:latch()}],
-                  Reset :: [key()], Now :: integer(), kind_data()) -> kind_data().
+                  Reset :: [key()], Now :: integer(), kind_data(), shell()) ->
+    {kind_data(), shell()}.
 %% The core events of an answer that came after the wait (or from the
 %% caller of the wiring change).
 -callback late(key(), toroco_router_core:latch() | inhibited) -> [core_event()].
-%% Messages and calls of its own: `{events, CoreEvents, Data}', `{reply,
-%% Reply, CoreEvents, Data}' (calls), or `unknown'.
--callback handle(gen_statem:event_type(), term(), kind_data()) ->
-    {events, [core_event()], kind_data()} | {reply, term(), [core_event()], kind_data()} | unknown.
+%% Messages, calls (answered with a `reply' action) and timeouts of its
+%% own, or `unknown'.
+-callback handle(gen_statem:event_type(), term(), kind_data(), shell()) -> handled() | unknown.
 %% The inspection view.
 -callback info(Now :: integer(), kind_data()) -> term().
-%% The observer tap's events it keeps, not sent yet (toroco_tap:after_event/3).
--callback tap_batch(kind_data()) -> toroco_tap:batch().
--callback tap_batch(toroco_tap:batch(), kind_data()) -> kind_data().
 
 -record(c, {mod :: module(),
             key :: key(),
             data :: kind_data(),
+            %% the kind's event path callbacks, made once at start: external
+            %% funs, so a code reload of the kind takes effect at the next call
+            run :: fun((core_event(), integer(), kind_data(), shell()) -> {kind_data(), shell()}),
+            settled :: fun((kind_data(), shell()) -> {kind_data(), shell()}),
+            deadline :: fun((kind_data()) -> infinity | integer()),
+            %% lockstep, the idle tick, the tap's batch, the simulated hold timer
+            shell :: toroco_shell:shell(),
             links = toroco_wire:new_links() :: toroco_wire:links(),
             timer = infinity :: infinity | integer(),
             %% remote sources: when each was last heard (monotonic ms), its
@@ -86,7 +107,6 @@
             stale = [] :: [key()],
             stale_at = infinity :: infinity | integer(),
             tries = 0 :: non_neg_integer(),
-            idle = off :: toroco_wire:idle(),
             sync = none :: none | {toroco_wire:sync(), gen_statem:from() | none, map()}}).
 
 %%====================================================================
@@ -140,7 +160,9 @@ init({Mod, Key, Caller}) ->
     case toroco_wiring:lookup({Mod:kind(), Key}) of
         {ok, Cfg} ->
             ok = toroco_lockstep:up(Mod:reg(Key), consumer),
-            C = #c{mod = Mod, key = Key, data = Mod:init(Key, Cfg), idle = toroco_wire:idle_arm()},
+            C = #c{mod = Mod, key = Key, data = Mod:init(Key, Cfg), run = fun Mod:run/4,
+                   settled = fun Mod:settled/2, deadline = fun Mod:deadline/1,
+                   shell = toroco_shell:new()},
             {St, C1, Actions} = start_sync(Cfg, Caller, none, C),
             toroco_lockstep:ready(Mod:reg(Key)),
             {ok, St, C1, Actions};
@@ -152,67 +174,84 @@ init({Mod, Key, Caller}) ->
 
 -spec handle_event(gen_statem:event_type(), term(), ready | syncing | gone, #c{} | none) ->
           gen_statem:event_handler_result(ready | syncing | gone).
-%% Every event, then what becomes of the kind's tapped events
-%% (toroco_tap:after_event/3). In lockstep a barrier is answered at once,
-%% and a death is handed to toroco_lockstep, to come back as a step.
-handle_event(info, ?WIRE_BARRIER(Ref), _, _) ->
-    toroco_lockstep:synced(Ref),
-    keep_state_and_data;
+%% Lockstep, the idle tick and the tap's batch are the shell's
+%% (toroco_shell); the rest comes to event/4. In lockstep a death is handed
+%% to toroco_lockstep, to come back as a step, and the deaths a step
+%% caused are handed over before it is done.
+handle_event(internal, gone, gone, none) ->
+    {stop, normal};
 handle_event(info, {'DOWN', _, process, _, _} = Down, St, C) ->
     case toroco_lockstep:down(Down) of
         true -> keep_state_and_data;
-        false -> tap_after(event(info, Down, St, C), C)
+        false -> toroco_shell:handle_event(info, Down, St, C, ?HOST)
     end;
-handle_event(Type, Content, St, C) ->
-    tap_after(event(Type, Content, St, C), C).
-
-event(internal, gone, gone, none) ->
-    {stop, normal};
-%% Lockstep (toroco_lockstep): one message of the event path, or the hold
-%% timer, as a step; the step is done once the events it inserts are handled.
-event(info, ?WIRE_STEP(Token, ?WIRE_TIMER(Kind, Msg)), St, C) ->
-    toroco_wire:step_done(Token, event(Kind, Msg, St, C));
-event(info, ?WIRE_STEP(Token, Msg), St, C) ->
-    toroco_wire:step_done(Token, event(info, Msg, St, C));
-event(internal, ?WIRE_STEP_DONE(Token), _, _) ->
+handle_event(internal, ?WIRE_STEP_DONE(_) = Done, St, C) ->
     %% a monitor the step set on a process already gone has its DOWN here
     %% now: it is handed over before the step is done, not at a moment
     %% that depends on the schedulers
     hand_over_downs(),
-    toroco_lockstep:done(Token),
-    keep_state_and_data;
-%% The idle tick (toroco_wire:idle_arm/0); the first event after
-%% hibernating arms it again.
-event(info, ?WIRE_IDLE, _, C = #c{idle = Idle}) ->
-    {Idle1, Actions} = toroco_wire:idle_tick(Idle),
-    {keep_state, C#c{idle = Idle1}, Actions};
-event(Type, Content, St, C = #c{idle = off}) ->
-    event(Type, Content, St, C#c{idle = toroco_wire:idle_arm()});
-%% The event path.
-event(info, ?WIRE_EVENT(Src, Op), St, C = #c{heard = H}) when map_size(H) =:= 0 ->
-    op(emitter, Src, Op, St, C);
-event(info, ?WIRE_GATED(Src, Op), St, C = #c{heard = H}) when map_size(H) =:= 0 ->
-    op(gate, Src, Op, St, C);
+    toroco_shell:handle_event(internal, Done, St, C, ?HOST);
+handle_event(Type, Content, St, C) ->
+    toroco_shell:handle_event(Type, Content, St, C, ?HOST).
+
+%% @private
+-spec shell(#c{}) -> toroco_shell:shell().
+shell(#c{shell = Sh}) -> Sh.
+
+%% @private
+-spec shell(toroco_shell:shell(), #c{}) -> #c{}.
+shell(Sh, C) -> C#c{shell = Sh}.
+
+%% @private Every event the shell does not handle itself.
+-spec event(gen_statem:event_type(), term(), ready | syncing | gone, #c{}) ->
+          gen_statem:event_handler_result(ready | syncing | gone).
+
+%% The event path, and the remote sources' keep-alives and timers.
 event(info, ?WIRE_EVENT(Src, Op), St, C) ->
-    with_heard(Src, fun(C1) -> op(emitter, Src, Op, St, C1) end, C);
+    path(emitter, Src, Op, St, C);
 event(info, ?WIRE_GATED(Src, Op), St, C) ->
-    with_heard(Src, fun(C1) -> op(gate, Src, Op, St, C1) end, C);
-event(info, ?WIRE_ALIVE(Tag, Src, Latch), _, C = #c{links = L, stale = Stale, mod = Mod}) ->
-    case toroco_wire:carries(Tag, Src, L) andalso lists:member(Src, Stale) of
-        %% Heard again after its silence: its latch comes back.
-        true -> with_heard(Src, fun(C1) -> steps(Mod:late(Src, Latch), C1) end, C);
-        false -> {keep_state, heard(Src, C)}
-    end;
+    path(gate, Src, Op, St, C);
+event({timeout, hold}, expire, _, C) ->
+    steps([tick], C#c{timer = infinity});
+event(info, ?WIRE_ALIVE(Tag, Src, Latch), _, C) ->
+    alive(Tag, Src, Latch, C);
 event({timeout, stale}, check, _, C) ->
     silent(C#c{stale_at = infinity});
 event({timeout, resub}, again, _, C) ->
     resubscribe(C);
 event(info, ?WIRE_RESUBSCRIBE, _, C) ->
     resubscribe(C#c{tries = 0});
-event({timeout, hold}, expire, _, C) ->
-    steps([tick], C#c{timer = infinity});
 %% Upstreams: answers, new incarnations, deaths.
-event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C = #c{sync = {Sync, From, Cfg}}) ->
+event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C) ->
+    state(Tag, Src, Pid, Latch, St, C);
+event(info, ?WIRE_HELLO(Tag, Src, Pid), St, C) ->
+    hello(Tag, Src, Pid, St, C);
+event(info, {'DOWN', _, process, _, _} = Down, _, C) ->
+    down(Down, C);
+event({timeout, sync}, expire, syncing, C = #c{sync = {Sync, From, Cfg}}) ->
+    {ready, C1, Actions} = finish(C#c{sync = {toroco_wire:sync_expire(Sync), From, Cfg}}),
+    {next_state, ready, C1, Actions};
+%% The wiring server, and inspection.
+event({call, From}, Req, St, C) ->
+    called(Req, From, St, C);
+%% The observer tap, and whatever is the kind's own.
+event(Type, Content, _, C) ->
+    kind(Type, Content, C).
+
+%% An event of a source: a remote one is heard.
+path(Tag, Src, Op, St, C = #c{heard = H}) when map_size(H) =:= 0 ->
+    op(Tag, Src, Op, St, C);
+path(Tag, Src, Op, St, C) ->
+    with_heard(Src, fun(C1) -> op(Tag, Src, Op, St, C1) end, C).
+
+alive(Tag, Src, Latch, C = #c{links = L, stale = Stale, mod = Mod}) ->
+    case toroco_wire:carries(Tag, Src, L) andalso lists:member(Src, Stale) of
+        %% Heard again after its silence: its latch comes back.
+        true -> with_heard(Src, fun(C1) -> steps(Mod:late(Src, Latch), C1) end, C);
+        false -> {keep_state, heard(Src, C)}
+    end.
+
+state(Tag, Src, Pid, Latch, St, C = #c{sync = {Sync, From, Cfg}}) ->
     case toroco_wire:sync_answer(Tag, Src, Pid, Latch, Sync) of
         {ok, Sync1} ->
             maybe_finish(C#c{sync = {Sync1, From, Cfg}});
@@ -224,9 +263,10 @@ event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C = #c{sync = {Sync, From, Cf
                 false -> late(Tag, Src, Pid, Latch, St, C)
             end
     end;
-event(info, ?WIRE_STATE(Tag, Src, Pid, Latch), St, C) ->
-    late(Tag, Src, Pid, Latch, St, C);
-event(info, ?WIRE_HELLO(Tag, Src, Pid), St, C = #c{links = L}) ->
+state(Tag, Src, Pid, Latch, St, C) ->
+    late(Tag, Src, Pid, Latch, St, C).
+
+hello(Tag, Src, Pid, St, C = #c{links = L}) ->
     case St =:= syncing andalso toroco_wire:sync_fresh(Tag, Src, element(1, C#c.sync)) of
         true ->
             {keep_state_and_data, [postpone]};
@@ -235,8 +275,9 @@ event(info, ?WIRE_HELLO(Tag, Src, Pid), St, C = #c{links = L}) ->
                 {ok, L1} -> steps([{op, Src, unset}], C#c{links = L1});
                 ignore -> keep_state_and_data
             end
-    end;
-event(info, {'DOWN', Ref, process, Pid, _} = Down, _, C = #c{links = L, sync = Sync}) ->
+    end.
+
+down({'DOWN', Ref, process, Pid, _} = Down, C = #c{links = L, sync = Sync}) ->
     case Sync =/= none andalso toroco_wire:sync_down(Ref, element(1, Sync)) of
         {ok, Sync1} ->
             maybe_finish(C#c{sync = setelement(1, Sync, Sync1)});
@@ -248,29 +289,23 @@ event(info, {'DOWN', Ref, process, Pid, _} = Down, _, C = #c{links = L, sync = S
                     remote(steps([{op, S, unset} || S <- Srcs], C#c{links = L1}));
                 ignore -> kind(info, Down, C)
             end
-    end;
-event({timeout, sync}, expire, syncing, C = #c{sync = {Sync, From, Cfg}}) ->
-    {ready, C1, Actions} = finish(C#c{sync = {toroco_wire:sync_expire(Sync), From, Cfg}}),
-    {next_state, ready, C1, Actions};
-%% The wiring server, and inspection: answered once the change is in (a
-%% consumer that just restarted answers with its sources' state recovered).
-event({call, _}, _Req, syncing, _C) ->
+    end.
+
+%% Answered once the change is in (a consumer that just restarted answers
+%% with its sources' state recovered); the kind's own calls too.
+called(_Req, _From, syncing, _C) ->
     {keep_state_and_data, [postpone]};
-event({call, From}, info, ready, #c{mod = Mod, data = D}) ->
+called(info, From, ready, #c{mod = Mod, data = D}) ->
     {keep_state_and_data, [{reply, From, Mod:info(toroco_clock:now_ms(), D)}]};
-event({call, From}, {rewire, Cfg, Caller}, ready, C) ->
+called({rewire, Cfg, Caller}, From, ready, C) ->
     case start_sync(Cfg, Caller, From, C) of
         {syncing, C1, Actions} -> {next_state, syncing, C1, Actions};
         {ready, C1, Actions} -> {keep_state, C1, Actions}
     end;
-event({call, From}, ready, ready, _C) ->
+called(ready, From, ready, _C) ->
     {keep_state_and_data, [{reply, From, ok}]};
-%% The kind's tapped events are due (toroco_tap:after_event/3).
-event({timeout, '$toroco_tap'}, flush, _, C = #c{mod = Mod, data = D}) ->
-    {keep_state, C#c{data = Mod:tap_batch(toroco_tap:flush(Mod:tap_batch(D)), D)}};
-%% The observer tap, and whatever is the kind's own.
-event(Type, Content, _, C) ->
-    kind(Type, Content, C).
+called(Req, From, _St, C) ->
+    kind({call, From}, Req, C).
 
 hand_over_downs() ->
     {monitors, Mons} = erlang:process_info(self(), monitors),
@@ -303,8 +338,8 @@ flush_downs() ->
 -spec terminate(term(), ready | syncing | gone, #c{} | none) -> ok.
 terminate(_Reason, gone, none) ->
     ok;
-terminate(_Reason, _, C = #c{links = L, mod = Mod, data = D}) ->
-    _ = toroco_tap:flush(Mod:tap_batch(D)),
+terminate(_Reason, _, C = #c{links = L, shell = Sh}) ->
+    _ = toroco_shell:flush(Sh),
     toroco_wire:detach_all(L, me(C)).
 
 %%====================================================================
@@ -331,63 +366,34 @@ late(Tag, Src, Pid, Latch, _St, C = #c{links = L, mod = Mod}) ->
         ignore -> keep_state_and_data
     end.
 
-kind(Type, Content, C = #c{mod = Mod, data = D}) ->
-    case Mod:handle(Type, Content, D) of
-        {events, Events, D1} -> steps(Events, C#c{data = D1});
-        {reply, Reply, Events, D1} ->
-            {call, From} = Type,
-            add_actions([{reply, From, Reply}], steps(Events, C#c{data = D1}));
+kind(Type, Content, C = #c{mod = Mod, data = D, shell = Sh}) ->
+    case Mod:handle(Type, Content, D, Sh) of
+        {Events, [], D1, Sh1} -> steps(Events, C#c{data = D1, shell = Sh1});
+        {Events, Actions, D1, Sh1} ->
+            add_actions(Actions, steps(Events, C#c{data = D1, shell = Sh1}));
         unknown ->
             logger:warning("toroco: ~p ~p: unexpected ~p event ~p",
                            [Mod:kind(), C#c.key, Type, Content], #{domain => [toroco, wire]}),
             keep_state_and_data
     end.
 
-steps([Event], C = #c{mod = Mod, data = D0}) ->
+steps([Event], C = #c{run = Run, data = D0, shell = Sh}) ->
     %% the event path: one event at a time
-    settle(Mod:run(Event, toroco_clock:now_ms(), D0), C);
-steps(Events, C = #c{mod = Mod, data = D0}) ->
+    settle(Run(Event, toroco_clock:now_ms(), D0, Sh), C);
+steps(Events, C = #c{run = Run, data = D0, shell = Sh}) ->
     Now = toroco_clock:now_ms(),
-    settle(lists:foldl(fun(E, Acc) -> Mod:run(E, Now, Acc) end, D0, Events), C).
+    settle(lists:foldl(fun(E, {D, Sh1}) -> Run(E, Now, D, Sh1) end, {D0, Sh}, Events), C).
 
-settle(D0, C = #c{mod = Mod}) ->
-    D = Mod:settled(D0),
-    case timer(C#c{data = D}) of
+settle({D0, Sh0}, C = #c{settled = Settled}) ->
+    {D, Sh} = Settled(D0, Sh0),
+    case timer(C#c{data = D, shell = Sh}) of
         {C1, []} -> {keep_state, C1};
         {C1, Actions} -> {keep_state, C1, Actions}
     end.
 
-timer(C = #c{mod = Mod, data = D, timer = T}) ->
-    {T1, Actions} = toroco_wire:hold_timer(Mod:deadline(D), T),
-    {C#c{timer = T1}, Actions}.
-
-%% After an event, with the data the result carries (or the data before
-%% the event if it carries none).
-tap_after({keep_state, C}, C0) -> tapped(none, C, [], C0, {keep_state, C});
-tap_after({keep_state, C, A}, C0) -> tapped(none, C, A, C0, {keep_state, C, A});
-tap_after({next_state, St, C}, C0) -> tapped(St, C, [], C0, {next_state, St, C});
-tap_after({next_state, St, C, A}, C0) -> tapped(St, C, A, C0, {next_state, St, C, A});
-tap_after(keep_state_and_data = R, C0 = #c{}) -> tapped(none, C0, [], C0, R);
-tap_after({keep_state_and_data, A} = R, C0 = #c{}) -> tapped(none, C0, A, C0, R);
-tap_after(R, _) -> R.
-
-tapped(St, C = #c{mod = Mod, data = D}, A0, C0, R) ->
-    case Mod:tap_batch(D) of
-        [] -> R;
-        B ->
-            case toroco_tap:after_event(Mod:tap_batch(C0#c.data) =/= [], B, false) of
-                keep -> R;
-                {B1, More} ->
-                    C1 = C#c{data = Mod:tap_batch(B1, D)},
-                    A = case is_list(A0) of true -> A0; false -> [A0] end,
-                    case St of
-                        none -> {keep_state, C1, More ++ A};
-                        _ -> {next_state, St, C1, More ++ A}
-                    end
-            end
-    end;
-tapped(_St, _C, _A, _C0, R) ->
-    R.
+timer(C = #c{deadline = Deadline, data = D, timer = T, shell = Sh}) ->
+    {T1, Actions, Sh1} = toroco_shell:hold(Deadline(D), T, Sh),
+    {C#c{timer = T1, shell = Sh1}, Actions}.
 
 add_actions(More, {keep_state, C}) -> {keep_state, C, More};
 add_actions(More, {keep_state, C, Actions}) -> {keep_state, C, More ++ Actions}.
@@ -415,10 +421,11 @@ maybe_finish(C = #c{sync = {Sync, _, _}}) ->
 
 %% The whole change enters the core at once; the wiring server's call is
 %% answered; postponed events follow (leaving `syncing' replays them).
-finish(C = #c{sync = {Sync, From, Cfg}, links = L, mod = Mod, data = D}) ->
+finish(C = #c{sync = {Sync, From, Cfg}, links = L, mod = Mod, data = D, shell = Sh}) ->
     {L1, Synced, Reset} = toroco_wire:finish_sync(Sync, L),
-    D1 = Mod:settled(Mod:rewired(Cfg, Synced, Reset, toroco_clock:now_ms(), D)),
-    {C1, Actions} = timer(C#c{links = L1, data = D1, sync = none,
+    {D1, Sh1} = Mod:rewired(Cfg, Synced, Reset, toroco_clock:now_ms(), D, Sh),
+    {D2, Sh2} = (C#c.settled)(D1, Sh1),
+    {C1, Actions} = timer(C#c{links = L1, data = D2, sync = none, shell = Sh2,
                               ages = ages(Cfg), stale = C#c.stale -- Reset}),
     Reply = case From of
                 none -> [];

@@ -17,8 +17,7 @@
 -include("toroco_wire.hrl").
 
 -export([info/1]).
--export([tap_batch/1, tap_batch/2]).
--export([kind/0, reg/1, init/2, run/3, settled/1, deadline/1, rewired/5, late/2, handle/3,
+-export([kind/0, reg/1, init/2, run/4, settled/2, deadline/1, rewired/6, late/2, handle/4,
          info/2]).
 
 -record(g, {core = toroco_gate_core:new() :: toroco_gate_core:core(),
@@ -57,64 +56,59 @@ init(_Key, #{subs := Subs}) ->
                  end, Subs),
     #g{}.
 
-%% @doc Feeds one event to the core and forwards what comes out.
--spec run(term(), integer(), #g{}) -> #g{}.
-run(Event, Now, D = #g{core = C, subs = Subs}) ->
+%% @doc Feeds one event to the core and forwards what comes out. A gate
+%% taps nothing: the batch passes.
+-spec run(term(), integer(), #g{}, toroco_shell:shell()) -> {#g{}, toroco_shell:shell()}.
+run(Event, Now, D = #g{core = C, subs = Subs}, Sh) ->
     {C1, Fwd} = toroco_gate_core:handle(Event, Now, C),
     _ = [toroco_wire:send(R, ?WIRE_GATED(M, Op)) || {M, Op} <- Fwd, R <- maps:get(M, Subs, [])],
-    D#g{core = C1}.
+    {D#g{core = C1}, Sh}.
 
--spec settled(#g{}) -> #g{}.
-settled(D) -> D.
-
-%% A gate taps nothing.
--spec tap_batch(#g{}) -> [].
-tap_batch(_D) -> [].
-
--spec tap_batch(toroco_tap:batch(), #g{}) -> #g{}.
-tap_batch(_B, D) -> D.
+-spec settled(#g{}, toroco_shell:shell()) -> {#g{}, toroco_shell:shell()}.
+settled(D, Sh) -> {D, Sh}.
 
 -spec deadline(#g{}) -> infinity | integer().
 deadline(#g{core = C}) -> toroco_gate_core:next_deadline(C).
 
 %% Subscribers that attached on their own stay; the planned ones are added.
 -spec rewired(map(), [{{atom(), atom()}, toroco_router_core:latch()}], [{atom(), atom()}],
-              integer(), #g{}) -> #g{}.
+              integer(), #g{}, toroco_shell:shell()) -> {#g{}, toroco_shell:shell()}.
 rewired(#{members := Members, entries := Entries, subs := Planned}, Synced, Reset, Now,
-        D = #g{subs = Old}) ->
+        D = #g{subs = Old}, Sh) ->
     Subs = maps:from_list(
              [{M, lists:usort([toroco_wire:address(R) || R <- maps:get(M, Planned, [])]
                               ++ maps:get(M, Old, []))}
               || M <- Members]),
-    run({rewire, Members, Entries, Synced, Reset}, Now, D#g{subs = Subs}).
+    run({rewire, Members, Entries, Synced, Reset}, Now, D#g{subs = Subs}, Sh).
 
 -spec late({atom(), atom()}, toroco_router_core:latch() | inhibited) -> [term()].
 late(Src, {value, V}) -> [{op, Src, {set, V}}];
 late(_Src, _NoLatch) -> [].
 
--spec handle(gen_statem:event_type(), term(), #g{}) -> {events, [], #g{}} | unknown.
-handle(info, ?WIRE_SUB(Src, Consumer), D = #g{core = C, subs = Subs}) ->
+-spec handle(gen_statem:event_type(), term(), #g{}, toroco_shell:shell()) ->
+          {[], [gen_statem:action()], #g{}, toroco_shell:shell()} | unknown.
+handle(info, ?WIRE_SUB(Src, Consumer), D = #g{core = C, subs = Subs}, Sh) ->
     case lists:member(Src, toroco_gate_core:members(C)) of
         true ->
             State = member_state(Src, C),
             toroco_wire:send(Consumer, ?WIRE_STATE(gate, Src, self(), State)),
             D1 = D#g{subs = Subs#{Src => lists:usort([Consumer | maps:get(Src, Subs, [])])}},
-            {events, [], beat(D1)};
+            beat(D1, Sh);
         false ->
             toroco_wire:send(Consumer, ?WIRE_STATE(gate, Src, self(), none)),
-            {events, [], D}
+            {[], [], D, Sh}
     end;
-handle(info, ?WIRE_UNSUB(Src, Consumer), D = #g{subs = Subs}) ->
-    {events, [], D#g{subs = Subs#{Src => lists:delete(Consumer, maps:get(Src, Subs, []))}}};
-handle(info, '$toroco_alive', D = #g{core = C, subs = Subs}) ->
+handle(info, ?WIRE_UNSUB(Src, Consumer), D = #g{subs = Subs}, Sh) ->
+    {[], [], D#g{subs = Subs#{Src => lists:delete(Consumer, maps:get(Src, Subs, []))}}, Sh};
+handle({timeout, '$toroco_alive'}, beat, D = #g{core = C, subs = Subs}, Sh) ->
     %% Remote subscribers hear from each member now and then, with what
     %% they would get on subscribing (SPEC §13).
     maps:foreach(fun(M, Consumers) ->
                          Msg = ?WIRE_ALIVE(gate, M, member_state(M, C)),
                          [toroco_wire:send(R, Msg) || R <- Consumers, toroco_wire:remote(R)]
                  end, Subs),
-    {events, [], beat(D#g{beating = false})};
-handle(_Type, _Content, _D) ->
+    beat(D#g{beating = false}, Sh);
+handle(_Type, _Content, _D, _Sh) ->
     unknown.
 
 member_state(M, C) ->
@@ -123,15 +117,16 @@ member_state(M, C) ->
         false -> toroco_gate_core:state_for(M, C)
     end.
 
-%% The keep-alive is a plain timer message: a gate's timeouts belong to
-%% its shell.
-beat(D = #g{beating = true}) -> D;
-beat(D = #g{subs = Subs}) ->
+%% The keep-alive, while there are remote subscribers: a named gen_statem
+%% timeout in real time (as the emitters' is: it is about the network, not
+%% the robot's time), set once and again when it fires.
+beat(D = #g{beating = true}, Sh) -> {[], [], D, Sh};
+beat(D = #g{subs = Subs}, Sh) ->
     case lists:any(fun toroco_wire:remote/1, lists:append(maps:values(Subs))) of
         true ->
-            erlang:send_after(toroco_wire:keepalive_ms(), self(), '$toroco_alive'),
-            D#g{beating = true};
-        false -> D
+            {[], [{{timeout, '$toroco_alive'}, toroco_wire:keepalive_ms(), beat}],
+             D#g{beating = true}, Sh};
+        false -> {[], [], D, Sh}
     end.
 
 -spec info(integer(), #g{}) -> #{{atom(), atom()} => map()}.

@@ -19,8 +19,8 @@
 -include("toroco_wire.hrl").
 
 -export([unwire/1, info/1]).
--export([kind/0, reg/1, init/2, run/3, settled/1, deadline/1, rewired/5, late/2, handle/3,
-         info/2, tap_batch/1, tap_batch/2]).
+-export([kind/0, reg/1, init/2, run/4, settled/2, deadline/1, rewired/6, late/2, handle/4,
+         info/2]).
 
 -record(r, {key :: {atom(), atom()},
             input :: atom(),
@@ -33,9 +33,7 @@
             %% the observer tap's sinks about this input's receiver, and
             %% what it last reported of the router's state
             tap = #{} :: toroco_tap:sinks(),
-            view = none :: term(),
-            %% the tapped events not sent yet (toroco_tap:after_event/3)
-            batch = [] :: toroco_tap:batch()}).
+            view = none :: term()}).
 
 %%====================================================================
 %% API
@@ -74,63 +72,56 @@ init(Key = {R, I}, _Cfg) ->
     end.
 
 %% @doc Feeds one event to the core and delivers what comes out.
--spec run(term(), integer(), #r{}) -> #r{}.
-run(Event, Now, D = #r{core = C}) ->
+-spec run(term(), integer(), #r{}, toroco_shell:shell()) -> {#r{}, toroco_shell:shell()}.
+run(Event, Now, D = #r{core = C}, Sh) ->
     {C1, Out} = toroco_router_core:handle(Event, Now, C),
-    deliver(Out, D#r{core = C1}).
+    deliver(Out, D#r{core = C1}, Sh).
 
 %% @doc Tells the tap's subscribers when the winner, holds or latches changed.
--spec settled(#r{}) -> #r{}.
-settled(D = #r{tap = #{router := Sinks}, core = C, view = Old, key = Key}) ->
+-spec settled(#r{}, toroco_shell:shell()) -> {#r{}, toroco_shell:shell()}.
+settled(D = #r{tap = #{router := Sinks}, core = C, view = Old, key = Key}, Sh) ->
     case toroco_router_core:view(C) of
-        Old -> D;
+        Old -> {D, Sh};
         View ->
             Info = toroco_router_core:info(C, toroco_clock:now_ms()),
-            Event = {router, toroco_tap:timestamp(), Key, maps:with([winner, holds, latches], Info)},
-            D#r{view = View, batch = toroco_tap:tap(Sinks, Event, D#r.batch)}
+            Event = {router, stamp, Key, maps:with([winner, holds, latches], Info)},
+            {D#r{view = View}, toroco_shell:tap(Sinks, Event, Sh)}
     end;
-settled(D) ->
-    D.
+settled(D, Sh) ->
+    {D, Sh}.
 
 -spec deadline(#r{}) -> infinity | integer().
 deadline(#r{core = C}) -> toroco_router_core:next_deadline(C).
 
 -spec rewired(map(), [{{atom(), atom()}, toroco_router_core:latch()}], [{atom(), atom()}],
-              integer(), #r{}) -> #r{}.
-rewired(#{sources := Srcs, buffer := B, idle := Idle}, Synced, Reset, Now, D) ->
-    run({rewire, Srcs, #{idle => Idle}, Synced, Reset}, Now, D#r{buffer = B}).
+              integer(), #r{}, toroco_shell:shell()) -> {#r{}, toroco_shell:shell()}.
+rewired(#{sources := Srcs, buffer := Buf, idle := Idle}, Synced, Reset, Now, D, Sh) ->
+    run({rewire, Srcs, #{idle => Idle}, Synced, Reset}, Now, D#r{buffer = Buf}, Sh).
 
 -spec late({atom(), atom()}, toroco_router_core:latch() | inhibited) -> [term()].
 late(_Src, inhibited) -> [];
 late(Src, Latch) -> [{sync, [{Src, Latch}]}].
 
--spec handle(gen_statem:event_type(), term(), #r{}) ->
-          {events, [term()], #r{}} | {reply, term(), [term()], #r{}} | unknown.
-handle(info, ?WIRE_ACK(_Input), D = #r{pending = {value, V}, rx = Rx, input = I})
+-spec handle(gen_statem:event_type(), term(), #r{}, toroco_shell:shell()) ->
+          {[term()], [gen_statem:action()], #r{}, toroco_shell:shell()} | unknown.
+handle(info, ?WIRE_ACK(_Input), D = #r{pending = {value, V}, rx = Rx, input = I}, Sh)
   when is_pid(Rx) ->
     toroco_wire:send(Rx, ?WIRE_IN(I, V, self())),
-    {events, [], delivered(D#r{pending = none}, V)};
-handle(info, ?WIRE_ACK(_Input), D) ->
-    {events, [], D#r{inflight = false}};
-handle(info, ?WIRE_RX(_Input, Pid), D) ->
-    {events, [receiver_up], attach_receiver(Pid, D)};
-handle(info, {'DOWN', Ref, process, _, _}, D = #r{rx_mon = Ref}) ->
-    {events, [], D#r{rx = undefined, rx_mon = undefined, inflight = false, pending = none}};
-handle(info, ?WIRE_TAP(Subs), D = #r{key = {R, _}}) ->
-    {events, [], D#r{tap = tap(Subs, R), view = none}};
-handle(info, ?WIRE_UNSUB(_, _), D) ->
-    {events, [], D};
-handle({call, _}, unwire, D) ->
-    {reply, ok, [unwire], D};
-handle(_Type, _Content, _D) ->
+    {[], [], D#r{pending = none}, delivered(D, V, Sh)};
+handle(info, ?WIRE_ACK(_Input), D, Sh) ->
+    {[], [], D#r{inflight = false}, Sh};
+handle(info, ?WIRE_RX(_Input, Pid), D, Sh) ->
+    {[receiver_up], [], attach_receiver(Pid, D), Sh};
+handle(info, {'DOWN', Ref, process, _, _}, D = #r{rx_mon = Ref}, Sh) ->
+    {[], [], D#r{rx = undefined, rx_mon = undefined, inflight = false, pending = none}, Sh};
+handle(info, ?WIRE_TAP(Subs), D = #r{key = {R, _}}, Sh) ->
+    {[], [], D#r{tap = tap(Subs, R), view = none}, Sh};
+handle(info, ?WIRE_UNSUB(_, _), D, Sh) ->
+    {[], [], D, Sh};
+handle({call, From}, unwire, D, Sh) ->
+    {[unwire], [{reply, From, ok}], D, Sh};
+handle(_Type, _Content, _D, _Sh) ->
     unknown.
-
-%% @doc The tapped events not sent yet (toroco_tap:after_event/3).
--spec tap_batch(#r{}) -> toroco_tap:batch().
-tap_batch(#r{batch = B}) -> B.
-
--spec tap_batch(toroco_tap:batch(), #r{}) -> #r{}.
-tap_batch(B, D) -> D#r{batch = B}.
 
 -spec info(integer(), #r{}) -> map().
 info(Now, #r{core = C, buffer = B, rx = Rx}) ->
@@ -141,19 +132,19 @@ info(Now, #r{core = C, buffer = B, rx = Rx}) ->
 %% Internals
 %%====================================================================
 
-deliver([], D) ->
-    D;
-deliver(_Values, D = #r{rx = undefined}) ->
-    D;                                          % receiver down: lost, as specified
-deliver([V | Vs], D = #r{buffer = all, rx = Rx, input = I}) ->
+deliver([], D, Sh) ->
+    {D, Sh};
+deliver(_Values, D = #r{rx = undefined}, Sh) ->
+    {D, Sh};                                     % receiver down: lost, as specified
+deliver([V | Vs], D = #r{buffer = all, rx = Rx, input = I}, Sh) ->
     toroco_wire:send(Rx, ?WIRE_IN(I, V)),
-    deliver(Vs, delivered(D, V));
-deliver(Values, D = #r{buffer = latest, inflight = true}) ->
-    D#r{pending = {value, lists:last(Values)}};
-deliver(Values, D = #r{buffer = latest, rx = Rx, input = I}) ->
+    deliver(Vs, D, delivered(D, V, Sh));
+deliver(Values, D = #r{buffer = latest, inflight = true}, Sh) ->
+    {D#r{pending = {value, lists:last(Values)}}, Sh};
+deliver(Values, D = #r{buffer = latest, rx = Rx, input = I}, Sh) ->
     V = lists:last(Values),
     toroco_wire:send(Rx, ?WIRE_IN(I, V, self())),
-    delivered(D#r{inflight = true}, V).
+    {D#r{inflight = true}, delivered(D, V, Sh)}.
 
 attach_receiver(Pid, D = #r{rx_mon = Old}) ->
     _ = Old =/= undefined andalso erlang:demonitor(Old, [flush]),
@@ -163,7 +154,8 @@ attach_receiver(Pid, D = #r{rx_mon = Old}) ->
 tap(Subs, Receiver) ->
     toroco_tap:select(Subs, [deliver, router], Receiver).
 
-delivered(D = #r{tap = #{deliver := Sinks}, key = Key, batch = B}, V) ->
-    D#r{batch = toroco_tap:tap(Sinks, {deliver, toroco_tap:timestamp(), Key, V}, B)};
-delivered(D, _V) ->
-    D.
+%% The delivery of `V' tapped into the shell.
+delivered(#r{tap = #{deliver := Sinks}, key = Key}, V, Sh) ->
+    toroco_shell:tap(Sinks, {deliver, stamp, Key, V}, Sh);
+delivered(_D, _V, Sh) ->
+    Sh.

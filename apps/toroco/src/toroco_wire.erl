@@ -77,7 +77,7 @@
 -export([idle_arm/0, idle_tick/1, step_done/2]).
 -export([new_links/0, start_sync/4, sync_answer/5, sync_down/2, sync_expire/1, sync_done/1,
          sync_fresh/3, finish_sync/2, detach_all/2, hello/4, late_state/4, down/3, carries/3,
-         hold_timer/2, orphans/1, resubscribe/3]).
+         orphans/1, resubscribe/3]).
 -export_type([address/0, links/0, sync/0, upstream/0, idle/0]).
 
 -type source() :: {atom(), atom()}.
@@ -322,23 +322,6 @@ carries(Tag, Src, #{ups := Ups}) ->
     case Ups of
         #{Src := {Tag, _}} -> true;
         #{} -> false
-    end.
-
-%% @doc The consumer's one hold timer (the gen_statem timeout `{timeout,
-%% hold}'), moved only when the earliest deadline changed; deadlines are
-%% in `toroco_clock' time.
--spec hold_timer(infinity | integer(), infinity | integer()) ->
-          {infinity | integer(), [gen_statem:action()]}.
-hold_timer(Same, Same) -> {Same, []};
-hold_timer(infinity, _) ->
-    case toroco_clock:lockstep_server() of
-        none -> {infinity, [{{timeout, hold}, cancel}]};
-        _ -> toroco_clock:cancel_timer({timeout, hold}), {infinity, []}
-    end;
-hold_timer(Next, _) ->
-    case toroco_clock:lockstep_server() of
-        none -> {Next, [{{timeout, hold}, toroco_clock:real_deadline(Next), expire, [{abs, true}]}]};
-        _ -> toroco_clock:set_timer({timeout, hold}, Next, expire), {Next, []}
     end.
 
 %% @doc A step handled (lockstep, see `toroco_lockstep'): the result of

@@ -11,7 +11,8 @@ suite() -> [{timetrap, {seconds, 60}}].
 
 all() -> [reload_under_1khz_stream_loses_nothing, failing_code_change_rolls_everything_back,
           code_kept_when_behavior_starts, failure_without_old_code_is_reported,
-          refusals_change_nothing, idle_module_and_several_behaviors_reload].
+          refusals_change_nothing, idle_module_and_several_behaviors_reload,
+          reload_makes_the_callback_funs_again].
 
 init_per_suite(Config) ->
     Dir = filename:join(?config(priv_dir, Config), "reload_code"),
@@ -178,6 +179,45 @@ idle_module_and_several_behaviors_reload(Config) ->
     [#{version := 1}, #{version := 1}] =
         [gen_statem:call(toroco_names:process(B), state) || B <- [b1, b2]],
     {status, _, _, [_, running | _]} = sys:get_status(toroco_names:process(b2)).
+
+reload_makes_the_callback_funs_again() ->
+    [{doc, "The engine calls a behavior's callbacks through funs made at start and made again "
+           "by a reload: a module that gains handle_event/4 answers calls with it afterwards, "
+           "and its inputs run the new handle_input/4."}].
+reload_makes_the_callback_funs_again(Config) ->
+    Mod = ?config(module, Config),
+    Src = write_source(Config, 2),
+    ok = file:write_file(Src, without_events(Mod)),
+    {ok, Mod} = compile:file(Src, [{outdir, ?config(code_dir, Config)}, return_errors]),
+    {module, Mod} = code:load_file(Mod),
+    sensor(s, [v]),
+    actuator(a, [out]),
+    ok = toroco:add_behavior(b, Mod, #{layer => 1}),
+    ok = toroco:set_inputs(b, #{in => [{s, v}]}),
+    ok = toroco:set_inputs(a, #{out => [{b, out}]}),
+    ok = toroco:inject({s, v}, 1),
+    ok = toroco_fake_actuator:await(a, fun(H) -> lists:keymember(out, 1, H) end, 3000),
+    B = toroco_names:process(b),
+    {error, {unknown_call, {b, state}}} = gen_statem:call(B, state, 3000),
+    compile(Config, 2),
+    ok = toroco:reload(Mod),
+    #{version := 2, count := 0} = gen_statem:call(B, state, 3000),
+    ok = toroco:inject({s, v}, 2),
+    ok = toroco_fake_actuator:await(a, fun(H) -> lists:keymember({v2, 2}, 2, H) end, 3000),
+    [{v0, 1}, {v2, 2}] = [V || {out, V, _} <- toroco_fake_actuator:history(a)].
+
+%% Version 0: no handle_event/4; its state counts nothing.
+without_events(Mod) ->
+    io_lib:format(
+      "-module(~w).~n"
+      "-behaviour(toroco_behavior).~n"
+      "-export([interface/0, init/1, handle_input/4]).~n"
+      "interface() -> #{inputs => [in, latch], outputs => [out, mark]}.~n"
+      "init(P) -> {ok, relaying, #{count => 0, params => P, version => 0}}.~n"
+      "handle_input(in, V, _S, _D) ->~n"
+      "    {keep_state_and_data, [{send, #{out => {v0, V}}}]};~n"
+      "handle_input(latch, _V, _S, _D) ->~n"
+      "    keep_state_and_data.~n", [Mod]).
 
 %%====================================================================
 %% The behavior, in three versions
