@@ -174,8 +174,8 @@ worlds(Other, _GenOpts) ->
 %% The wiring, tried on a robot node as a run would start it; its text, to
 %% send to the other nodes.
 try_wiring(Wiring, [{_, Spec} | _]) ->
-    case {file:consult(Wiring), file:read_file(Wiring)} of
-        {{error, Reason}, _} ->
+    case {toroco:read_wiring(Wiring), file:read_file(Wiring)} of
+        {{error, {wiring_file, _, Reason}}, _} ->
             {error, {wiring, Wiring, Reason}};
         {_, {error, Reason}} ->
             {error, {wiring, Wiring, Reason}};
@@ -184,8 +184,8 @@ try_wiring(Wiring, [{_, Spec} | _]) ->
             Opts = #{wiring => Wiring, speed => 1,
                      thresholds => torobot_world:ir_thresholds(World),
                      %% the library's sensors, as a run adds them
-                     sensors => [{Name, Outputs(World)}
-                                 || {Name, Outputs} <- torobot_sensors:devices()]},
+                     sensors => [{Name, Os} || {Name, Outputs} <- torobot_sensors:devices(),
+                                               Os <- [Outputs(World)], Os =/= []]},
             case torobot_sim_robot:start_peer(Opts) of
                 {ok, Handle, _Port} -> ok = torobot_sim_robot:stop_peer(Handle), {ok, Text};
                 {error, Reason} -> {error, {wiring, Wiring, Reason}}

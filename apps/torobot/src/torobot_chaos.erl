@@ -399,14 +399,14 @@ replay(File) ->
 %% devices (and the simulated world's) and its wired inputs.
 -spec names(file:name_all()) -> {ok, torobot_faults:names()} | {error, term()}.
 names(Wiring) ->
-    case file:consult(Wiring) of
-        {ok, Terms} ->
-            {ok, #{behaviors => lists:sort([N || {behavior, N, _, _} <- Terms]),
-                   devices => lists:usort([N || {device, N, _, _} <- Terms] ++ ?SIM_DEVICES),
-                   inputs => lists:sort([{R, I} || {inputs, R, M} <- Terms, is_map(M),
-                                                   I <- maps:keys(M)]),
-                   ports => [pru_port | [lua_port || lists:keymember(toroco_lua, 3, Terms)]]}};
-        {error, Reason} ->
+    case toroco:read_wiring(Wiring) of
+        {ok, #{behaviors := Bs, devices := Ds, inputs := Inputs, modules := Modules}} ->
+            Lua = lists:member(toroco_lua, maps:values(Modules)),
+            {ok, #{behaviors => lists:sort(Bs),
+                   devices => lists:usort(Ds ++ ?SIM_DEVICES),
+                   inputs => Inputs,
+                   ports => [pru_port | [lua_port || Lua]]}};
+        {error, {wiring_file, _, Reason}} ->
             {error, {wiring, {Wiring, Reason}}}
     end.
 

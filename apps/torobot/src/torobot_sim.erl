@@ -189,7 +189,7 @@ observe(WorldSpec, Opts, Observing) ->
     Time = maps:get(time, Opts, realtime),
     Trace = maps:get(trace, Opts, undefined),
     Unknown = lists:sort(maps:keys(Opts) -- ?OPTIONS),
-    case {load(WorldSpec), file:consult(WiringFile)} of
+    case {load(WorldSpec), toroco:read_wiring(WiringFile)} of
         _ when Unknown =/= [] ->
             {error, {bad_option, hd(Unknown)}};
         _ when Time =/= realtime, Time =/= lockstep ->
@@ -201,7 +201,7 @@ observe(WorldSpec, Opts, Observing) ->
             {error, {trace, Trace}};
         {{error, Reason}, _} ->
             {error, {world, WorldSpec, Reason}};
-        {_, {error, Reason}} ->
+        {_, {error, {wiring_file, _, Reason}}} ->
             {error, {wiring, WiringFile, Reason}};
         {_, _} when not is_number(Speed); Speed =< 0 ->
             {error, {speed, Speed}};

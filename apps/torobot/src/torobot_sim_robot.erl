@@ -92,11 +92,10 @@
 %% as `torobot_sim_robot'). Returns the camera's UDP port.
 -spec start(opts()) -> {ok, inet:port_number()} | {error, term()}.
 start(#{wiring := Wiring} = Opts) ->
-    case file:consult(Wiring) of
-        {ok, Terms} ->
+    case toroco:read_wiring(Wiring) of
+        {ok, #{behaviors := Bs, devices := Ds}} ->
             %% What the wiring adds, taken away again by teardown/1.
-            Behaviors = [{Kind, Name} || {Kind, Name, _, _} <- Terms,
-                                         Kind =:= behavior orelse Kind =:= device],
+            Behaviors = [{behavior, B} || B <- Bs] ++ [{device, D} || D <- Ds],
             case application:ensure_all_started(torobot) of
                 {ok, Started} ->
                     Init = Opts#{started => Started, behaviors => Behaviors},

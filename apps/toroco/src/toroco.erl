@@ -41,15 +41,18 @@
 -compile({no_auto_import, [whereis/1]}).
 -export([add_behavior/3, add_device/3, remove_behavior/1, remove_device/1,
          suspend_behavior/1, resume_behavior/1, reset_behavior/1, restart_behavior/1,
-         set_inputs/2, set_inhibitors/2, set_reset/2, load_wiring/1,
+         set_inputs/2, set_inhibitors/2, set_reset/2, load_wiring/1, read_wiring/1,
          inject/2, inject/3, inspect/0, inspect/1,
          top/0, watch/2, unwatch/0, wiring_dot/0, reload/1,
          subscribe_events/1, unsubscribe_events/1]).
 
+-export_type([wiring_summary/0]).
 -export_type([name/0, source/0, source_spec/0, input_spec/0, behavior_opts/0,
               hold/0, error_reason/0]).
 
 -type name() :: atom().
+%% What a wiring file adds ({@link read_wiring/1}).
+-type wiring_summary() :: toroco_wiring_file:summary().
 
 %% Whether the caller is the process of behavior or device `Name': a
 %% callback that injects into its own output would wait on itself.
@@ -212,6 +215,19 @@ set_reset(Behavior, Sources) ->
 load_wiring(File) ->
     case file:consult(File) of
         {ok, Terms} -> load(Terms);
+        {error, Reason} -> {error, {wiring_file, File, Reason}}
+    end.
+
+%% @doc What wiring file `File' adds, read without applying it: its
+%% behaviors and devices (in the file's order), their modules, the inputs
+%% it wires and the other nodes it places things on. A program that sets
+%% up or takes down what a file loads (the simulated lab) asks this instead
+%% of reading the file's terms itself.
+-spec read_wiring(file:name_all()) ->
+          {ok, wiring_summary()} | {error, error_reason()}.
+read_wiring(File) ->
+    case file:consult(File) of
+        {ok, Terms} -> {ok, toroco_wiring_file:summary(Terms)};
         {error, Reason} -> {error, {wiring_file, File, Reason}}
     end.
 

@@ -10,11 +10,20 @@
 %% are the changes of `toroco_wiring_core'.
 -module(toroco_wiring_file).
 
--export([node/4, validate/2]).
+-export([node/4, validate/2, summary/1]).
+-export_type([summary/0]).
 
 -compile({no_auto_import, [node/1]}).
 
 -type spec() :: toroco_behavior:spec().
+
+%% What a wiring file adds (`toroco:read_wiring/1'): its behaviors and
+%% devices in the file's order, each one's module, the inputs it wires
+%% (`{Receiver, Input}'), and the nodes other than this one it places
+%% things on (SPEC §13).
+-type summary() :: #{behaviors := [atom()], devices := [atom()],
+                     modules := #{atom() => module()}, inputs := [{atom(), atom()}],
+                     nodes := [node()]}.
 
 %% @doc A behavior or device term: the spec its process is started from and
 %% its entry in the wiring, or an error naming it.
@@ -29,6 +38,19 @@ node(Kind, Name, Module, Opts) ->
             end;
         Err -> Err
     end.
+
+%% @doc What a file's terms add, read from them alone (nothing checked
+%% against a running wiring: `validate/2' does that as they load).
+-spec summary([term()]) -> summary().
+summary(Terms) ->
+    Added = [{Kind, Name, Module, Opts} || {Kind, Name, Module, Opts} <- Terms,
+                                           Kind =:= behavior orelse Kind =:= device,
+                                           is_atom(Name)],
+    #{behaviors => [N || {behavior, N, _, _} <- Added],
+      devices => [N || {device, N, _, _} <- Added],
+      modules => maps:from_list([{N, M} || {_, N, M, _} <- Added]),
+      inputs => lists:usort([{R, I} || {inputs, R, M} <- Terms, is_map(M), I <- maps:keys(M)]),
+      nodes => lists:usort([N || {_, _, _, #{node := N}} <- Added, N =/= node()])}.
 
 %% @doc A file's terms checked in order against `W': the wiring they make
 %% and the specs of the behaviors and devices to start, in the file's order.

@@ -2,6 +2,7 @@
 %% nothing (SPEC §4 "Errors", "Wiring changes").
 -module(toroco_errors_SUITE).
 -include_lib("common_test/include/ct.hrl").
+-include_lib("stdlib/include/assert.hrl").
 -compile([export_all, nowarn_export_all]).
 
 -import(toroco_test_lib, [values/1, await_values/2, settle/1, sensor/2, actuator/2]).
@@ -10,7 +11,7 @@ suite() -> [{timetrap, {seconds, 30}}].
 
 all() -> [bad_api_calls_name_the_culprit, refused_wiring_changes_nothing,
           malformed_wiring_files_are_refused_whole, inhibition_cycles_are_refused,
-          hierarchy_is_checked].
+          hierarchy_is_checked, read_wiring_says_what_a_file_adds].
 
 init_per_testcase(_TC, Config) ->
     toroco_test_lib:start(),
@@ -173,3 +174,23 @@ hierarchy_is_checked(_) ->
     ok = toroco:set_inhibitors(lo, #{out => [{hi, out}]}),
     %% the receiver's own layer does not matter
     ok = toroco:set_inputs(lo, #{in => [{hi, out}]}).
+
+read_wiring_says_what_a_file_adds() ->
+    [{doc, "read_wiring/1 says what a wiring file adds (behaviors and devices in the file's "
+      "order, their modules, the inputs it wires, the other nodes) without loading it; a "
+      "file that cannot be read is refused naming it."}].
+read_wiring_says_what_a_file_adds(Config) ->
+    F = filename:join(?config(priv_dir, Config), "summary.wiring"),
+    ok = file:write_file(F, "{device, s2, toroco_fake_sensor, #{outputs => [v]}}.\n"
+                            "{behavior, b2, tb_relay, #{layer => 1}}.\n"
+                            "{behavior, b1, tb_relay, #{layer => 2}}.\n"
+                            "{inputs, b1, #{in => [{s2, v}]}}.\n"
+                            "{inputs, b2, #{in => [{s2, v}], other => [{b1, out}]}}.\n"),
+    Before = snapshot(),
+    ?assertEqual({ok, #{behaviors => [b2, b1], devices => [s2],
+                        modules => #{s2 => toroco_fake_sensor, b2 => tb_relay, b1 => tb_relay},
+                        inputs => [{b1, in}, {b2, in}, {b2, other}], nodes => []}},
+                 toroco:read_wiring(F)),
+    Before = snapshot(),
+    ?assertMatch({error, {wiring_file, "/nonexistent/x.wiring", enoent}},
+                 toroco:read_wiring("/nonexistent/x.wiring")).
