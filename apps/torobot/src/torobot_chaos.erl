@@ -404,7 +404,8 @@ names(Wiring) ->
             {ok, #{behaviors => lists:sort([N || {behavior, N, _, _} <- Terms]),
                    devices => lists:usort([N || {device, N, _, _} <- Terms] ++ ?SIM_DEVICES),
                    inputs => lists:sort([{R, I} || {inputs, R, M} <- Terms, is_map(M),
-                                                   I <- maps:keys(M)])}};
+                                                   I <- maps:keys(M)]),
+                   nodes => torobot_sim_robot:wiring_nodes(Wiring)}};
         {error, Reason} ->
             {error, {wiring, {Wiring, Reason}}}
     end.

@@ -199,18 +199,28 @@ observe(WorldSpec, Opts) when is_map(Opts) ->
             {error, {wiring, WiringFile, Reason}};
         {_, _} when not is_number(Speed); Speed =< 0 ->
             {error, {speed, Speed}};
+        {{ok, Worlds}, {ok, _}} when Time =:= lockstep ->
+            case [N || N <- torobot_sim_robot:wiring_nodes(WiringFile),
+                       not lists:member(N, nodes())] of
+                [] -> run_worlds(Worlds, WiringFile, Speed, Time, Opts);
+                [Node | _] -> {error, {node_not_connected, Node}}
+            end;
         {{ok, Worlds}, {ok, _}} ->
-            Named = torobot_world:name(hd(Worlds)) =/= undefined,
-            Nodes = maps:get(nodes, Opts, case Named of
-                                              true -> peer;
-                                              false -> local
-                                          end),
-            case with_robots(Worlds, Nodes, Opts#{wiring => WiringFile, speed => Speed,
-                                                  time => Time}) of
-                {ok, [Final], Obs} when not Named -> {ok, Final, Obs};
-                {ok, Finals, Obs} -> {ok, Finals, Obs};
-                {error, _} = Error -> Error
-            end
+            run_worlds(Worlds, WiringFile, Speed, Time, Opts)
+    end.
+
+%% The checked worlds run (a robot placed on several nodes, SPEC §13, runs
+%% from this node, whose clock the other nodes join in lockstep).
+run_worlds(Worlds, WiringFile, Speed, Time, Opts) ->
+    Named = torobot_world:name(hd(Worlds)) =/= undefined,
+    Nodes = maps:get(nodes, Opts, case Named of
+                                      true -> peer;
+                                      false -> local
+                                  end),
+    case with_robots(Worlds, Nodes, Opts#{wiring => WiringFile, speed => Speed, time => Time}) of
+        {ok, [Final], Obs} when not Named -> {ok, Final, Obs};
+        {ok, Finals, Obs} -> {ok, Finals, Obs};
+        {error, _} = Error -> Error
     end.
 
 %% @doc The summary as one JSON object (`none' as `null'); a world's own

@@ -357,7 +357,7 @@ event(info, ?WIRE_SUB({_, Out} = Src, Consumer), _S, E = #e{outputs = Outs}) ->
             toroco_wire:send(Consumer, ?WIRE_STATE(emitter, Src, self(), latch(Out, E))),
             E1 = E#e{outputs = Outs#{Out := lists:usort([Consumer | Consumers])}},
             case toroco_wire:remote(Consumer) andalso not has_remote(E) of
-                true -> {keep_state, E1, [alive_timer()]};
+                true -> alive_timer(E1);
                 false -> {keep_state, E1}
             end;
         #{} ->
@@ -378,7 +378,7 @@ event({timeout, '$toroco_alive'}, beat, _S, E = #e{outputs = Outs, name = Name})
                          [toroco_wire:send(C, Msg) || C <- Consumers, toroco_wire:remote(C)]
                  end, Outs),
     case has_remote(E) of
-        true -> {keep_state_and_data, [alive_timer()]};
+        true -> alive_timer(E);
         false -> keep_state_and_data
     end;
 event({call, From}, {'$toroco_inject', Out, Op}, S, E = #e{outputs = Outs, open = true})
@@ -729,8 +729,13 @@ send_all([C | Cs], Msg) ->
 has_remote(#e{outputs = Outs}) ->
     lists:any(fun toroco_wire:remote/1, lists:append(maps:values(Outs))).
 
-alive_timer() ->
-    {{timeout, '$toroco_alive'}, toroco_wire:keepalive_ms(), beat}.
+%% In lockstep the keep-alive is a timer of the world's, in simulated time.
+alive_timer(E) ->
+    A = {{timeout, '$toroco_alive'}, toroco_wire:keepalive_ms(), beat},
+    case toroco_clock:lockstep_server() of
+        none -> {keep_state, E, [A]};
+        _ -> {none, E1} = virtual(A, E), {keep_state, E1}
+    end.
 
 relatch(Out, {set, V}, E = #e{latches = L}) ->
     E#e{latches = L#{Out => V}};

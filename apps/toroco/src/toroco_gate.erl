@@ -106,6 +106,9 @@ handle(info, ?WIRE_SUB(Src, Consumer), D = #g{core = C, subs = Subs}) ->
     end;
 handle(info, ?WIRE_UNSUB(Src, Consumer), D = #g{subs = Subs}) ->
     {events, [], D#g{subs = Subs#{Src => lists:delete(Consumer, maps:get(Src, Subs, []))}}};
+handle({timeout, '$toroco_alive'}, Beat, D) ->
+    %% the keep-alive in lockstep: a timer of the world's (toroco_clock:link_timer/3)
+    handle(info, Beat, D);
 handle(info, '$toroco_alive', D = #g{core = C, subs = Subs}) ->
     %% Remote subscribers hear from each member now and then, with what
     %% they would get on subscribing (SPEC §13).
@@ -129,7 +132,11 @@ beat(D = #g{beating = true}) -> D;
 beat(D = #g{subs = Subs}) ->
     case lists:any(fun toroco_wire:remote/1, lists:append(maps:values(Subs))) of
         true ->
-            erlang:send_after(toroco_wire:keepalive_ms(), self(), '$toroco_alive'),
+            _ = case toroco_clock:lockstep_server() of
+                    none -> erlang:send_after(toroco_wire:keepalive_ms(), self(), '$toroco_alive');
+                    _ -> toroco_clock:link_timer({timeout, '$toroco_alive'},
+                                                 toroco_wire:keepalive_ms(), '$toroco_alive')
+                end,
             D#g{beating = true};
         false -> D
     end.

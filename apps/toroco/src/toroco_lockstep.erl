@@ -81,7 +81,7 @@
 -include("toroco_wire.hrl").
 
 -export([start_link/0, send/3, timer/4, cancel/2, done/1, up/2, ready/1, down/1, synced/1]).
--export([start/1, stop/0, tick/3, settle/0, info/0]).
+-export([start/1, stop/0, tick/3, settle/0, info/0, join/1, cut/2]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 -export_type([stimulus/0]).
 
@@ -117,7 +117,7 @@
                  guard :: reference()}).
 
 -record(s, {queue = queue:new() :: queue:queue(item()),
-            inflight = none :: none | {reference() | none, reference(), pid()},
+            inflight = none :: none | {reference() | none, reference(), pid() | pending},
             procs = #{} :: #{pid() => proc()},
             %% the supervisors of the processes of the path, monitored
             sups = #{} :: #{pid() => {reference(), non_neg_integer() | none | consumer}},
@@ -143,7 +143,9 @@
             stimuli = [] :: [stimulus()],
             trace = off :: off | [iodata()],
             steps = 0 :: non_neg_integer(),
-            lost = 0 :: non_neg_integer()}).
+            lost = 0 :: non_neg_integer(),
+            %% the other nodes of the world, their cuts (toroco_lockstep_nodes)
+            world = none :: none | toroco_lockstep_nodes:world()}).
 
 %%====================================================================
 %% The event path's side
@@ -265,6 +267,20 @@ settle() ->
         Error -> Error
     end.
 
+%% @doc The robot's other nodes `Nodes' join this node's clock (SPEC §13,
+%% §17): their event paths run as steps of this one, at its simulated time.
+%% `{error, {node_not_connected, Node}}' if one is not connected.
+-spec join([node()]) -> ok | {error, {atom(), term()}}.
+join(Nodes) ->
+    gen_server:call(?MODULE, {join, Nodes}, ?CALL_MS).
+
+%% @doc Cuts `Node' from the rest of the robot for `Ms' simulated ms from
+%% now (`forever': the node is killed): a step between it and another node
+%% is lost; the heal comes at its simulated time. The trace shows both.
+-spec cut(node(), non_neg_integer() | forever) -> ok | {error, {atom(), node()}}.
+cut(Node, Ms) ->
+    gen_server:call(?MODULE, {cut, Node, Ms}, ?CALL_MS).
+
 %% @doc Counters: steps delivered, steps lost (their receiver was not
 %% there), timers pending, the simulated time.
 -spec info() -> map().
@@ -293,6 +309,7 @@ handle_call(stop, _From, S) ->
     _ = persistent_term:erase(?MODULE),
     ok = toroco_clock:lockstep_cell(undefined),
     _ = [forward(To, Pid, Msg) || {To, Pid, Msg} <- queue:to_list(Q)],
+    ok = toroco_lockstep_nodes:leave(S#s.world),
     {reply, ok, #s{}};
 handle_call({tick, _, _}, _From, S = #s{cell = undefined}) ->
     {reply, {error, not_lockstep}, S};
@@ -309,6 +326,15 @@ handle_call({up, Pid, Name, Sup, Layer}, _From, S = #s{cell = Cell}) when Cell =
     {reply, ok, run(progress(up(Pid, Name, Sup, Layer, predecessor(Name, S))))};
 handle_call({up, _, _, _, _}, _From, S) ->
     {reply, ok, S};
+handle_call({join, _}, _From, S = #s{cell = undefined}) ->
+    {reply, {error, {not_lockstep, node()}}, S};
+handle_call({join, Nodes}, _From, S) ->
+    case toroco_lockstep_nodes:join(Nodes, self()) of
+        {ok, W} -> {reply, ok, S#s{world = W}};
+        Error -> {reply, Error, S}
+    end;
+handle_call({cut, Node, Ms}, _From, S) ->
+    cut_node(Node, Ms, S);
 handle_call(_Req, _From, S) ->
     {reply, {error, unknown_call}, S}.
 
@@ -338,14 +364,19 @@ handle_info({?TAG, send, To, Pid, Msg, _From}, S = #s{cell = undefined}) ->
     {noreply, S};
 handle_info({?TAG, send, To, Pid, Msg, From}, S = #s{queue = Q, settle = Settle}) ->
     case is_step(Msg) of
+        true when S#s.world =/= none -> {noreply, across(To, Pid, Msg, From, S)};
         true when Settle =/= none -> {noreply, hold(From, {send, To, Pid, Msg}, S)};
         true -> {noreply, run(S#s{queue = queue:in({To, Pid, Msg}, Q)})};
         false -> forward(To, Pid, Msg), {noreply, S}
     end;
 handle_info({?TAG, timer, Pid, Kind, Deadline, Msg}, S = #s{settle = #settle{}}) ->
     {noreply, hold(Pid, {timer, Pid, Kind, Deadline, Msg}, S)};
-handle_info({?TAG, timer, Pid, Kind, Deadline, Msg}, S) ->
+handle_info({?TAG, timer, Pid, Kind, Deadline, Msg}, S = #s{world = none}) ->
     {noreply, run(set_timer(Pid, Kind, Deadline, Msg, S))};
+handle_info({?TAG, timer, Pid, Kind, Deadline, Msg}, S) ->
+    {noreply, run(world_timer(Pid, Kind, Deadline, Msg, S))};
+handle_info({?TAG, at, Token, Pid, By}, S) ->
+    {noreply, run(at(Token, Pid, By, S))};
 handle_info({?TAG, cancel, Pid, Kind}, S = #s{settle = #settle{}}) ->
     {noreply, hold(Pid, {cancel, Pid, Kind}, S)};
 handle_info({?TAG, cancel, Pid, Kind}, S) ->
@@ -419,7 +450,7 @@ up(Pid, Name, Sup, Layer, S = #s{procs = Procs, sups = Sups}) ->
             end,
     S#s{procs = Procs#{Pid => #{name => Name, sup => Sup, layer => Layer,
                                 mon => erlang:monitor(process, Pid)}},
-        sups = Sups1}.
+        sups = Sups1, world = toroco_lockstep_nodes:remember(Pid, S#s.world)}.
 
 %% A restart in a layer: more than the intensity allows within its period
 %% of simulated time takes the layer out, as its supervisor would.
@@ -548,6 +579,8 @@ apply_held({cancel, Pid, Kind}, S) ->
 hold(From, H, S = #s{held = Held, arrival = A}) ->
     S#s{held = [{A, From, H} | Held], arrival = A + 1}.
 
+pname(Pid) when node(Pid) =/= node() ->
+    toroco_lockstep_nodes:regname(Pid);
 pname(Pid) ->
     case erlang:process_info(Pid, registered_name) of
         {registered_name, Reg} -> atom_to_list(Reg);
@@ -563,8 +596,10 @@ reason(Reason) ->
 
 note(_Line, S = #s{trace = off}) ->
     S;
+note(Line, S = #s{trace = Lines, now = Now, world = none}) ->
+    S#s{trace = [io_lib:format("~b ~ts~n", [Now, Line]) | Lines]};
 note(Line, S = #s{trace = Lines, now = Now}) ->
-    S#s{trace = [io_lib:format("~b ~ts~n", [Now, Line]) | Lines]}.
+    S#s{trace = [io_lib:format("~b ~s ~ts~n", [Now, node(), Line]) | Lines]}.
 
 %%====================================================================
 %% Stepping
@@ -587,7 +622,19 @@ run(S = #s{queue = Q}) ->
             due(S)
     end.
 
-due(S = #s{timers = Ts, target = Target}) ->
+due(S = #s{world = W}) when W =/= none ->
+    case toroco_lockstep_nodes:heal_due(next_deadline(S), W) of
+        {Node, At} ->
+            S1 = set_now(max(S#s.now, At), S),
+            run(note(io_lib:format("heal ~s", [Node]),
+                     S1#s{world = toroco_lockstep_nodes:heal(Node, W)}));
+        none ->
+            due_timer(S)
+    end;
+due(S) ->
+    due_timer(S).
+
+due_timer(S = #s{timers = Ts, target = Target}) ->
     case gb_trees:is_empty(Ts) of
         false ->
             case gb_trees:smallest(Ts) of
@@ -637,6 +684,12 @@ deliver(To, Target, {exit, Reason} = Msg, S = #s{steps = N}) when is_pid(Target)
     S1 = watch(Target, S),
     exit(Target, Reason),
     trace(To, Target, Msg, S1#s{inflight = {none, Mon, Target}, steps = N + 1});
+deliver({Reg, Node} = To, remote, Msg, S = #s{world = W}) when W =/= none, Node =:= node() ->
+    %% sent from another node to this one: found here, as it arrives
+    deliver(To, whereis(Reg), Msg, S);
+deliver(To, Target, Msg, S = #s{world = W}) when W =/= none, Target =/= undefined,
+                                              not is_pid(Target) orelse node(Target) =/= node() ->
+    deliver_node(To, Target, Msg, S);
 deliver(To, Target, Msg, S = #s{steps = N}) ->
     case Target of
         Pid when is_pid(Pid) ->
@@ -649,7 +702,7 @@ deliver(To, Target, Msg, S = #s{steps = N}) ->
                                     end),
             trace(To, Pid, Msg, S1#s{inflight = {Token, Mon, Pid}, steps = N + 1});
         remote ->
-            toroco_wire:send(To, Msg),
+            send_out(To, Msg),
             S;
         undefined ->
             trace(To, undefined, Msg, S#s{lost = S#s.lost + 1})
@@ -658,7 +711,7 @@ deliver(To, Target, Msg, S = #s{steps = N}) ->
 %% Who will hand over `Pid''s DOWN should it die now: the consumers that
 %% monitor it (read as its step goes, when only it works, or before it is
 %% killed). Only processes of the path are looked at.
-watch(Pid, S = #s{procs = Procs, watch = W}) when is_map_key(Pid, Procs) ->
+watch(Pid, S = #s{procs = Procs, watch = W}) when is_map_key(Pid, Procs), node(Pid) =:= node() ->
     case erlang:process_info(Pid, monitored_by) of
         {monitored_by, By} ->
             S#s{watch = W#{Pid => [C || C <- By, is_pid(C),
@@ -687,12 +740,13 @@ is_step(?WIRE_STATE(_, _, _, _)) -> true;
 is_step(?WIRE_RX(_, _)) -> true;
 is_step(?WIRE_UNSUB(_, _)) -> true;
 is_step(?WIRE_RESUBSCRIBE) -> true;
+is_step(?WIRE_ALIVE(_, _, _)) -> true;
 is_step(_) -> false.
 
 %% Sent as in real time, to the process the address named when it was sent.
 forward(_To, _Pid, {exit, _}) -> ok;
 forward(_To, Pid, Msg) when is_pid(Pid) -> Pid ! Msg, ok;
-forward(To, remote, Msg) -> toroco_wire:send(To, Msg);
+forward(To, remote, Msg) -> send_out(To, Msg);
 forward(_To, undefined, _Msg) -> ok.
 
 whereis_local(Pid) when is_pid(Pid), node(Pid) =:= node() -> Pid;
@@ -715,12 +769,21 @@ drop_timer(Pid, Kind, S = #s{owned = Owned, timers = Ts}) ->
 
 trace(_To, _Pid, _Msg, S = #s{trace = off}) ->
     S;
-trace(To, Pid, Msg, S = #s{trace = Lines, now = Now}) ->
+trace(To, Pid, Msg, S = #s{trace = Lines, now = Now, world = none}) ->
     Line = io_lib:format("~b ~ts ~ts~n", [Now, name(To, Pid), line(Msg)]),
+    S#s{trace = [Line | Lines]};
+trace(To, Pid, Msg, S = #s{trace = Lines, now = Now}) ->
+    Node = toroco_lockstep_nodes:node_of(case Pid of
+                                             _ when is_pid(Pid) -> Pid;
+                                             _ -> To
+                                         end),
+    Line = io_lib:format("~b ~s ~ts ~ts~n", [Now, Node, name(To, Pid), line(Msg)]),
     S#s{trace = [Line | Lines]}.
 
 name({Reg, _Node}, _Pid) -> atom_to_list(Reg);
 name(Reg, _Pid) when is_atom(Reg) -> atom_to_list(Reg);
+name(_To, Pid) when is_pid(Pid), node(Pid) =/= node() ->
+    pname(Pid);
 name(_To, Pid) when is_pid(Pid) ->
     case erlang:process_info(Pid, registered_name) of
         {registered_name, Reg} -> atom_to_list(Reg);
@@ -734,6 +797,7 @@ line(?WIRE_GATED({E, O}, Op)) -> io_lib:format("gated ~s.~s ~ts", [E, O, op(Op)]
 line(?WIRE_IN(I, V)) -> io_lib:format("deliver ~s ~0tp", [I, V]);
 line(?WIRE_IN(I, V, _)) -> io_lib:format("deliver ~s ~0tp", [I, V]);
 line(?WIRE_ACK(I)) -> io_lib:format("ack ~s", [I]);
+line(?WIRE_ALIVE(_, {E, O}, _)) -> io_lib:format("alive ~s.~s", [E, O]);
 line(?WIRE_TIMER(Kind, Msg)) -> io_lib:format("timer ~0tp ~0tp", [Kind, Msg]);
 line({stimulus, Msg}) -> io_lib:format("stimulus ~0tp", [Msg]);
 line({exit, Reason}) -> io_lib:format("fault exit ~0tp", [strip(Reason)]);
@@ -750,3 +814,112 @@ strip(T) when is_reference(T) -> ref;
 strip(T) when is_tuple(T) -> list_to_tuple([strip(E) || E <- tuple_to_list(T)]);
 strip(T) when is_list(T) -> [strip(E) || E <- T];
 strip(T) -> T.
+
+%%====================================================================
+%% Several nodes (toroco_lockstep_nodes)
+%%====================================================================
+
+%% A message for another node goes as in real time, and never waits.
+send_out(To, Msg) ->
+    try erlang:send(To, Msg, [noconnect, nosuspend]) of
+        _ -> ok
+    catch
+        error:badarg -> ok
+    end.
+
+%% A step sent in a world of several nodes: lost if it crosses a cut.
+across(To, Pid, Msg, From, S = #s{world = W}) ->
+    Dest = case Pid of
+               _ when is_pid(Pid) -> node(Pid);
+               _ when is_atom(To) -> node(From);
+               _ -> toroco_lockstep_nodes:node_of(To)
+           end,
+    case toroco_lockstep_nodes:lost(node(From), Dest, W) of
+        true -> S#s{lost = S#s.lost + 1};
+        false when S#s.settle =/= none -> hold(From, {send, To, Pid, Msg}, S);
+        false -> run(S#s{queue = queue:in({To, Pid, Msg}, S#s.queue)})
+    end.
+
+%% A timer set inside its owner's step is ordered as on one node; one set
+%% outside any step (a subscription's keep-alive, as the wiring loads) is
+%% ordered by its owner's name among those of its deadline, not by when
+%% its message came from whichever node.
+world_timer(Pid, Kind, Deadline, Msg, S = #s{inflight = {_, _, Pid}}) ->
+    set_timer(Pid, Kind, Deadline, Msg, S);
+world_timer(Pid, Kind, Deadline, Msg, S) ->
+    S1 = #s{timers = Ts, owned = Owned} = drop_timer(Pid, Kind, S),
+    Key = free_key({Deadline, -1 - erlang:phash2({pname(Pid), Kind}, 1 bsl 27)}, Ts),
+    S1#s{timers = gb_trees:insert(Key, {Pid, Kind, Msg}, Ts),
+         owned = Owned#{{Pid, Kind} => Key}}.
+
+free_key(Key = {Deadline, N}, Ts) ->
+    case gb_trees:is_defined(Key, Ts) of
+        true -> free_key({Deadline, N - (1 bsl 27)}, Ts);
+        false -> Key
+    end.
+
+%% A step for a process of another node, through its agent (which answers
+%% `at'); none goes to a node killed.
+deliver_node(To, Target, Msg, S = #s{steps = N, world = W, now = Now}) ->
+    Node = toroco_lockstep_nodes:node_of(case Target of
+                                             _ when is_pid(Target) -> Target;
+                                             _ -> To
+                                         end),
+    case toroco_lockstep_nodes:killed(Node, W) of
+        true ->
+            S#s{lost = S#s.lost + 1};
+        false ->
+            Token = make_ref(),
+            Addr = case Target of
+                       _ when is_pid(Target) -> Target;
+                       _ -> element(1, To)
+                   end,
+            Body = case Msg of
+                       {stimulus, M} -> M;
+                       _ -> Msg
+                   end,
+            ok = toroco_lockstep_nodes:deliver(Node, Addr, Token, Body, Now),
+            trace(To, Target, Msg, S#s{inflight = {Token, make_ref(), pending}, steps = N + 1})
+    end.
+
+%% The agent found the step's receiver (`undefined': none had the name)
+%% and who monitors it; the step is in flight to it.
+at(Token, Pid, By, S = #s{inflight = {Token, _, pending}, procs = Procs, watch = W})
+  when is_pid(Pid) ->
+    Consumers = [C || C <- By, case Procs of
+                                   #{C := #{layer := consumer}} -> true;
+                                   #{} -> false
+                               end],
+    S#s{inflight = {Token, erlang:monitor(process, Pid), Pid},
+        watch = case Procs of
+                    #{Pid := _} -> W#{Pid => Consumers};
+                    #{} -> W
+                end};
+at(Token, _Pid, _By, S = #s{inflight = {Token, _, pending}}) ->
+    S#s{inflight = none, lost = S#s.lost + 1};
+at(_Token, _Pid, _By, S) ->
+    S.
+
+%% How far time may go before the next timer: a heal due by then comes first.
+next_deadline(#s{timers = Ts, target = Target}) ->
+    case gb_trees:is_empty(Ts) of
+        true -> Target;
+        false -> min(Target, element(1, element(1, gb_trees:smallest(Ts))))
+    end.
+
+cut_node(Node, _Ms, S = #s{world = none}) ->
+    {reply, {error, {case Node =:= node() of
+                         true -> own_node;
+                         false -> unknown_node
+                     end, Node}}, S};
+cut_node(Node, Ms, S = #s{world = W, now = Now}) ->
+    case toroco_lockstep_nodes:cut(Node, Ms, Now, W) of
+        {ok, W1} ->
+            Line = case Ms of
+                       forever -> io_lib:format("kill ~s", [Node]);
+                       _ -> io_lib:format("cut ~s ~b", [Node, Ms])
+                   end,
+            {reply, ok, note(Line, S#s{world = W1})};
+        Error ->
+            {reply, Error, S}
+    end.

@@ -116,8 +116,9 @@ address(Reg) -> {Reg, node()}.
 %% gone), or a node that is not connected or whose connection is congested
 %% (a frozen peer), swallows the message, as a cut wire would: the event
 %% path never waits for another node.
-%% In lockstep (`toroco_clock:lockstep/1') a send to this node is handed to
-%% `toroco_lockstep', which delivers it as a step in its turn.
+%% In lockstep (`toroco_clock:lockstep/1') a send is handed to
+%% `toroco_lockstep', which delivers it as a step in its turn (one to
+%% another node too: in a world of several nodes it is a step there).
 -spec send(address() | atom(), term()) -> ok.
 send({Reg, Node} = To, Msg) when Node =:= node() ->
     %% the event path's common case: a plain send to a local name
@@ -137,6 +138,13 @@ send(Pid, Msg) when is_pid(Pid), node(Pid) =:= node() ->
         Lockstep -> toroco_lockstep:send(Lockstep, Pid, Msg)
     end;
 send(To, Msg) ->
+    case persistent_term:get(toroco_lockstep, none) of
+        none -> send_remote(To, Msg);
+        %% a robot over several nodes in one lockstep world (SPEC §13, §17)
+        Lockstep -> toroco_lockstep:send(Lockstep, To, Msg)
+    end.
+
+send_remote(To, Msg) ->
     try erlang:send(To, Msg, [noconnect, nosuspend]) of
         ok -> ok;
         nosuspend -> swallowed(1, congested, To);
