@@ -582,10 +582,14 @@ observed([#bot{world = W, motors = Motors, lines = Lines}], S = #sim{obs = Obs})
 observed(_Bots, S) ->
     S.
 
-%% The events of a tick's trace lines that conditions name.
+%% The events of a tick's trace lines that conditions name (a line of a
+%% robot over several nodes names its node second: read without it).
 events(Lines) ->
     lists:filtermap(fun(Line) ->
-                            case string:lexemes(iolist_to_binary(Line), " \n") of
+                            case unnode(string:lexemes(iolist_to_binary(Line), " \n")) of
+                                [_, <<"cut">>, N, _] -> {true, {cut, binary_to_atom(N)}};
+                                [_, <<"kill">>, N] -> {true, {cut, binary_to_atom(N)}};
+                                [_, <<"heal">>, N] -> {true, {healed, binary_to_atom(N)}};
                                 [_, Name, <<"restarted">>] ->
                                     {true, {restarted, binary_to_atom(Name)}};
                                 [_, <<"layer">>, L, <<"out">>] ->
@@ -599,6 +603,14 @@ events(Lines) ->
                                 _ -> false
                             end
                     end, Lines).
+
+unnode([T, Node | Rest] = Tokens) ->
+    case binary:match(Node, <<"@">>) of
+        nomatch -> Tokens;
+        _ -> [T | Rest]
+    end;
+unnode(Tokens) ->
+    Tokens.
 
 %% From the robot's rim to the nearest wall or arena edge, in metres.
 distance_to_wall(W) ->

@@ -6,10 +6,12 @@
 -include_lib("stdlib/include/assert.hrl").
 
 -export([all/0, init_per_suite/1, end_per_suite/1]).
--export([split_run_is_exact/1, disconnect_takeover_at_deadline/1, bad_nodes_refused/1]).
+-export([split_run_is_exact/1, disconnect_takeover_at_deadline/1, bad_nodes_refused/1,
+         partition_found_shrunk_replayed/1]).
 
 all() ->
-    [bad_nodes_refused, split_run_is_exact, disconnect_takeover_at_deadline].
+    [bad_nodes_refused, split_run_is_exact, disconnect_takeover_at_deadline,
+     partition_found_shrunk_replayed].
 
 init_per_suite(Config) ->
     logger:set_primary_config(level, error),
@@ -127,3 +129,26 @@ disconnect_takeover_at_deadline(Config) ->
     ?assertEqual(Deadline, Away),
     ?assert(lists:member(Layer, ["forward", "avoid_left", "avoid_right"])),
     ?assert(lists:any(fun({T, W}) -> T > CutAt + 3000 andalso W =:= "red_follower" end, Winners)).
+
+%% @doc Pins: exploring partitions of the laptop over 100 seeds finds a
+%% property made to fail on purpose (the board must win within 200 ms of a
+%% cut, the laptop's sources' max age is 300 ms), shrinks it to one cut,
+%% and its replay file gives the same trace and violation.
+partition_found_shrunk_replayed(Config) ->
+    Laptop = ?config(laptop, Config),
+    World = filename:join(?config(data_dir, Config), "red_ahead.world"),
+    Away = {'not', {any, [{winner, setvel, L} || L <- [red_follower, hold_left, hold_right,
+                                                        trq_ignore]]}},
+    {ok, R} = torobot_chaos:explore(#{worlds => [World], wiring => ?config(split, Config),
+                                      faults => [{rate, 0.5, {disconnect, Laptop, {500, 1500}}}],
+                                      property => {always_after, {cut, Laptop}, 200, Away},
+                                      runs => runs(), seed => 1, shrink => 1,
+                                      dir => filename:join(?config(priv_dir, Config), "chaos")}),
+    #{runs := Runs, failed := [#{shrunk := Shrunk} | _], nondeterministic := []} = R,
+    ?assertEqual(runs(), Runs),
+    #{faults := Faults, violation := {_, At}, sha256 := Sha, replay := File} = Shrunk,
+    ?assertMatch([{at, _, {disconnect, Laptop, _}}], Faults),
+    ?assertMatch({ok, #{sha256 := Sha, violation := {_, At}}}, torobot_chaos:replay(File)).
+
+runs() ->
+    list_to_integer(os:getenv("SPLIT_RUNS", "100")).
