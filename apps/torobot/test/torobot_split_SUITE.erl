@@ -7,11 +7,11 @@
 
 -export([all/0, init_per_suite/1, end_per_suite/1]).
 -export([split_run_is_exact/1, disconnect_takeover_at_deadline/1, bad_nodes_refused/1,
-         partition_found_shrunk_replayed/1]).
+         partition_found_shrunk_replayed/1, long_cut_fires_monitors/1, killed_node_lets_go_at_once/1]).
 
 all() ->
     [bad_nodes_refused, split_run_is_exact, disconnect_takeover_at_deadline,
-     partition_found_shrunk_replayed].
+     long_cut_fires_monitors, killed_node_lets_go_at_once, partition_found_shrunk_replayed].
 
 init_per_suite(Config) ->
     logger:set_primary_config(level, error),
@@ -140,7 +140,7 @@ partition_found_shrunk_replayed(Config) ->
     Away = {'not', {any, [{winner, setvel, L} || L <- [red_follower, hold_left, hold_right,
                                                         trq_ignore]]}},
     {ok, R} = torobot_chaos:explore(#{worlds => [World], wiring => ?config(split, Config),
-                                      faults => [{rate, 0.5, {disconnect, Laptop, {500, 1500}}}],
+                                      faults => [{rate, 0.1, {disconnect, Laptop, {500, 1500}}}],
                                       property => {always_after, {cut, Laptop}, 200, Away},
                                       runs => runs(), seed => 1, shrink => 1,
                                       dir => filename:join(?config(priv_dir, Config), "chaos")}),
@@ -152,3 +152,45 @@ partition_found_shrunk_replayed(Config) ->
 
 runs() ->
     list_to_integer(os:getenv("SPLIT_RUNS", "100")).
+
+%% @doc Pins: a cut that outlasts the net tick time fires the monitors
+%% across it as `noconnection' at the cut + the net tick time, and at the
+%% heal the consumers subscribe again and red is followed again.
+long_cut_fires_monitors(Config) ->
+    Laptop = ?config(laptop, Config),
+    Old = net_kernel:get_net_ticktime(),
+    _ = net_kernel:set_net_ticktime(4, 0),
+    Lines = try cut_run(Config, "long.trace", [{at, 36000, {disconnect, Laptop, 6000}}])
+            after net_kernel:set_net_ticktime(Old, 0)
+            end,
+    Board = atom_to_list(node()),
+    L = atom_to_list(Laptop),
+    ?assert(lists:member(["40000", Board, "noconnection", L], Lines)),
+    Downs = [{T, N} || [T, N, _, "down", "noconnection"] <- Lines],
+    ?assert(lists:member({"40000", Board}, Downs)),
+    ?assert(lists:member({"40000", L}, Downs)),
+    ?assertEqual([], [T || {T, _} <- Downs, T =/= "40000"]),
+    ?assert(lists:member(["42000", Board, "heal", L], Lines)),
+    Resub = [T || [T, _, _, "'$toroco_resubscribe'"] <- Lines],
+    ?assert(lists:member("42000", Resub)),
+    ?assert(lists:any(fun([T, "wheels", _, _, "red_follower"]) -> list_to_integer(T) > 42000;
+                         (_) -> false
+                      end, Lines)).
+
+%% @doc Pins: a node killed lets its sources go at once (its monitors fire
+%% as `noconnection' at the kill), and its layers never win again.
+killed_node_lets_go_at_once(Config) ->
+    Laptop = ?config(laptop, Config),
+    Lines = cut_run(Config, "kill.trace", [{at, 38000, {kill_node, Laptop}}]),
+    ?assert(lists:member(["38000", atom_to_list(node()), "kill", atom_to_list(Laptop)], Lines)),
+    After = [{list_to_integer(T), W} || [T, "wheels", _, _, W] <- Lines, list_to_integer(T) >= 38000],
+    ?assertMatch([{38000, _} | _], After),
+    ?assertEqual([], [W || {_, W} <- After, lists:member(W, ["red_follower", "hold_left",
+                                                            "hold_right", "trq_ignore"])]).
+
+cut_run(Config, Name, Faults) ->
+    Trace = filename:join(?config(priv_dir, Config), Name),
+    {ok, _} = torobot_chaos:run(#{world => ?config(world, Config), wiring => ?config(split, Config),
+                                  faults => Faults, trace => Trace}),
+    {ok, Bin} = file:read_file(Trace),
+    [string:split(L, " ", all) || L <- string:split(binary_to_list(Bin), "\n", all), L =/= ""].

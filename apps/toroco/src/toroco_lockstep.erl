@@ -81,6 +81,7 @@
 -include("toroco_wire.hrl").
 
 -export([start_link/0, send/3, timer/4, cancel/2, done/1, up/2, ready/1, down/1, synced/1]).
+-export([monitored/2, demonitored/1]).
 -export([start/1, stop/0, tick/3, settle/0, info/0, join/1, cut/2]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 -export_type([stimulus/0]).
@@ -227,6 +228,23 @@ synced(Ref) ->
         Server -> Server ! {?TAG, synced, Ref, self()}, ok
     end.
 
+%% @doc The calling consumer monitors `Pid', of another node, with `Ref'
+%% (a lockstep world over several nodes fires it when it cuts that node).
+-spec monitored(pid(), reference()) -> ok.
+monitored(Pid, Ref) ->
+    case persistent_term:get(?MODULE, none) of
+        none -> ok;
+        Server -> Server ! {?TAG, monitor, self(), Pid, Ref}, ok
+    end.
+
+%% @doc The calling consumer's monitor `Ref' is off.
+-spec demonitored(reference()) -> ok.
+demonitored(Ref) ->
+    case persistent_term:get(?MODULE, none) of
+        none -> ok;
+        Server -> Server ! {?TAG, demonitor, Ref}, ok
+    end.
+
 %% The calling process's supervisor: proc_lib's first ancestor.
 supervisor() ->
     case get('$ancestors') of
@@ -363,7 +381,7 @@ handle_info({?TAG, send, To, Pid, Msg, _From}, S = #s{cell = undefined}) ->
     forward(To, Pid, Msg),
     {noreply, S};
 handle_info({?TAG, send, To, Pid, Msg, From}, S = #s{queue = Q, settle = Settle}) ->
-    case is_step(Msg) of
+    case is_step(Msg) orelse (S#s.world =/= none andalso is_sub(Msg)) of
         true when S#s.world =/= none -> {noreply, across(To, Pid, Msg, From, S)};
         true when Settle =/= none -> {noreply, hold(From, {send, To, Pid, Msg}, S)};
         true -> {noreply, run(S#s{queue = queue:in({To, Pid, Msg}, Q)})};
@@ -377,6 +395,10 @@ handle_info({?TAG, timer, Pid, Kind, Deadline, Msg}, S) ->
     {noreply, run(world_timer(Pid, Kind, Deadline, Msg, S))};
 handle_info({?TAG, at, Token, Pid, By}, S) ->
     {noreply, run(at(Token, Pid, By, S))};
+handle_info({?TAG, monitor, C, Pid, Ref}, S = #s{world = W}) when W =/= none ->
+    {noreply, S#s{world = toroco_lockstep_nodes:monitor(C, Pid, Ref, W)}};
+handle_info({?TAG, demonitor, Ref}, S = #s{world = W}) when W =/= none ->
+    {noreply, S#s{world = toroco_lockstep_nodes:demonitor(Ref, W)}};
 handle_info({?TAG, cancel, Pid, Kind}, S = #s{settle = #settle{}}) ->
     {noreply, hold(Pid, {cancel, Pid, Kind}, S)};
 handle_info({?TAG, cancel, Pid, Kind}, S) ->
@@ -623,11 +645,10 @@ run(S = #s{queue = Q}) ->
     end.
 
 due(S = #s{world = W}) when W =/= none ->
-    case toroco_lockstep_nodes:heal_due(next_deadline(S), W) of
-        {Node, At} ->
+    case toroco_lockstep_nodes:due(next_deadline(S), W) of
+        {Event, Node, At} ->
             S1 = set_now(max(S#s.now, At), S),
-            run(note(io_lib:format("heal ~s", [Node]),
-                     S1#s{world = toroco_lockstep_nodes:heal(Node, W)}));
+            run(world_event(Event, Node, S1));
         none ->
             due_timer(S)
     end;
@@ -742,6 +763,11 @@ is_step(?WIRE_UNSUB(_, _)) -> true;
 is_step(?WIRE_RESUBSCRIBE) -> true;
 is_step(?WIRE_ALIVE(_, _, _)) -> true;
 is_step(_) -> false.
+
+%% A subscription to another node's upstream: a step in a world of several
+%% nodes (toroco_wire sends no other through the clock).
+is_sub(?WIRE_SUB(_, _)) -> true;
+is_sub(_) -> false.
 
 %% Sent as in real time, to the process the address named when it was sent.
 forward(_To, _Pid, {exit, _}) -> ok;
@@ -906,6 +932,21 @@ next_deadline(#s{timers = Ts, target = Target}) ->
         true -> Target;
         false -> min(Target, element(1, element(1, gb_trees:smallest(Ts))))
     end.
+
+%% A heal, or the net kernel noticing a cut (its monitors fire); what
+%% either sends goes by the receivers' names.
+world_event(heal, Node, S = #s{world = W}) ->
+    {W1, Consumers} = toroco_lockstep_nodes:heal(Node, W),
+    S1 = note(io_lib:format("heal ~s", [Node]), S#s{world = W1}),
+    S1#s{queue = lists:foldl(fun({_, C}, Q) -> queue:in({C, C, ?WIRE_RESUBSCRIBE}, Q) end,
+                             S1#s.queue, lists:sort([{pname(C), C} || C <- Consumers]))};
+world_event(notice, Node, S = #s{world = W}) ->
+    {W1, Fired} = toroco_lockstep_nodes:notice(Node, W),
+    S1 = note(io_lib:format("noconnection ~s", [Node]), S#s{world = W1}),
+    Downs = lists:sort([{pname(C), pname(P), C, {'DOWN', Ref, process, P, noconnection}}
+                        || {C, Ref, P} <- Fired]),
+    S1#s{queue = lists:foldl(fun({_, _, C, Down}, Q) -> queue:in({C, C, Down}, Q) end,
+                             S1#s.queue, Downs)}.
 
 cut_node(Node, _Ms, S = #s{world = none}) ->
     {reply, {error, {case Node =:= node() of

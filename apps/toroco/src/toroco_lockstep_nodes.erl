@@ -19,16 +19,22 @@
 %% must not depend on when the real net kernel notices anything): while a
 %% node is cut, a step from one side to the other is lost when it is sent,
 %% as a real partition loses it, and each side keeps running on the world's
-%% clock. A cut shorter than the net tick time is what a real network drop
-%% is to Erlang: no monitor fires, and the remote sources' `max_age'
-%% (SPEC §13) is what lets them go; a node killed is cut for good and its
-%% processes get no step again. This module keeps that state; the clock
-%% asks it.
+%% clock. As with a real network drop, the remote sources' `max_age' (SPEC
+%% §13) is what lets them go first; the monitors that consumers hold on
+%% processes across the cut (`toroco_wire' tells the clock of each) fire as
+%% `noconnection' when the net kernel would notice, the net tick time
+%% (`net_kernel:get_net_ticktime/0') after the cut began, if it still
+%% lasts; and when a cut whose monitors fired heals, those consumers are
+%% told to subscribe again, as the wiring server tells them when a node
+%% comes back. A node killed is cut for good, its monitors fire at once,
+%% and its processes get no step again. This module keeps that state; the
+%% clock asks it.
 -module(toroco_lockstep_nodes).
 
 -include("toroco_wire.hrl").
 
--export([join/2, leave/1, nodes/1, cut/4, heal_due/2, heal/2, lost/3, killed/2]).
+-export([join/2, leave/1, nodes/1, cut/4, due/2, heal/2, notice/2, lost/3, killed/2]).
+-export([monitor/4, demonitor/2]).
 -export([deliver/5, node_of/1, regname/1, remember/2]).
 -export([agent/2]).
 -export_type([world/0]).
@@ -40,10 +46,15 @@
 -define(REGS, '$toroco_lockstep_regs').
 
 %% The world's nodes (this one first), the cuts (node -> the simulated
-%% time it heals, or `forever' for a node killed), the registered names of
+%% time it heals, or `forever' for a node killed), when each cut is noticed
+%% (node -> simulated time), the consumers whose monitors fired for each
+%% (told to subscribe again at the heal), the monitors across nodes
+%% (reference -> {consumer, monitored}); the registered names of
 %% the processes of other nodes are kept in the clock's process dictionary
 %% (the trace and the settle's order name them).
--type world() :: #{nodes := [node()], cuts := #{node() => integer() | forever}}.
+-type world() :: #{nodes := [node()], cuts := #{node() => integer() | forever},
+                   notices := #{node() => integer()}, downed := #{node() => [pid()]},
+                   mons := #{reference() => {pid(), pid()}}}.
 
 %%====================================================================
 %% Joining and leaving
@@ -63,12 +74,15 @@ join(Nodes0, Clock) ->
                       || N <- Nodes],
             case [{N, R} || {N, R} <- Joined, R =/= ok] of
                 [] ->
-                    {ok, #{nodes => [node() | Nodes], cuts => #{}}};
+                    {ok, world([node() | Nodes])};
                 [{Node, Why} | _] ->
-                    _ = leave(#{nodes => [N || {N, ok} <- Joined], cuts => #{}}),
+                    _ = leave(world([N || {N, ok} <- Joined])),
                     {error, {node_not_joined, {Node, Why}}}
             end
     end.
+
+world(Nodes) ->
+    #{nodes => Nodes, cuts => #{}, notices => #{}, downed => #{}, mons => #{}}.
 
 %% @doc The other nodes go back to their own clocks.
 -spec leave(world() | none) -> ok.
@@ -93,32 +107,75 @@ nodes(#{nodes := Nodes}) -> Nodes.
           {ok, world()} | {error, {atom(), node()}}.
 cut(Node, _Ms, _Now, _W) when Node =:= node() ->
     {error, {own_node, Node}};
-cut(Node, Ms, Now, W = #{nodes := Nodes, cuts := Cuts}) ->
+cut(Node, Ms, Now, W = #{nodes := Nodes, cuts := Cuts, notices := Notices, downed := Downed}) ->
     case lists:member(Node, Nodes) of
-        false -> {error, {unknown_node, Node}};
-        true when Ms =:= forever -> {ok, W#{cuts := Cuts#{Node => forever}}};
+        false ->
+            {error, {unknown_node, Node}};
+        true when Ms =:= forever ->
+            {ok, W#{cuts := Cuts#{Node => forever}, notices := Notices#{Node => Now}}};
         true ->
             Until = case Cuts of
                         #{Node := forever} -> forever;
                         #{Node := Old} -> max(Old, Now + Ms);
                         #{} -> Now + Ms
                     end,
-            {ok, W#{cuts := Cuts#{Node => Until}}}
+            Notice = case Notices of
+                         #{Node := At} -> At;
+                         #{} -> Now + tick_ms()
+                     end,
+            {ok, W#{cuts := Cuts#{Node => Until},
+                    notices := case is_map_key(Node, Downed) of
+                                   true -> Notices;
+                                   false -> Notices#{Node => Notice}
+                               end}}
     end.
 
-%% @doc The earliest heal due at or before `Target': `{Node, At}', or `none'.
--spec heal_due(integer(), world() | none) -> {node(), integer()} | none.
-heal_due(_Target, none) ->
+%% When the net kernel notices a silent node.
+tick_ms() ->
+    case net_kernel:get_net_ticktime() of
+        Secs when is_integer(Secs) -> Secs * 1000;
+        {_, Secs} -> Secs * 1000;
+        ignored -> 60000
+    end.
+
+%% @doc The world's earliest event due at or before `Limit': a heal or a
+%% notice (a heal first at the same instant: the cut is over), or `none'.
+-spec due(integer(), world() | none) -> {heal | notice, node(), integer()} | none.
+due(_Limit, none) ->
     none;
-heal_due(Target, #{cuts := Cuts}) ->
-    case lists:sort([{At, N} || {N, At} <- maps:to_list(Cuts), is_integer(At), At =< Target]) of
-        [{At, Node} | _] -> {Node, At};
+due(Limit, #{cuts := Cuts, notices := Notices}) ->
+    Events = [{At, 0, heal, N} || {N, At} <- maps:to_list(Cuts), is_integer(At), At =< Limit]
+        ++ [{At, 1, notice, N} || {N, At} <- maps:to_list(Notices), At =< Limit],
+    case lists:sort(Events) of
+        [{At, _, Event, Node} | _] -> {Event, Node, At};
         [] -> none
     end.
 
--spec heal(node(), world()) -> world().
-heal(Node, W = #{cuts := Cuts}) ->
-    W#{cuts := maps:remove(Node, Cuts)}.
+%% @doc `Node''s cut is over: the world without it, and the consumers
+%% whose monitors fired for it (to be told to subscribe again).
+-spec heal(node(), world()) -> {world(), [pid()]}.
+heal(Node, W = #{cuts := Cuts, notices := Notices, downed := Downed}) ->
+    {W#{cuts := maps:remove(Node, Cuts), notices := maps:remove(Node, Notices),
+        downed := maps:remove(Node, Downed)}, maps:get(Node, Downed, [])}.
+
+%% @doc The net kernel notices `Node''s cut: the monitors across it fire,
+%% `[{Consumer, Ref, Monitored}]'.
+-spec notice(node(), world()) -> {world(), [{pid(), reference(), pid()}]}.
+notice(Node, W = #{mons := Mons, notices := Notices, downed := Downed}) ->
+    Fired = [{C, Ref, P} || {Ref, {C, P}} <- maps:to_list(Mons), node(C) =/= node(P),
+                            node(C) =:= Node orelse node(P) =:= Node],
+    {W#{mons := maps:without([Ref || {_, Ref, _} <- Fired], Mons),
+        notices := maps:remove(Node, Notices),
+        downed := Downed#{Node => lists:usort([C || {C, _, _} <- Fired])}}, Fired}.
+
+%% @doc Consumer `C' monitors `Pid' of another node with `Ref'.
+-spec monitor(pid(), pid(), reference(), world()) -> world().
+monitor(C, Pid, Ref, W = #{mons := Mons}) ->
+    W#{mons := Mons#{Ref => {C, Pid}}}.
+
+-spec demonitor(reference(), world()) -> world().
+demonitor(Ref, W = #{mons := Mons}) ->
+    W#{mons := maps:remove(Ref, Mons)}.
 
 %% @doc Whether a message from node `From' to node `To' is lost to a cut.
 -spec lost(node(), node(), world() | none) -> boolean().

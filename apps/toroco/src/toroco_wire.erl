@@ -378,9 +378,22 @@ listen(Src, Pid, Links) ->
     L1 = #{pids := Pids, mons := Mons} = forget(Src, Links),
     Mons1 = case Mons of
                 #{Pid := _} -> Mons;
-                #{} -> Mons#{Pid => erlang:monitor(process, Pid)}
+                #{} -> Mons#{Pid => monitor_up(Pid)}
             end,
     L1#{pids := Pids#{Src => Pid}, mons := Mons1}.
+
+%% A monitor of an upstream on another node is told to a lockstep world
+%% over several nodes, which fires it as `noconnection' when it cuts that
+%% node off (toroco_lockstep_nodes).
+monitor_up(Pid) ->
+    Ref = erlang:monitor(process, Pid),
+    _ = node(Pid) =/= node() andalso toroco_lockstep:monitored(Pid, Ref),
+    Ref.
+
+demonitor_up(Pid, Ref) ->
+    erlang:demonitor(Ref, [flush]),
+    _ = node(Pid) =/= node() andalso toroco_lockstep:demonitored(Ref),
+    ok.
 
 %% Drops a source's pid, and the monitor of that pid if no other source uses it.
 forget(Src, Links = #{pids := Pids, mons := Mons}) ->
@@ -391,7 +404,7 @@ forget(Src, Links = #{pids := Pids, mons := Mons}) ->
                 true -> Links#{pids := Pids1};
                 false ->
                     case Mons of
-                        #{Pid := Ref} -> erlang:demonitor(Ref, [flush]);
+                        #{Pid := Ref} -> demonitor_up(Pid, Ref);
                         #{} -> ok
                     end,
                     Links#{pids := Pids1, mons := maps:remove(Pid, Mons)}
@@ -400,8 +413,16 @@ forget(Src, Links = #{pids := Pids, mons := Mons}) ->
     end.
 
 %% A subscription may be the first message to another node: it connects.
+%% In a lockstep world over several nodes one to another node is a step.
 subscribe(Src, {_Tag, Up}, Me) ->
-    try erlang:send(address(Up), ?WIRE_SUB(Src, Me), [nosuspend]) of
+    case {persistent_term:get(toroco_lockstep, none), address(Up)} of
+        {none, To} -> subscribe_now(To, ?WIRE_SUB(Src, Me));
+        {_, {_, Node} = To} when Node =:= node() -> subscribe_now(To, ?WIRE_SUB(Src, Me));
+        {Lockstep, To} -> toroco_lockstep:send(Lockstep, To, ?WIRE_SUB(Src, Me))
+    end.
+
+subscribe_now(To, Msg) ->
+    try erlang:send(To, Msg, [nosuspend]) of
         _ -> ok
     catch
         error:badarg -> ok
