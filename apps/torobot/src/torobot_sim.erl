@@ -293,10 +293,12 @@ with_robots(Worlds, Nodes, Opts) ->
                  {error, GoFailed} -> throw({failed, {go, GoFailed}})
              end,
         %% a run in lockstep goes as fast as the CPU allows: given as long
-        %% as real time would take, it is stuck
+        %% as real time would take, it is stuck; a robot over several nodes
+        %% pays round trips between them for its steps, and gets more
+        Others = length(torobot_sim_robot:wiring_nodes(maps:get(wiring, Opts))),
         Timeout = case Time of
                       realtime -> round(torobot_world:duration_ms(hd(Worlds)) / Speed);
-                      lockstep -> torobot_world:duration_ms(hd(Worlds))
+                      lockstep -> torobot_world:duration_ms(hd(Worlds)) * (1 + 4 * Others)
                   end + ?GRACE_MS,
         receive
             {?MODULE, Sim, {done, Finals, Obs}} ->

@@ -15,15 +15,7 @@ all() ->
 
 init_per_suite(Config) ->
     logger:set_primary_config(level, error),
-    Stop = case node() of
-               nonode@nohost ->
-                   Name = list_to_atom("split_ct" ++ integer_to_list(erlang:unique_integer([positive]))
-                                       ++ "@127.0.0.1"),
-                   {ok, _} = net_kernel:start([Name, longnames]),
-                   true;
-               _ ->
-                   false
-           end,
+    Stop = toroco_test_lib:distributed("split_ct"),
     Root = toroco_test_lib:root(),
     Paths = [P || P <- code:get_path(), string:find(P, "_build") =/= nomatch],
     PeerName = list_to_atom("laptop" ++ integer_to_list(erlang:unique_integer([positive]))),

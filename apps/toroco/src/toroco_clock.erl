@@ -124,7 +124,7 @@ mode() ->
 %% Node}}' and this node back in real time if one is not connected.
 -spec lockstep(#{trace => boolean(), nodes => [node()]}) -> ok | {error, {atom(), term()}}.
 lockstep(Opts) ->
-    ok = toroco_lockstep:start(Opts),
+    ok = toroco_lockstep:start(maps:with([trace], Opts)),
     case maps:get(nodes, Opts, []) -- [node()] of
         [] ->
             ok;

@@ -52,11 +52,18 @@
 %% flight, no exit is settling and no timer is due at or before now;
 %% {@link tick/3} and {@link settle/0} answer then. No process is polled.
 %%
+%% Several nodes (SPEC §13, §17): {@link join/1} makes the robot's other
+%% nodes join this clock (`toroco_lockstep_nodes': an agent on each points
+%% its event path here and hands it its steps at their simulated instant),
+%% so a message between nodes (keep-alives and subscriptions included) is
+%% a step in this one order, and {@link cut/2} cuts a node off inside the
+%% world. Each trace line names its node after the time then.
+%%
 %% The trace: with `trace => true' every step is written down as one
 %% canonical line with its simulated time (emissions, deliveries, acks,
 %% timers, stimuli); {@link tick/3} hands the lines over.
 %%
-%% Messages (all from processes of this node):
+%% Messages (from processes of this node, or of the world's other nodes):
 %% <table>
 %% <tr><th>message</th><th>from</th><th>effect</th></tr>
 %% <tr><td>`{Tag, send, To, Pid, Msg}'</td><td>`toroco_wire:send/2'</td><td>queued
@@ -72,6 +79,11 @@
 %%     <td>a restart awaited is done</td></tr>
 %% <tr><td>`{Tag, down, Pid, Down}'</td><td>a consumer given a `DOWN'</td>
 %%     <td>the `DOWN' comes back to it as a step once the exit settles</td></tr>
+%% <tr><td>`{Tag, at, Token, Pid, MonitoredBy}'</td><td>another node's agent</td>
+%%     <td>the step `Token' for that node is in flight to `Pid'</td></tr>
+%% <tr><td>`{Tag, monitor, C, Pid, Ref}' / `{Tag, demonitor, Ref}'</td>
+%%     <td>a consumer (`toroco_wire')</td><td>its monitor of a process of
+%%     another node, fired by a cut</td></tr>
 %% <tr><td>`WIRE_BARRIER(Ref)' / `{Tag, synced, Ref, Pid}'</td><td>this
 %%     process → the path / back</td><td>the settle's barrier</td></tr>
 %% </table>
@@ -232,17 +244,18 @@ synced(Ref) ->
 %% (a lockstep world over several nodes fires it when it cuts that node).
 -spec monitored(pid(), reference()) -> ok.
 monitored(Pid, Ref) ->
-    case persistent_term:get(?MODULE, none) of
-        none -> ok;
-        Server -> Server ! {?TAG, monitor, self(), Pid, Ref}, ok
-    end.
+    tell({?TAG, monitor, self(), Pid, Ref}).
 
 %% @doc The calling consumer's monitor `Ref' is off.
 -spec demonitored(reference()) -> ok.
 demonitored(Ref) ->
+    tell({?TAG, demonitor, Ref}).
+
+%% Tells the clock, in lockstep.
+tell(Msg) ->
     case persistent_term:get(?MODULE, none) of
         none -> ok;
-        Server -> Server ! {?TAG, demonitor, Ref}, ok
+        Server -> Server ! Msg, ok
     end.
 
 %% The calling process's supervisor: proc_lib's first ancestor.
@@ -723,7 +736,7 @@ deliver(To, Target, Msg, S = #s{steps = N}) ->
                                     end),
             trace(To, Pid, Msg, S1#s{inflight = {Token, Mon, Pid}, steps = N + 1});
         remote ->
-            send_out(To, Msg),
+            toroco_lockstep_nodes:send_out(To, Msg),
             S;
         undefined ->
             trace(To, undefined, Msg, S#s{lost = S#s.lost + 1})
@@ -772,7 +785,7 @@ is_sub(_) -> false.
 %% Sent as in real time, to the process the address named when it was sent.
 forward(_To, _Pid, {exit, _}) -> ok;
 forward(_To, Pid, Msg) when is_pid(Pid) -> Pid ! Msg, ok;
-forward(To, remote, Msg) -> send_out(To, Msg);
+forward(To, remote, Msg) -> toroco_lockstep_nodes:send_out(To, Msg);
 forward(_To, undefined, _Msg) -> ok.
 
 whereis_local(Pid) when is_pid(Pid), node(Pid) =:= node() -> Pid;
@@ -842,70 +855,34 @@ strip(T) when is_list(T) -> [strip(E) || E <- T];
 strip(T) -> T.
 
 %%====================================================================
-%% Several nodes (toroco_lockstep_nodes)
+%% Several nodes (the world's side is toroco_lockstep_nodes)
 %%====================================================================
-
-%% A message for another node goes as in real time, and never waits.
-send_out(To, Msg) ->
-    try erlang:send(To, Msg, [noconnect, nosuspend]) of
-        _ -> ok
-    catch
-        error:badarg -> ok
-    end.
 
 %% A step sent in a world of several nodes: lost if it crosses a cut.
 across(To, Pid, Msg, From, S = #s{world = W}) ->
-    Dest = case Pid of
-               _ when is_pid(Pid) -> node(Pid);
-               _ when is_atom(To) -> node(From);
-               _ -> toroco_lockstep_nodes:node_of(To)
-           end,
-    case toroco_lockstep_nodes:lost(node(From), Dest, W) of
+    case toroco_lockstep_nodes:lost(node(From), toroco_lockstep_nodes:dest(To, Pid, From), W) of
         true -> S#s{lost = S#s.lost + 1};
         false when S#s.settle =/= none -> hold(From, {send, To, Pid, Msg}, S);
         false -> run(S#s{queue = queue:in({To, Pid, Msg}, S#s.queue)})
     end.
 
 %% A timer set inside its owner's step is ordered as on one node; one set
-%% outside any step (a subscription's keep-alive, as the wiring loads) is
-%% ordered by its owner's name among those of its deadline, not by when
-%% its message came from whichever node.
+%% outside any step is ordered by its owner's name (toroco_lockstep_nodes).
 world_timer(Pid, Kind, Deadline, Msg, S = #s{inflight = {_, _, Pid}}) ->
     set_timer(Pid, Kind, Deadline, Msg, S);
 world_timer(Pid, Kind, Deadline, Msg, S) ->
     S1 = #s{timers = Ts, owned = Owned} = drop_timer(Pid, Kind, S),
-    Key = free_key({Deadline, -1 - erlang:phash2({pname(Pid), Kind}, 1 bsl 27)}, Ts),
+    Key = toroco_lockstep_nodes:timer_key(Deadline, {pname(Pid), Kind}, Ts),
     S1#s{timers = gb_trees:insert(Key, {Pid, Kind, Msg}, Ts),
          owned = Owned#{{Pid, Kind} => Key}}.
-
-free_key(Key = {Deadline, N}, Ts) ->
-    case gb_trees:is_defined(Key, Ts) of
-        true -> free_key({Deadline, N - (1 bsl 27)}, Ts);
-        false -> Key
-    end.
 
 %% A step for a process of another node, through its agent (which answers
 %% `at'); none goes to a node killed.
 deliver_node(To, Target, Msg, S = #s{steps = N, world = W, now = Now}) ->
-    Node = toroco_lockstep_nodes:node_of(case Target of
-                                             _ when is_pid(Target) -> Target;
-                                             _ -> To
-                                         end),
-    case toroco_lockstep_nodes:killed(Node, W) of
-        true ->
-            S#s{lost = S#s.lost + 1};
-        false ->
-            Token = make_ref(),
-            Addr = case Target of
-                       _ when is_pid(Target) -> Target;
-                       _ -> element(1, To)
-                   end,
-            Body = case Msg of
-                       {stimulus, M} -> M;
-                       _ -> Msg
-                   end,
-            ok = toroco_lockstep_nodes:deliver(Node, Addr, Token, Body, Now),
-            trace(To, Target, Msg, S#s{inflight = {Token, make_ref(), pending}, steps = N + 1})
+    case toroco_lockstep_nodes:step(To, Target, Msg, Now, W) of
+        lost -> S#s{lost = S#s.lost + 1};
+        {sent, Token} -> trace(To, Target, Msg, S#s{inflight = {Token, make_ref(), pending},
+                                                   steps = N + 1})
     end.
 
 %% The agent found the step's receiver (`undefined': none had the name)
@@ -926,41 +903,21 @@ at(Token, _Pid, _By, S = #s{inflight = {Token, _, pending}}) ->
 at(_Token, _Pid, _By, S) ->
     S.
 
-%% How far time may go before the next timer: a heal due by then comes first.
+%% How far time may go before the next timer: a world's event due by
+%% then comes first.
 next_deadline(#s{timers = Ts, target = Target}) ->
     case gb_trees:is_empty(Ts) of
         true -> Target;
         false -> min(Target, element(1, element(1, gb_trees:smallest(Ts))))
     end.
 
-%% A heal, or the net kernel noticing a cut (its monitors fire); what
-%% either sends goes by the receivers' names.
-world_event(heal, Node, S = #s{world = W}) ->
-    {W1, Consumers} = toroco_lockstep_nodes:heal(Node, W),
-    S1 = note(io_lib:format("heal ~s", [Node]), S#s{world = W1}),
-    S1#s{queue = lists:foldl(fun({_, C}, Q) -> queue:in({C, C, ?WIRE_RESUBSCRIBE}, Q) end,
-                             S1#s.queue, lists:sort([{pname(C), C} || C <- Consumers]))};
-world_event(notice, Node, S = #s{world = W}) ->
-    {W1, Fired} = toroco_lockstep_nodes:notice(Node, W),
-    S1 = note(io_lib:format("noconnection ~s", [Node]), S#s{world = W1}),
-    Downs = lists:sort([{pname(C), pname(P), C, {'DOWN', Ref, process, P, noconnection}}
-                        || {C, Ref, P} <- Fired]),
-    S1#s{queue = lists:foldl(fun({_, _, C, Down}, Q) -> queue:in({C, C, Down}, Q) end,
-                             S1#s.queue, Downs)}.
+%% A heal, or the net kernel noticing a cut: its line, and what it sends.
+world_event(Event, Node, S = #s{world = W, queue = Q}) ->
+    {W1, Line, Steps} = toroco_lockstep_nodes:event(Event, Node, fun pname/1, W),
+    note(Line, S#s{world = W1, queue = lists:foldl(fun queue:in/2, Q, Steps)}).
 
-cut_node(Node, _Ms, S = #s{world = none}) ->
-    {reply, {error, {case Node =:= node() of
-                         true -> own_node;
-                         false -> unknown_node
-                     end, Node}}, S};
 cut_node(Node, Ms, S = #s{world = W, now = Now}) ->
     case toroco_lockstep_nodes:cut(Node, Ms, Now, W) of
-        {ok, W1} ->
-            Line = case Ms of
-                       forever -> io_lib:format("kill ~s", [Node]);
-                       _ -> io_lib:format("cut ~s ~b", [Node, Ms])
-                   end,
-            {reply, ok, note(Line, S#s{world = W1})};
-        Error ->
-            {reply, Error, S}
+        {ok, W1, Line} -> {reply, ok, note(Line, S#s{world = W1})};
+        Error -> {reply, Error, S}
     end.

@@ -33,9 +33,9 @@
 
 -include("toroco_wire.hrl").
 
--export([join/2, leave/1, nodes/1, cut/4, due/2, heal/2, notice/2, lost/3, killed/2]).
--export([monitor/4, demonitor/2]).
--export([deliver/5, node_of/1, regname/1, remember/2]).
+-export([join/2, leave/1, nodes/1, cut/4, due/2, event/4, lost/3, dest/3]).
+-export([monitor/4, demonitor/2, timer_key/3]).
+-export([step/5, node_of/1, regname/1, remember/2, send_out/2]).
 -export([agent/2]).
 -export_type([world/0]).
 
@@ -101,34 +101,37 @@ nodes(#{nodes := Nodes}) -> Nodes.
 %%====================================================================
 
 %% @doc `Node' is cut from the rest of the robot from `Now' for `Ms'
-%% simulated ms (`forever': the node is killed). The world's own node and
-%% a node not in the world are refused.
--spec cut(node(), non_neg_integer() | forever, integer(), world()) ->
-          {ok, world()} | {error, {atom(), node()}}.
+%% simulated ms (`forever': the node is killed), with the trace's line. The
+%% world's own node and a node not in the world are refused.
+-spec cut(node(), non_neg_integer() | forever, integer(), world() | none) ->
+          {ok, world(), iodata()} | {error, {atom(), node()}}.
 cut(Node, _Ms, _Now, _W) when Node =:= node() ->
     {error, {own_node, Node}};
-cut(Node, Ms, Now, W = #{nodes := Nodes, cuts := Cuts, notices := Notices, downed := Downed}) ->
-    case lists:member(Node, Nodes) of
-        false ->
-            {error, {unknown_node, Node}};
-        true when Ms =:= forever ->
-            {ok, W#{cuts := Cuts#{Node => forever}, notices := Notices#{Node => Now}}};
-        true ->
-            Until = case Cuts of
-                        #{Node := forever} -> forever;
-                        #{Node := Old} -> max(Old, Now + Ms);
-                        #{} -> Now + Ms
-                    end,
-            Notice = case Notices of
-                         #{Node := At} -> At;
-                         #{} -> Now + tick_ms()
-                     end,
-            {ok, W#{cuts := Cuts#{Node => Until},
-                    notices := case is_map_key(Node, Downed) of
-                                   true -> Notices;
-                                   false -> Notices#{Node => Notice}
-                               end}}
+cut(Node, _Ms, _Now, none) ->
+    {error, {unknown_node, Node}};
+cut(Node, Ms, Now, W) ->
+    case lists:member(Node, maps:get(nodes, W)) of
+        false -> {error, {unknown_node, Node}};
+        true when Ms =:= forever -> {ok, cut_until(Node, forever, Now, W), ["kill ", atom_to_list(Node)]};
+        true -> {ok, cut_until(Node, Ms, Now, W), io_lib:format("cut ~s ~b", [Node, Ms])}
     end.
+
+cut_until(Node, forever, Now, W = #{cuts := Cuts, notices := Notices}) ->
+    W#{cuts := Cuts#{Node => forever}, notices := Notices#{Node => Now}};
+cut_until(Node, Ms, Now, W = #{cuts := Cuts, notices := Notices, downed := Downed}) ->
+    Until = case Cuts of
+                #{Node := forever} -> forever;
+                #{Node := Old} -> max(Old, Now + Ms);
+                #{} -> Now + Ms
+            end,
+    %% noticed once a cut lasts the net tick time (a cut already noticed
+    %% is not noticed again)
+    Notice = case {Notices, is_map_key(Node, Downed)} of
+                 {_, true} -> #{};
+                 {#{Node := At}, false} -> #{Node => At};
+                 {#{}, false} -> #{Node => Now + tick_ms()}
+             end,
+    W#{cuts := Cuts#{Node => Until}, notices := maps:merge(Notices, Notice)}.
 
 %% When the net kernel notices a silent node.
 tick_ms() ->
@@ -151,16 +154,26 @@ due(Limit, #{cuts := Cuts, notices := Notices}) ->
         [] -> none
     end.
 
-%% @doc `Node''s cut is over: the world without it, and the consumers
-%% whose monitors fired for it (to be told to subscribe again).
--spec heal(node(), world()) -> {world(), [pid()]}.
+%% @doc A heal (the consumers whose monitors fired for the cut are told
+%% to subscribe again) or a notice (the monitors across the cut fire as
+%% `noconnection'): the world after it, the trace's line and the steps it
+%% queues, `{To, Pid, Msg}', by the receivers' names (`Name' names a pid).
+-spec event(heal | notice, node(), fun((pid()) -> string()), world()) ->
+          {world(), iodata(), [{pid(), pid(), term()}]}.
+event(heal, Node, Name, W) ->
+    {W1, Consumers} = heal(Node, W),
+    {W1, ["heal ", atom_to_list(Node)],
+     [{C, C, ?WIRE_RESUBSCRIBE} || {_, C} <- lists:sort([{Name(C), C} || C <- Consumers])]};
+event(notice, Node, Name, W) ->
+    {W1, Fired} = notice(Node, W),
+    Downs = lists:sort([{Name(C), Name(P), C, {'DOWN', Ref, process, P, noconnection}}
+                        || {C, Ref, P} <- Fired]),
+    {W1, ["noconnection ", atom_to_list(Node)], [{C, C, Down} || {_, _, C, Down} <- Downs]}.
+
 heal(Node, W = #{cuts := Cuts, notices := Notices, downed := Downed}) ->
     {W#{cuts := maps:remove(Node, Cuts), notices := maps:remove(Node, Notices),
         downed := maps:remove(Node, Downed)}, maps:get(Node, Downed, [])}.
 
-%% @doc The net kernel notices `Node''s cut: the monitors across it fire,
-%% `[{Consumer, Ref, Monitored}]'.
--spec notice(node(), world()) -> {world(), [{pid(), reference(), pid()}]}.
 notice(Node, W = #{mons := Mons, notices := Notices, downed := Downed}) ->
     Fired = [{C, Ref, P} || {Ref, {C, P}} <- maps:to_list(Mons), node(C) =/= node(P),
                             node(C) =:= Node orelse node(P) =:= Node],
@@ -183,10 +196,38 @@ lost(_From, _To, none) -> false;
 lost(Same, Same, _W) -> false;
 lost(From, To, #{cuts := Cuts}) -> is_map_key(From, Cuts) orelse is_map_key(To, Cuts).
 
-%% @doc Whether the processes of `Node' are gone for good.
--spec killed(node(), world() | none) -> boolean().
-killed(_Node, none) -> false;
+%% @doc The node a step sent to `To' (found as `Pid' on the sender's
+%% node, `remote' or `undefined') by `From' goes to.
+-spec dest(term(), pid() | remote | undefined, pid()) -> node().
+dest(_To, Pid, _From) when is_pid(Pid) -> node(Pid);
+dest(To, _Pid, From) when is_atom(To) -> node(From);
+dest(To, _Pid, _From) -> node_of(To).
+
+%% Whether the processes of `Node' are gone for good.
 killed(Node, #{cuts := Cuts}) -> maps:get(Node, Cuts, none) =:= forever.
+
+%% @doc The key of a timer set outside any step: among the timers of its
+%% deadline, ordered by `Owner' (its name and kind), not by when its
+%% message came from whichever node; before those set inside steps.
+-spec timer_key(integer(), term(), gb_trees:tree()) -> {integer(), integer()}.
+timer_key(Deadline, Owner, Ts) ->
+    free_key({Deadline, -1 - erlang:phash2(Owner, 1 bsl 27)}, Ts).
+
+free_key(Key = {Deadline, N}, Ts) ->
+    case gb_trees:is_defined(Key, Ts) of
+        true -> free_key({Deadline, N - (1 bsl 27)}, Ts);
+        false -> Key
+    end.
+
+%% @doc A message for another node that is no step goes as in real time,
+%% and never waits.
+-spec send_out(term(), term()) -> ok.
+send_out(To, Msg) ->
+    try erlang:send(To, Msg, [noconnect, nosuspend]) of
+        _ -> ok
+    catch
+        error:badarg -> ok
+    end.
 
 %%====================================================================
 %% Steps to other nodes
@@ -198,12 +239,31 @@ node_of(Pid) when is_pid(Pid) -> node(Pid);
 node_of({_Reg, Node}) when is_atom(Node) -> Node;
 node_of(_) -> node().
 
-%% @doc Hands step `Token' (message `Msg') to `Target' on its node, at
-%% simulated `Now', through that node's agent.
--spec deliver(node(), pid() | atom(), reference(), term(), integer()) -> ok.
-deliver(Node, Target, Token, Msg, Now) ->
-    {?AGENT, Node} ! {deliver, Now, Target, Token, Msg, self()},
-    ok.
+%% @doc Hands `Msg' for `To' (`Target': its pid, or `remote' for a name
+%% of another node) to its node's agent as a step at simulated `Now':
+%% `{sent, Token}', or `lost' for a node killed.
+-spec step(term(), pid() | remote, term(), integer(), world()) -> {sent, reference()} | lost.
+step(To, Target, Msg, Now, W) ->
+    Node = node_of(case Target of
+                       _ when is_pid(Target) -> Target;
+                       _ -> To
+                   end),
+    case killed(Node, W) of
+        true ->
+            lost;
+        false ->
+            Token = make_ref(),
+            Addr = case Target of
+                       _ when is_pid(Target) -> Target;
+                       _ -> element(1, To)
+                   end,
+            Body = case Msg of
+                       {stimulus, M} -> M;
+                       _ -> Msg
+                   end,
+            {?AGENT, Node} ! {deliver, Now, Addr, Token, Body, self()},
+            {sent, Token}
+    end.
 
 %% @doc The registered name of a process of another node, as the trace
 %% writes it (called by the clock).
