@@ -6,6 +6,8 @@
 -include_lib("stdlib/include/assert.hrl").
 
 -export([all/0, init_per_suite/1, end_per_suite/1]).
+-export([split_run_is_exact/0, disconnect_takeover_at_deadline/0, bad_nodes_refused/0,
+         partition_found_shrunk_replayed/0, long_cut_fires_monitors/0, killed_node_lets_go_at_once/0]).
 -export([split_run_is_exact/1, disconnect_takeover_at_deadline/1, bad_nodes_refused/1,
          partition_found_shrunk_replayed/1, long_cut_fires_monitors/1, killed_node_lets_go_at_once/1]).
 
@@ -41,9 +43,9 @@ end_per_suite(Config) ->
 
 %%====================================================================
 
-%% @doc Pins: a wiring naming a node that is not connected, and a
-%% disconnect of the world's own node or of a node the wiring lacks, are
-%% refused before anything runs.
+bad_nodes_refused() ->
+    [{doc, "A wiring naming a node that is not connected, and a disconnect of the world's "
+      "own node or of a node the wiring lacks, are refused before anything runs."}].
 bad_nodes_refused(Config) ->
     Bad = filename:join(?config(priv_dir, Config), "bad.wiring"),
     ok = file:write_file(Bad, "{behavior, forward, torobot_forward, #{node => 'nowhere@127.0.0.1', "
@@ -59,8 +61,9 @@ bad_nodes_refused(Config) ->
                  torobot_chaos:run(#{world => ?config(world, Config), wiring => ?config(split, Config),
                                      faults => [Other]})).
 
-%% @doc Pins: the split Torobot in lockstep gives a byte-identical trace
-%% twice, each line naming its node, and the one-node run's summary.
+split_run_is_exact() ->
+    [{doc, "The split Torobot in lockstep gives a byte-identical trace twice, each line "
+      "naming its node, and the one-node run's summary."}].
 split_run_is_exact(Config) ->
     Dir = ?config(priv_dir, Config),
     [A, B] = [filename:join(Dir, N) || N <- ["a.trace", "b.trace"]],
@@ -90,10 +93,11 @@ split_run_is_exact(Config) ->
     ?assertMatch({_, _}, binary:match(BinA, <<" ", (atom_to_binary(node()))/binary,
                                               " toroco:motors deliver">>)).
 
-%% @doc Pins: cutting the laptop while it follows red, the board's motors
-%% router lets red_follower go at the simulated instant its max age says
-%% (the last word heard from it + 300 ms), to the millisecond; the trace
-%% shows the cut and the heal, and red is followed again after it.
+disconnect_takeover_at_deadline() ->
+    [{doc, "Cutting the laptop while it follows red, the board's motors router lets "
+      "red_follower go at the simulated instant its max age says (the last word heard "
+      "from it + 300 ms), to the millisecond; the trace shows the cut and the heal, and "
+      "red is followed again after it."}].
 disconnect_takeover_at_deadline(Config) ->
     Laptop = ?config(laptop, Config),
     Trace = filename:join(?config(priv_dir, Config), "cut.trace"),
@@ -122,10 +126,11 @@ disconnect_takeover_at_deadline(Config) ->
     ?assert(lists:member(Layer, ["forward", "avoid_left", "avoid_right"])),
     ?assert(lists:any(fun({T, W}) -> T > CutAt + 3000 andalso W =:= "red_follower" end, Winners)).
 
-%% @doc Pins: exploring partitions of the laptop over 100 seeds finds a
-%% property made to fail on purpose (the board must win within 200 ms of a
-%% cut, the laptop's sources' max age is 300 ms), shrinks it to one cut,
-%% and its replay file gives the same trace and violation.
+partition_found_shrunk_replayed() ->
+    [{doc, "Exploring partitions of the laptop over 100 seeds finds a property made to fail "
+      "on purpose (the board must win within 200 ms of a cut, the laptop's sources' max "
+      "age is 300 ms), shrinks it to one cut, and its replay file gives the same trace "
+      "and violation."}].
 partition_found_shrunk_replayed(Config) ->
     Laptop = ?config(laptop, Config),
     World = filename:join(?config(data_dir, Config), "red_ahead.world"),
@@ -145,9 +150,10 @@ partition_found_shrunk_replayed(Config) ->
 runs() ->
     list_to_integer(os:getenv("SPLIT_RUNS", "100")).
 
-%% @doc Pins: a cut that outlasts the net tick time fires the monitors
-%% across it as `noconnection' at the cut + the net tick time, and at the
-%% heal the consumers subscribe again and red is followed again.
+long_cut_fires_monitors() ->
+    [{doc, "A cut that outlasts the net tick time fires the monitors across it as "
+      "`noconnection' at the cut + the net tick time, and at the heal the consumers "
+      "subscribe again and red is followed again."}].
 long_cut_fires_monitors(Config) ->
     Laptop = ?config(laptop, Config),
     Old = net_kernel:get_net_ticktime(),
@@ -169,8 +175,9 @@ long_cut_fires_monitors(Config) ->
                          (_) -> false
                       end, Lines)).
 
-%% @doc Pins: a node killed lets its sources go at once (its monitors fire
-%% as `noconnection' at the kill), and its layers never win again.
+killed_node_lets_go_at_once() ->
+    [{doc, "A node killed lets its sources go at once (its monitors fire as `noconnection' "
+      "at the kill), and its layers never win again."}].
 killed_node_lets_go_at_once(Config) ->
     Laptop = ?config(laptop, Config),
     Lines = cut_run(Config, "kill.trace", [{at, 38000, {kill_node, Laptop}}]),

@@ -96,7 +96,7 @@
 -export([monitored/2, demonitored/1]).
 -export([start/1, stop/0, tick/3, settle/0, info/0, join/1, cut/2]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
--export_type([stimulus/0]).
+-export_type([stimulus/0, token/0]).
 
 %% A stimulus from the world: `Msg' to behavior or device `Name' of this
 %% node (a device, as a rule), delivered as a step like any other; or
@@ -104,6 +104,10 @@
 %% of the path (a behavior's, device's, router's or gate's, see
 %% `toroco:whereis/1'), the step done once its exit has settled.
 -type stimulus() :: {atom(), term()} | {exit, pid(), term()}.
+
+%% A step's token: its receiver says `done' with it; another node's agent
+%% relays its own (toroco_lockstep_nodes).
+-type token() :: reference() | {relay, pid(), reference()}.
 
 -define(TAG, '$toroco_lockstep').
 -define(CALL_MS, 60000).
@@ -130,7 +134,7 @@
                  guard :: reference()}).
 
 -record(s, {queue = queue:new() :: queue:queue(item()),
-            inflight = none :: none | {reference() | none, reference(), pid() | pending},
+            inflight = none :: none | {reference() | none, reference(), pid() | {pending, node()}},
             procs = #{} :: #{pid() => proc()},
             %% the supervisors of the processes of the path, monitored
             sups = #{} :: #{pid() => {reference(), non_neg_integer() | none | consumer}},
@@ -189,7 +193,10 @@ cancel(Server, Kind) ->
     ok.
 
 %% @doc The step `Token' was handled (sent by its receiver).
--spec done(reference()) -> ok.
+-spec done(token()) -> ok.
+done({relay, Agent, Ref}) ->
+    Agent ! {?TAG, done, Ref},
+    ok;
 done(Token) ->
     case persistent_term:get(?MODULE, none) of
         none -> ok;
@@ -408,6 +415,8 @@ handle_info({?TAG, timer, Pid, Kind, Deadline, Msg}, S) ->
     {noreply, run(world_timer(Pid, Kind, Deadline, Msg, S))};
 handle_info({?TAG, at, Token, Pid, By}, S) ->
     {noreply, run(at(Token, Pid, By, S))};
+handle_info({?TAG, batched, Token, Lost, Rest}, S) ->
+    {noreply, run(batched(Token, Lost, Rest, S))};
 handle_info({?TAG, monitor, C, Pid, Ref}, S = #s{world = W}) when W =/= none ->
     {noreply, S#s{world = toroco_lockstep_nodes:monitor(C, Pid, Ref, W)}};
 handle_info({?TAG, demonitor, Ref}, S = #s{world = W}) when W =/= none ->
@@ -870,6 +879,10 @@ across(To, Pid, Msg, From, S = #s{world = W}) ->
 %% outside any step is ordered by its owner's name (toroco_lockstep_nodes).
 world_timer(Pid, Kind, Deadline, Msg, S = #s{inflight = {_, _, Pid}}) ->
     set_timer(Pid, Kind, Deadline, Msg, S);
+world_timer(Pid, Kind, Deadline, Msg, S = #s{inflight = {_, _, {pending, Node}}})
+  when node(Pid) =:= Node ->
+    %% set by a step of the batch in flight there
+    set_timer(Pid, Kind, Deadline, Msg, S);
 world_timer(Pid, Kind, Deadline, Msg, S) ->
     S1 = #s{timers = Ts, owned = Owned} = drop_timer(Pid, Kind, S),
     Key = toroco_lockstep_nodes:timer_key(Deadline, {pname(Pid), Kind}, Ts),
@@ -878,16 +891,36 @@ world_timer(Pid, Kind, Deadline, Msg, S) ->
 
 %% A step for a process of another node, through its agent (which answers
 %% `at'); none goes to a node killed.
-deliver_node(To, Target, Msg, S = #s{steps = N, world = W, now = Now}) ->
-    case toroco_lockstep_nodes:step(To, Target, Msg, Now, W) of
-        lost -> S#s{lost = S#s.lost + 1};
-        {sent, Token} -> trace(To, Target, Msg, S#s{inflight = {Token, make_ref(), pending},
-                                                   steps = N + 1})
+deliver_node(To, Target, Msg, S = #s{steps = N, world = W, now = Now, queue = Q}) ->
+    {More, Q1} = toroco_lockstep_nodes:batch({To, Target, Msg}, Q, W),
+    case More of
+        [] ->
+            case toroco_lockstep_nodes:step(To, Target, Msg, Now, W) of
+                lost -> S#s{lost = S#s.lost + 1};
+                {sent, Token, Node} ->
+                    trace(To, Target, Msg, S#s{inflight = {Token, make_ref(), {pending, Node}},
+                                               steps = N + 1})
+            end;
+        _ ->
+            %% the steps for that node next in the queue go as one batch
+            Items = [{To, Target, Msg} | More],
+            {Token, Node} = toroco_lockstep_nodes:step_batch(Items, Now),
+            lists:foldl(fun({T, P, M}, Acc) -> trace(T, P, M, Acc) end,
+                        S#s{queue = Q1, inflight = {Token, make_ref(), {pending, Node}},
+                            steps = N + length(Items)}, Items)
     end.
+
+%% A batch is done (`Rest': the steps not run, since one's receiver died:
+%% they go first again).
+batched(Token, Lost, Rest, S = #s{inflight = {Token, _, {pending, _}}, queue = Q}) ->
+    S#s{inflight = none, lost = S#s.lost + Lost,
+        queue = queue:join(queue:from_list(Rest), Q)};
+batched(_Token, _Lost, _Rest, S) ->
+    S.
 
 %% The agent found the step's receiver (`undefined': none had the name)
 %% and who monitors it; the step is in flight to it.
-at(Token, Pid, By, S = #s{inflight = {Token, _, pending}, procs = Procs, watch = W})
+at(Token, Pid, By, S = #s{inflight = {Token, _, {pending, _}}, procs = Procs, watch = W})
   when is_pid(Pid) ->
     Consumers = [C || C <- By, case Procs of
                                    #{C := #{layer := consumer}} -> true;
@@ -898,7 +931,7 @@ at(Token, Pid, By, S = #s{inflight = {Token, _, pending}, procs = Procs, watch =
                     #{Pid := _} -> W#{Pid => Consumers};
                     #{} -> W
                 end};
-at(Token, _Pid, _By, S = #s{inflight = {Token, _, pending}}) ->
+at(Token, _Pid, _By, S = #s{inflight = {Token, _, {pending, _}}}) ->
     S#s{inflight = none, lost = S#s.lost + 1};
 at(_Token, _Pid, _By, S) ->
     S.

@@ -353,7 +353,7 @@ hold_timer(Next, _) ->
 %% handling `WIRE_STEP(Token, Msg)' with, after its own actions, the
 %% internal event that says so, so that the events it inserts are handled
 %% first. A process that stops says so by its death.
--spec step_done(reference(), gen_statem:event_handler_result(term())) ->
+-spec step_done(toroco_lockstep:token(), gen_statem:event_handler_result(term())) ->
           gen_statem:event_handler_result(term()).
 step_done(Token, R) ->
     Done = {next_event, internal, ?WIRE_STEP_DONE(Token)},
