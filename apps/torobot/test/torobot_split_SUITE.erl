@@ -100,22 +100,17 @@ disconnect_takeover_at_deadline() ->
       "red is followed again after it."}].
 disconnect_takeover_at_deadline(Config) ->
     Laptop = ?config(laptop, Config),
-    Trace = filename:join(?config(priv_dir, Config), "cut.trace"),
     CutAt = 38000,
-    {ok, #{violation := none}} =
-        torobot_chaos:run(#{world => ?config(world, Config), wiring => ?config(split, Config),
-                            faults => [{at, CutAt, {disconnect, Laptop, 3000}}], trace => Trace}),
-    {ok, Bin} = file:read_file(Trace),
-    Lines = [string:split(L, " ", all) || L <- string:split(binary_to_list(Bin), "\n", all), L =/= ""],
+    Lines = cut_run(Config, "cut.trace", [{at, CutAt, {disconnect, Laptop, 3000}}]),
     Board = atom_to_list(node()),
     L = atom_to_list(Laptop),
     ?assert(lists:member([integer_to_list(CutAt), Board, "cut", L, "3000"], Lines)),
     ?assert(lists:member([integer_to_list(CutAt + 3000), Board, "heal", L], Lines)),
     %% the last word the motors' router heard from red_follower before the cut
-    Heard = lists:max([list_to_integer(T) || [T, N, "toroco:motors/setvel", Kind, "red_follower.motors" | _]
-                                                 <- Lines, N =:= Board,
-                                             Kind =:= "alive" orelse Kind =:= "emit",
-                                             list_to_integer(T) =< CutAt]),
+    Heard = lists:max([list_to_integer(T)
+                       || [T, N, "toroco:motors/setvel", Kind, "red_follower.motors" | _] <- Lines,
+                          N =:= Board, Kind =:= "alive" orelse Kind =:= "emit",
+                          list_to_integer(T) =< CutAt]),
     Deadline = Heard + 300,
     ?assert(lists:member([integer_to_list(Deadline), Board, "toroco:motors/setvel", "timer",
                           "{timeout,stale}", "check"], Lines)),
