@@ -166,13 +166,17 @@ explore(Opts) when is_map(Opts) ->
             Jobs = [{Name, Job0#{world => Terms, seed => Seed + I - 1}}
                     || I <- lists:seq(1, Runs),
                        {Name, Terms} <- [lists:nth((I - 1) rem length(Worlds) + 1, Worlds)]],
-            Nodes = maps:get(nodes, Opts, [node()]),
+            Nodes = case Job0 of
+                        %% a robot over several nodes runs from this node,
+                        %% whose clock its nodes join: one run at a time
+                        #{names := #{nodes := [_ | _]}} -> local;
+                        #{} -> maps:get(nodes, Opts, [node()])
+                    end,
             Parallel = maps:get(parallel, Opts, auto),
             Results = in_batches(Jobs, Nodes, Parallel, maps:get(progress, Opts, false)),
             Rows = [row(Name, Job, Result) || {{Name, Job}, Result} <- lists:zip(Jobs, Results)],
             Failed = [R || R = #{violation := V} <- Rows, V =/= none],
-            Again = torobot_batch:calls([{?MODULE, run_job, [Job]}
-                                         || #{job := Job} <- Failed], Nodes, Parallel),
+            Again = calls([{?MODULE, run_job, [Job]} || #{job := Job} <- Failed], Nodes, Parallel),
             Nondet = [S || {#{seed := S, sha256 := Sha}, {ok, #{sha256 := Sha2}}}
                                <- lists:zip(Failed, Again), Sha2 =/= Sha],
             Dir = maps:get(dir, Opts, "_build/chaos"),
@@ -232,13 +236,17 @@ in_batches(Jobs, Nodes, Parallel, Progress) ->
     Chunks = chunks(Jobs, 50),
     {Results, _} = lists:mapfoldl(
                      fun(Chunk, Done) ->
-                             R = torobot_batch:calls([{?MODULE, run_job, [J]} || {_, J} <- Chunk],
-                                                     Nodes, Parallel),
+                             R = calls([{?MODULE, run_job, [J]} || {_, J} <- Chunk], Nodes, Parallel),
                              Done1 = Done + length(Chunk),
                              Progress andalso io:format("chaos: ~b/~b runs~n", [Done1, length(Jobs)]),
                              {R, Done1}
                      end, 0, Chunks),
     lists:append(Results).
+
+calls(Calls, local, _Parallel) ->
+    [try apply(M, F, A) catch Class:Reason -> {error, {Class, Reason}} end || {M, F, A} <- Calls];
+calls(Calls, Nodes, Parallel) ->
+    torobot_batch:calls(Calls, Nodes, Parallel).
 
 chunks([], _N) -> [];
 chunks(L, N) when length(L) =< N -> [L];
@@ -400,12 +408,14 @@ replay(File) ->
 -spec names(file:name_all()) -> {ok, torobot_faults:names()} | {error, term()}.
 names(Wiring) ->
     case toroco:read_wiring(Wiring) of
-        {ok, #{behaviors := Bs, devices := Ds, inputs := Inputs, modules := Modules}} ->
+        {ok, #{behaviors := Bs, devices := Ds, inputs := Inputs, modules := Modules,
+               nodes := Nodes}} ->
             Lua = lists:member(toroco_lua, maps:values(Modules)),
             {ok, #{behaviors => lists:sort(Bs),
                    devices => lists:usort(Ds ++ ?SIM_DEVICES),
                    inputs => Inputs,
-                   ports => [pru_port | [lua_port || Lua]]}};
+                   ports => [pru_port | [lua_port || Lua]],
+                   nodes => Nodes}};
         {error, {wiring_file, _, Reason}} ->
             {error, {wiring, {Wiring, Reason}}}
     end.

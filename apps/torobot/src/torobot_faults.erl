@@ -31,8 +31,10 @@
 %% [Name]}' for a behavior drawn from those, and
 %% `{Min, Max}' for a duration, a sigma, a probability or a factor.
 %% `lua_port' is known only to a wiring with Lua behaviors (`names()'
-%% `ports'). `{disconnect, Node, Ms}' is refused as `unsupported_fault'
-%% for now (see doc/lab.md).
+%% `ports'). A robot over several nodes (SPEC §13) also takes `{disconnect, Node,
+%% Ms}' (the node cut from the rest of the robot for Ms, then healed) and
+%% `{kill_node, Node}' (cut for good), where `Node' is one of the wiring's
+%% nodes other than the world's (`nodes' of the names).
 -module(torobot_faults).
 
 -export([check/2, read/2, concrete/4, describe/1, ends/1, world_faults/2, robot_faults/1]).
@@ -45,9 +47,10 @@
 %% what a schedule may name: the wiring's behaviors and devices, and its
 %% routers' inputs
 %% `ports': the port programs the robot runs (default `[pru_port]'; a
-%% wiring with Lua behaviors adds `lua_port').
+%% wiring with Lua behaviors adds `lua_port'); `nodes': the wiring's nodes
+%% other than the world's.
 -type names() :: #{behaviors := [atom()], devices := [atom()], inputs := [{atom(), atom()}],
-                   ports => [pru_port | lua_port]}.
+                   ports => [pru_port | lua_port], nodes => [node()]}.
 
 -define(SENSORS, [{ir, left}, {ir, right}, ir, camera, range, bumper, light, odometry, beacon]).
 -define(ANY_SENSORS, [{ir, left}, {ir, right}, camera, range]).
@@ -133,8 +136,10 @@ fault({camera, delay, D, Ms}, _Names, Spec, E) ->
 fault({slip, Wheel, F, Ms}, _Names, Spec, E) when Wheel =:= left; Wheel =:= right;
                                                    Wheel =:= both ->
     all([number(F, Spec, E, 0, infinity), duration(Ms, Spec, E)]);
-fault({disconnect, _Node, _Ms}, _Names, _Spec, E) ->
-    {error, {unsupported_fault, E}};
+fault({disconnect, Node, Ms}, Names, Spec, E) ->
+    all([robot_node(Node, Names, E), duration(Ms, Spec, E)]);
+fault({kill_node, Node}, Names, _Spec, E) ->
+    robot_node(Node, Names, E);
 fault(_Other, _Names, _Spec, E) ->
     {error, {unknown_fault, E}}.
 
@@ -158,6 +163,15 @@ name(Name, Names, _Spec, E, Kinds) when is_atom(Name) ->
     end;
 name(Name, _Names, _Spec, E, _Kinds) ->
     {error, {unknown_name, {Name, E}}}.
+
+%% A node of the robot's other than the world's own.
+robot_node(Node, _Names, E) when Node =:= node() ->
+    {error, {own_node, {Node, E}}};
+robot_node(Node, Names, E) ->
+    case lists:member(Node, maps:get(nodes, Names, [])) of
+        true -> ok;
+        false -> {error, {unknown_node, {Node, E}}}
+    end.
 
 sensor(any, true, _E) -> ok;
 sensor(S, _Spec, E) ->
@@ -251,6 +265,7 @@ pick(E, _Spec, _Names, R) ->
 describe({kill, router, {R, I}}) -> io_lib:format("kill router ~s.~s", [R, I]);
 describe({kill, port, P}) -> io_lib:format("kill port ~s", [P]);
 describe({kill, Name}) -> io_lib:format("kill ~s", [Name]);
+describe({kill_node, Node}) -> io_lib:format("kill_node ~s", [Node]);
 describe(F) ->
     [Kind | Args] = tuple_to_list(F),
     lists:join(" ", [atom_to_list(Kind) | [arg(A) || A <- Args]]) ++ [" ms"].
@@ -264,20 +279,22 @@ ends({at, Ms, F}) ->
     case F of
         {kill, _} -> Ms;
         {kill, _, _} -> Ms;
+        {kill_node, _} -> Ms;
         _ -> Ms + round(element(tuple_size(F), F))
     end.
 
 %% @doc The faults the robot's runtime takes (kills, suspends), in order.
 -spec robot_faults(concrete()) -> concrete().
 robot_faults(Faults) ->
-    [F || {at, _, Fault} = F <- Faults, element(1, Fault) =:= kill orelse
-                                            element(1, Fault) =:= suspend].
+    [F || {at, _, Fault} = F <- Faults, robot_fault(Fault)].
+
+robot_fault(Fault) ->
+    lists:member(element(1, Fault), [kill, suspend, disconnect, kill_node]).
 
 %% @doc The faults of the world (sensors, camera, wheels) active at `T'.
 -spec world_faults(concrete(), non_neg_integer()) -> concrete().
 world_faults(Faults, T) ->
-    [F || {at, Ms, Fault} = F <- Faults, element(1, Fault) =/= kill,
-          element(1, Fault) =/= suspend, Ms =< T, T < ends(F)].
+    [F || {at, Ms, Fault} = F <- Faults, not robot_fault(Fault), Ms =< T, T < ends(F)].
 
 %%====================================================================
 %% The world's faults

@@ -18,15 +18,17 @@
 %% the nearest wall or arena edge), `{winner, motors, Source}' (the
 %% behavior that wins the motors, `none' when none), `{motors, {L, R}}'
 %% (the wheels' applied velocities), `{emitted, {Emitter, Output}}',
-%% `{layer_out, L}', `{restarted, Name}', `{figure, Key}' (a figure of the
+%% `{layer_out, L}', `{restarted, Name}', `{cut, Node}' and `{healed,
+%% Node}' (a node of a robot over several nodes cut from the rest, killed,
+%% or back: SPEC §13), `{figure, Key}' (a figure of the
 %% world's summary, such as the docker's `docked_ms', is set by now),
 %% `{'not', C}', `{any, [C]}', or a fun of the observation answering a
 %% boolean.
 %%
 %% An observation: `#{t, wall, blue, red, dist, winner, motors, events,
 %% figures}' (`figures': the world's summary then),
-%% `events' holding `{emitted, Source}', `{restarted, Name}' and
-%% `{layer_out, L}' of that tick.
+%% `events' holding `{emitted, Source}', `{restarted, Name}',
+%% `{layer_out, L}', `{cut, Node}' and `{healed, Node}' of that tick.
 -module(torobot_props).
 
 -export([check/1, read/1, violation/3, settled/2]).
@@ -76,6 +78,8 @@ condition({motors, {L, R}}) when is_number(L), is_number(R) -> ok;
 condition({emitted, {E, O}}) when is_atom(E), is_atom(O) -> ok;
 condition({layer_out, L}) when is_integer(L), L >= 0 -> ok;
 condition({restarted, N}) when is_atom(N) -> ok;
+condition({cut, N}) when is_atom(N) -> ok;
+condition({healed, N}) when is_atom(N) -> ok;
 condition({figure, K}) when is_atom(K) -> ok;
 condition({'not', C}) -> condition(C);
 condition({any, Cs}) when is_list(Cs) -> first([condition(C) || C <- Cs]);
@@ -196,6 +200,8 @@ holds({motors, V}, #{motors := M}) -> M == V;
 holds({emitted, Src}, #{events := E}) -> lists:member({emitted, Src}, E);
 holds({layer_out, L}, #{events := E}) -> lists:member({layer_out, L}, E);
 holds({restarted, N}, #{events := E}) -> lists:member({restarted, N}, E);
+holds({cut, N}, #{events := E}) -> lists:member({cut, N}, E);
+holds({healed, N}, #{events := E}) -> lists:member({healed, N}, E);
 holds({figure, K}, O) ->
     not lists:member(maps:get(K, maps:get(figures, O, #{}), none), [none, undefined, false]);
 holds({'not', C}, O) -> not holds(C, O);

@@ -205,18 +205,28 @@ observe(WorldSpec, Opts, Observing) ->
             {error, {wiring, WiringFile, Reason}};
         {_, _} when not is_number(Speed); Speed =< 0 ->
             {error, {speed, Speed}};
+        {{ok, Worlds}, {ok, #{nodes := WiringNodes}}} when Time =:= lockstep ->
+            case [N || N <- WiringNodes, not lists:member(N, nodes())] of
+                [] -> run_worlds(Worlds, WiringFile, Speed, Time, Opts#{observing => Observing});
+                [Node | _] -> {error, {node_not_connected, Node}}
+            end;
         {{ok, Worlds}, {ok, _}} ->
-            Named = torobot_world:name(hd(Worlds)) =/= undefined,
-            Nodes = maps:get(nodes, Opts, case Named of
-                                              true -> peer;
-                                              false -> local
-                                          end),
-            case with_robots(Worlds, Nodes, Opts#{wiring => WiringFile, speed => Speed,
-                                                  time => Time, observing => Observing}) of
-                {ok, [Final], Obs} when not Named -> {ok, Final, Obs};
-                {ok, Finals, Obs} -> {ok, Finals, Obs};
-                {error, _} = Error -> Error
-            end
+            run_worlds(Worlds, WiringFile, Speed, Time, Opts#{observing => Observing})
+    end.
+
+%% The checked worlds run (a robot placed on several nodes, SPEC §13, runs
+%% from this node, whose clock the other nodes join in lockstep).
+run_worlds(Worlds, WiringFile, Speed, Time, Opts) ->
+    Named = torobot_world:name(hd(Worlds)) =/= undefined,
+    Nodes = maps:get(nodes, Opts, case Named of
+                                      true -> peer;
+                                      false -> local
+                                  end),
+    case with_robots(Worlds, Nodes, Opts#{wiring => WiringFile, speed => Speed,
+                                          time => Time}) of
+        {ok, [Final], Obs} when not Named -> {ok, Final, Obs};
+        {ok, Finals, Obs} -> {ok, Finals, Obs};
+        {error, _} = Error -> Error
     end.
 
 %% @doc The summary as one JSON object (`none' as `null'); a world's own
@@ -291,10 +301,12 @@ with_robots(Worlds, Nodes, Opts) ->
                  {error, GoFailed} -> throw({failed, {go, GoFailed}})
              end,
         %% a run in lockstep goes as fast as the CPU allows: given as long
-        %% as real time would take, it is stuck
+        %% as real time would take, it is stuck; a robot over several nodes
+        %% pays round trips between them for its steps, and gets more
+        Others = length(torobot_sim_robot:wiring_nodes(maps:get(wiring, Opts))),
         Timeout = case Time of
                       realtime -> round(torobot_world:duration_ms(hd(Worlds)) / Speed);
-                      lockstep -> torobot_world:duration_ms(hd(Worlds))
+                      lockstep -> torobot_world:duration_ms(hd(Worlds)) * (1 + 4 * Others)
                   end + ?GRACE_MS,
         receive
             {?MODULE, Sim, {done, Finals, Obs}} ->
@@ -589,11 +601,16 @@ observed([#bot{world = W, motors = Motors, lines = Lines}], S = #sim{obs = Obs})
 observed(_Bots, S) ->
     S.
 
-%% The events of a tick's trace lines that conditions name.
+%% The events of a tick's trace lines that conditions name (a line of a
+%% robot over several nodes names its node second: read without it).
 events(Lines) ->
     lists:filtermap(fun(Line) ->
-                            case binary:split(iolist_to_binary(Line), [<<" ">>, <<"\n">>],
-                                              [global, trim_all]) of
+                            Tokens = binary:split(iolist_to_binary(Line), [<<" ">>, <<"\n">>],
+                                                  [global, trim_all]),
+                            case unnode(Tokens) of
+                                [_, <<"cut">>, N, _] -> {true, {cut, binary_to_atom(N)}};
+                                [_, <<"kill">>, N] -> {true, {cut, binary_to_atom(N)}};
+                                [_, <<"heal">>, N] -> {true, {healed, binary_to_atom(N)}};
                                 [_, Name, <<"restarted">>] ->
                                     {true, {restarted, binary_to_atom(Name)}};
                                 [_, <<"layer">>, L, <<"out">>] ->
@@ -607,6 +624,14 @@ events(Lines) ->
                                 _ -> false
                             end
                     end, Lines).
+
+unnode([T, Node | Rest] = Tokens) ->
+    case binary:match(Node, <<"@">>) of
+        nomatch -> Tokens;
+        _ -> [T | Rest]
+    end;
+unnode(Tokens) ->
+    Tokens.
 
 %% From the robot's rim to the nearest wall or arena edge, in metres.
 distance_to_wall(W) ->

@@ -52,7 +52,7 @@
 -behaviour(gen_server).
 
 -export([start/1, stop/0, go/1, wheels/1, sense/3, step/5, fault/3]).
--export([start_peer/1, stop_peer/1]).
+-export([start_peer/1, stop_peer/1, wiring_nodes/1]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2, terminate/2]).
 
 -export_type([opts/0, handle/0]).
@@ -81,6 +81,8 @@
                 behaviors :: [{behavior | device, atom()}],
                 sensors :: [atom()],
                 clock :: {previous, number()} | lockstep,
+                %% the wiring's behaviors on other nodes (SPEC §13)
+                remote = [] :: [atom()],
                 going :: {gen_server:from(), integer()} | undefined}).
 
 %%====================================================================
@@ -222,9 +224,9 @@ init(#{wiring := Wiring, thresholds := Thresholds, speed := Speed,
     Sensors = maps:get(sensors, Opts, []),
     Lockstep = maps:get(time, Opts, realtime) =:= lockstep,
     process_flag(trap_exit, true),
-    S = #robot{started = Started, behaviors = Behaviors,
+    S = #robot{started = Started, behaviors = Behaviors, remote = remote_behaviors(Wiring),
                sensors = [Name || {Name, _} <- Sensors],
-               clock = set_clock(Speed, Lockstep, maps:get(trace, Opts, false))},
+               clock = set_clock(Speed, Lockstep, maps:get(trace, Opts, false), Wiring)},
     try
         ok = step(devices, add_devices(Thresholds, Sensors, Lockstep)),
         ok = step(wheels, toroco:add_device(wheels, torobot_sim_wheels, #{sim => self()})),
@@ -341,6 +343,8 @@ apply_fault(Ms, Fault) ->
     _ = case Fault of
             {suspend, N} -> toroco:suspend_behavior(N);
             {resume, N} -> toroco:resume_behavior(N);
+            {disconnect, Node, For} -> ok = toroco_clock:cut(Node, round(For));
+            {kill_node, Node} -> ok = toroco_clock:cut(Node, forever);
             _ -> ok
         end,
     {ok, After} = toroco_clock:tick(Ms, Stimuli),
@@ -440,8 +444,12 @@ camera_port() ->
 %% The applications this run started are stopped whole; in a node where
 %% they were already running, only what the run added is removed.
 %% What the run added goes, unless the run started the runtime itself (a
-%% runtime already running, e.g. with toroco_lua, keeps only what it had).
-teardown(#robot{started = Started, behaviors = Behaviors, sensors = Sensors, clock = Clock}) ->
+%% runtime already running, e.g. with toroco_lua, keeps only what it had);
+%% what the wiring placed on other nodes goes first, before this node's
+%% toroco.
+teardown(#robot{started = Started, behaviors = Behaviors, sensors = Sensors, clock = Clock,
+                remote = Remote}) ->
+    _ = [toroco:remove_behavior(B) || B <- Remote],
     _ = case lists:member(toroco, Started) of
             true ->
                 ok;
@@ -493,13 +501,28 @@ applied(W) ->
 
 %% The runtime's clock runs at the world's speed for the run, or is the
 %% world's in lockstep.
-set_clock(_Speed, true, Trace) ->
-    ok = toroco_clock:lockstep(#{trace => Trace}),
+set_clock(_Speed, true, Trace, Wiring) ->
+    ok = toroco_clock:lockstep(#{trace => Trace, nodes => wiring_nodes(Wiring)}),
     lockstep;
-set_clock(Speed, false, _Trace) ->
+set_clock(Speed, false, _Trace, _Wiring) ->
     Previous = toroco_clock:speed(),
     ok = toroco_clock:set_speed(Speed),
     {previous, Previous}.
+
+%% @doc The nodes other than this one that a wiring file places things on
+%% (SPEC §13): they join the world's clock in lockstep.
+-spec wiring_nodes(file:name_all()) -> [node()].
+wiring_nodes(Wiring) ->
+    case toroco:read_wiring(Wiring) of
+        {ok, #{nodes := Nodes}} -> Nodes;
+        {error, _} -> []
+    end.
+
+remote_behaviors(Wiring) ->
+    case toroco:read_wiring(Wiring) of
+        {ok, #{behaviors := Bs, placement := Placed}} -> [B || B <- Bs, is_map_key(B, Placed)];
+        {error, _} -> []
+    end.
 
 restore_clock(lockstep) ->
     toroco_clock:realtime();

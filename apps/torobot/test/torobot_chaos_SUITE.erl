@@ -193,7 +193,11 @@ bad_schedules_refused(Config) ->
     ?assertMatch({error, {bad_duration, _}}, Run([{at, 5, {dropout, camera, -1}}])),
     ?assertMatch({error, {unknown_sensor, _}}, Run([{at, 5, {dropout, sonar, 10}}])),
     ?assertMatch({error, {bad_rate, _}}, Run([{rate, fast, {kill, any}}])),
-    ?assertMatch({error, {unsupported_fault, _}}, Run([{at, 5, {disconnect, 'laptop@h', 100}}])),
+    %% a node the wiring does not place anything on, and the world's own
+    ?assertMatch({error, {unknown_node, {'laptop@h', _}}}, Run([{at, 5, {disconnect, 'laptop@h', 100}}])),
+    ?assertMatch({error, {unknown_node, {'laptop@h', _}}}, Run([{at, 5, {kill_node, 'laptop@h'}}])),
+    Own = node(),
+    ?assertMatch({error, {own_node, {Own, _}}}, Run([{at, 5, {disconnect, Own, 100}}])),
     ?assertMatch({error, {world, _}}, torobot_chaos:run(#{world => "no/such.world"})),
     HeadOn = filename:join([?config(root, Config), "test", "worlds", "head_on.world"]),
     ?assertEqual({error, {world, several_robots}}, torobot_chaos:run(#{world => HeadOn})).

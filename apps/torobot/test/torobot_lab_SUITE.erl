@@ -32,18 +32,7 @@ end_per_suite(_Config) ->
     ok.
 
 init_per_group(nodes, Config) ->
-    _ = os:cmd("epmd -daemon"),
-    Started = case node() of
-                  nonode@nohost ->
-                      Name = list_to_atom("torobot_lab" ++ integer_to_list(
-                                                             erlang:unique_integer([positive]))
-                                          ++ "@127.0.0.1"),
-                      {ok, _} = net_kernel:start([Name, longnames]),
-                      true;
-                  _ ->
-                      false
-              end,
-    [{stop_dist, Started} | Config];
+    [{stop_dist, toroco_test_lib:distributed("torobot_lab")} | Config];
 init_per_group(_Group, Config) ->
     Config.
 

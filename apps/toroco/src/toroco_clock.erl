@@ -37,6 +37,7 @@
 -export_type([timebase/0, scale/0]).
 -export([mode/0, lockstep/1, realtime/0, tick/2, tick/3, settle/0, timestamp_ns/0]).
 -export([lockstep_cell/1, lockstep_server/0, set_timer/3, cancel_timer/1, notify/2, notify/3]).
+-export([link_ms/0, link_timer/3, cut/2]).
 -export_type([speed/0, stimulus/0]).
 
 -type stimulus() :: toroco_lockstep:stimulus().
@@ -141,9 +142,29 @@ mode() ->
 %% with {@link tick/2}. `trace => true' keeps a line per step for {@link
 %% tick/2} to hand over. Start it before the behaviors and devices of the
 %% run, end it with {@link realtime/0}.
--spec lockstep(#{trace => boolean()}) -> ok.
+%% `nodes => [Node]': the robot's other nodes (connected) join this clock,
+%% one world over several nodes (SPEC §13, §17); `{error, {node_not_connected,
+%% Node}}' and this node back in real time if one is not connected.
+-spec lockstep(#{trace => boolean(), nodes => [node()]}) -> ok | {error, {atom(), term()}}.
 lockstep(Opts) ->
-    toroco_lockstep:start(Opts).
+    ok = toroco_lockstep:start(maps:with([trace], Opts)),
+    case maps:get(nodes, Opts, []) -- [node()] of
+        [] ->
+            ok;
+        Nodes ->
+            case toroco_lockstep:join(Nodes) of
+                ok -> ok;
+                Error -> ok = toroco_lockstep:stop(), Error
+            end
+    end.
+
+%% @doc In lockstep over several nodes: cuts `Node' from the rest of the
+%% robot for `Ms' simulated ms (`forever': kills it). `{error, {own_node,
+%% Node}}' for this node, `{error, {unknown_node, Node}}' for one not in
+%% the world.
+-spec cut(node(), non_neg_integer() | forever) -> ok | {error, {atom(), node()}}.
+cut(Node, Ms) ->
+    toroco_lockstep:cut(Node, Ms).
 
 %% @doc Back to the monotonic clock (speed 1).
 -spec realtime() -> ok.
@@ -222,3 +243,31 @@ notify(Pid, Msg, Shown) when is_pid(Pid) ->
 -spec cancel_timer(term()) -> ok.
 cancel_timer(Kind) ->
     toroco_lockstep:cancel(lockstep_server(), Kind).
+
+%% @doc The time of the links between nodes (keep-alives, the silence of
+%% remote sources, resubscriptions): the monotonic clock in real time,
+%% unscaled; in lockstep the world's, so that a robot over several nodes
+%% lets a silent source go at its simulated deadline (SPEC §13, §17).
+-spec link_ms() -> integer().
+link_ms() ->
+    case mode() of
+        lockstep -> now_ms();
+        realtime -> erlang:monotonic_time(millisecond)
+    end.
+
+%% @doc A timer of the links in `link_ms/0' time: `Ms' from now, `{at, T}',
+%% or `cancel'. The gen_statem actions to return (in lockstep none: the
+%% timer is `toroco_lockstep''s, and comes as `WIRE_TIMER(Kind,
+%% {'$toroco_link', Msg})', which the process shell (`toroco_shell') hands
+%% on as the timeout `Kind' with `Msg', whatever timeouts it keeps itself).
+-spec link_timer(term(), non_neg_integer() | {at, integer()} | cancel, term()) ->
+          [gen_statem:action()].
+link_timer(Kind, When, Msg) ->
+    case {lockstep_server(), When} of
+        {none, cancel} -> [{Kind, cancel}];
+        {none, {at, T}} -> [{Kind, T, Msg, [{abs, true}]}];
+        {none, Ms} -> [{Kind, Ms, Msg}];
+        {_, cancel} -> cancel_timer(Kind), [];
+        {_, {at, T}} -> set_timer(Kind, T, {'$toroco_link', Msg}), [];
+        {_, Ms} -> set_timer(Kind, now_ms() + Ms, {'$toroco_link', Msg}), []
+    end.

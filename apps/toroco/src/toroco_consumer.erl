@@ -467,7 +467,7 @@ heard(Src, C = #c{heard = H}) ->
         #{} -> C
     end.
 
-heard_now() -> erlang:monotonic_time(millisecond).
+heard_now() -> toroco_clock:link_ms().
 
 %% Adds the timers of remote sources to a handler's result.
 remote({keep_state, C}) -> remote({keep_state, C, []});
@@ -483,8 +483,8 @@ track(C = #c{links = L, heard = H, tries = Tries}) ->
     H1 = maps:from_list([{S, maps:get(S, H, Now)} || S <- Listened]),
     C1 = C#c{heard = H1},
     {C2, Resub} = case toroco_wire:orphans(L) of
-                      [] -> {C1#c{tries = 0}, [{{timeout, resub}, cancel}]};
-                      _ when Tries =:= 0 -> {C1, [{{timeout, resub}, 100, again}]};
+                      [] -> {C1#c{tries = 0}, toroco_clock:link_timer({timeout, resub}, cancel, again)};
+                      _ when Tries =:= 0 -> {C1, toroco_clock:link_timer({timeout, resub}, 100, again)};
                       _ -> {C1, []}
                   end,
     {C3, Stale} = stale_timer(C2),
@@ -498,12 +498,12 @@ stale_timer(C = #c{heard = H, ages = Ages, stale = Stale, stale_at = Old}) ->
                                                               not lists:member(S, Stale)],
     case Due of
         [] when Old =:= infinity -> {C, []};
-        [] -> {C#c{stale_at = infinity}, [{{timeout, stale}, cancel}]};
+        [] -> {C#c{stale_at = infinity}, toroco_clock:link_timer({timeout, stale}, cancel, check)};
         _ ->
             At = lists:min(Due),
             case At of
                 Old -> {C, []};
-                _ -> {C#c{stale_at = At}, [{{timeout, stale}, At, check, [{abs, true}]}]}
+                _ -> {C#c{stale_at = At}, toroco_clock:link_timer({timeout, stale}, {at, At}, check)}
             end
     end.
 
@@ -526,7 +526,8 @@ resubscribe(C = #c{links = L, tries = Tries}) ->
             case Tries < resubscribe_tries() of
                 true ->
                     Backoff = min(2000, 100 bsl min(Tries, 5)),
-                    {keep_state, C#c{tries = Tries + 1}, [{{timeout, resub}, Backoff, again}]};
+                    {keep_state, C#c{tries = Tries + 1},
+                     toroco_clock:link_timer({timeout, resub}, Backoff, again)};
                 false ->
                     {keep_state, C}
             end

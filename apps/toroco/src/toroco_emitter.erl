@@ -161,7 +161,7 @@ subscribed({_, Out} = Src, Consumer, Em = #em{outputs = Outs}) ->
             toroco_wire:send(Consumer, ?WIRE_STATE(emitter, Src, self(), latch(Out, Em))),
             Em1 = Em#em{outputs = Outs#{Out := lists:usort([Consumer | Consumers])}},
             case toroco_wire:remote(Consumer) andalso not has_remote(Em) of
-                true -> {Em1, [alive_timer()]};
+                true -> {Em1, alive_timer()};
                 false -> {Em1, []}
             end;
         #{} ->
@@ -187,15 +187,17 @@ beat(Em = #em{outputs = Outs, name = Name}) ->
                          [toroco_wire:send(C, Msg) || C <- Consumers, toroco_wire:remote(C)]
                  end, Outs),
     case has_remote(Em) of
-        true -> [alive_timer()];
+        true -> alive_timer();
         false -> []
     end.
 
 has_remote(#em{outputs = Outs}) ->
     lists:any(fun toroco_wire:remote/1, lists:append(maps:values(Outs))).
 
+%% In real time a named gen_statem timeout; in lockstep a timer of the
+%% world's (toroco_clock:link_timer/3), in simulated time.
 alive_timer() ->
-    {{timeout, '$toroco_alive'}, toroco_wire:keepalive_ms(), beat}.
+    toroco_clock:link_timer({timeout, '$toroco_alive'}, toroco_wire:keepalive_ms(), beat).
 
 latch(Out, #em{latches = L}) ->
     case L of

@@ -119,12 +119,13 @@ member_state(M, C) ->
 
 %% The keep-alive, while there are remote subscribers: a named gen_statem
 %% timeout in real time (as the emitters' is: it is about the network, not
-%% the robot's time), set once and again when it fires.
+%% the robot's time), set once and again when it fires; in lockstep a
+%% timer of the world's (toroco_clock:link_timer/3).
 beat(D = #g{beating = true}, Sh) -> {[], [], D, Sh};
 beat(D = #g{subs = Subs}, Sh) ->
     case lists:any(fun toroco_wire:remote/1, lists:append(maps:values(Subs))) of
         true ->
-            {[], [{{timeout, '$toroco_alive'}, toroco_wire:keepalive_ms(), beat}],
+            {[], toroco_clock:link_timer({timeout, '$toroco_alive'}, toroco_wire:keepalive_ms(), beat),
              D#g{beating = true}, Sh};
         false -> {[], [], D, Sh}
     end.

@@ -52,11 +52,18 @@
 %% flight, no exit is settling and no timer is due at or before now;
 %% {@link tick/3} and {@link settle/0} answer then. No process is polled.
 %%
+%% Several nodes (SPEC §13, §17): {@link join/1} makes the robot's other
+%% nodes join this clock (`toroco_lockstep_nodes': an agent on each points
+%% its event path here and hands it its steps at their simulated instant),
+%% so a message between nodes (keep-alives and subscriptions included) is
+%% a step in this one order, and {@link cut/2} cuts a node off inside the
+%% world. Each trace line names its node after the time then.
+%%
 %% The trace: with `trace => true' every step is written down as one
 %% canonical line with its simulated time (emissions, deliveries, acks,
 %% timers, stimuli); {@link tick/3} hands the lines over.
 %%
-%% Messages (all from processes of this node):
+%% Messages (from processes of this node, or of the world's other nodes):
 %% <table>
 %% <tr><th>message</th><th>from</th><th>effect</th></tr>
 %% <tr><td>`{Tag, send, To, Pid, Msg}'</td><td>`toroco_wire:send/2'</td><td>queued
@@ -76,6 +83,11 @@
 %%     <td>a restart awaited is done</td></tr>
 %% <tr><td>`{Tag, down, Pid, Down}'</td><td>a consumer given a `DOWN'</td>
 %%     <td>the `DOWN' comes back to it as a step once the exit settles</td></tr>
+%% <tr><td>`{Tag, at, Token, Pid, MonitoredBy}'</td><td>another node's agent</td>
+%%     <td>the step `Token' for that node is in flight to `Pid'</td></tr>
+%% <tr><td>`{Tag, monitor, C, Pid, Ref}' / `{Tag, demonitor, Ref}'</td>
+%%     <td>a consumer (`toroco_wire')</td><td>its monitor of a process of
+%%     another node, fired by a cut</td></tr>
 %% <tr><td>`WIRE_BARRIER(Ref)' / `{Tag, synced, Ref, Pid}'</td><td>this
 %%     process → the path / back</td><td>the settle's barrier</td></tr>
 %% </table>
@@ -85,10 +97,11 @@
 -include("toroco_wire.hrl").
 
 -export([start_link/0, send/3, timer/4, cancel/2, done/1, up/2, ready/1, down/1, synced/1]).
--export([start/1, stop/0, tick/3, settle/0, info/0]).
+-export([monitored/2, demonitored/1]).
+-export([start/1, stop/0, tick/3, settle/0, info/0, join/1, cut/2]).
 -export([term/1]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
--export_type([stimulus/0]).
+-export_type([stimulus/0, token/0]).
 
 %% A stimulus from the world: `Msg' to behavior or device `Name' of this
 %% node (a device, as a rule), delivered as a step like any other; or
@@ -96,6 +109,10 @@
 %% of the path (a behavior's, device's, router's or gate's, see
 %% `toroco:whereis/1'), the step done once its exit has settled.
 -type stimulus() :: {atom(), term()} | {exit, pid(), term()}.
+
+%% A step's token: its receiver says `done' with it; another node's agent
+%% relays its own (toroco_lockstep_nodes).
+-type token() :: reference() | {relay, pid(), reference()}.
 
 -define(TAG, '$toroco_lockstep').
 -define(CALL_MS, 60000).
@@ -122,7 +139,7 @@
                  guard :: reference()}).
 
 -record(s, {queue = queue:new() :: queue:queue(item()),
-            inflight = none :: none | {reference() | none, reference(), pid()},
+            inflight = none :: none | {reference() | none, reference(), pid() | {pending, node()}},
             procs = #{} :: #{pid() => proc()},
             %% the supervisors of the processes of the path, monitored
             sups = #{} :: #{pid() => {reference(), non_neg_integer() | none | consumer}},
@@ -148,7 +165,9 @@
             stimuli = [] :: [stimulus()],
             trace = off :: off | [iodata()],
             steps = 0 :: non_neg_integer(),
-            lost = 0 :: non_neg_integer()}).
+            lost = 0 :: non_neg_integer(),
+            %% the other nodes of the world, their cuts (toroco_lockstep_nodes)
+            world = none :: none | toroco_lockstep_nodes:world()}).
 
 %%====================================================================
 %% The event path's side
@@ -179,7 +198,10 @@ cancel(Server, Kind) ->
     ok.
 
 %% @doc The step `Token' was handled (sent by its receiver).
--spec done(reference()) -> ok.
+-spec done(token()) -> ok.
+done({relay, Agent, Ref}) ->
+    Agent ! {?TAG, done, Ref},
+    ok;
 done(Token) ->
     case persistent_term:get(?MODULE, none) of
         none -> ok;
@@ -230,6 +252,24 @@ synced(Ref) ->
         Server -> Server ! {?TAG, synced, Ref, self()}, ok
     end.
 
+%% @doc The calling consumer monitors `Pid', of another node, with `Ref'
+%% (a lockstep world over several nodes fires it when it cuts that node).
+-spec monitored(pid(), reference()) -> ok.
+monitored(Pid, Ref) ->
+    tell({?TAG, monitor, self(), Pid, Ref}).
+
+%% @doc The calling consumer's monitor `Ref' is off.
+-spec demonitored(reference()) -> ok.
+demonitored(Ref) ->
+    tell({?TAG, demonitor, Ref}).
+
+%% Tells the clock, in lockstep.
+tell(Msg) ->
+    case persistent_term:get(?MODULE, none) of
+        none -> ok;
+        Server -> Server ! Msg, ok
+    end.
+
 %% The calling process's supervisor: proc_lib's first ancestor.
 supervisor() ->
     case get('$ancestors') of
@@ -270,6 +310,20 @@ settle() ->
         Error -> Error
     end.
 
+%% @doc The robot's other nodes `Nodes' join this node's clock (SPEC §13,
+%% §17): their event paths run as steps of this one, at its simulated time.
+%% `{error, {node_not_connected, Node}}' if one is not connected.
+-spec join([node()]) -> ok | {error, {atom(), term()}}.
+join(Nodes) ->
+    gen_server:call(?MODULE, {join, Nodes}, ?CALL_MS).
+
+%% @doc Cuts `Node' from the rest of the robot for `Ms' simulated ms from
+%% now (`forever': the node is killed): a step between it and another node
+%% is lost; the heal comes at its simulated time. The trace shows both.
+-spec cut(node(), non_neg_integer() | forever) -> ok | {error, {atom(), node()}}.
+cut(Node, Ms) ->
+    gen_server:call(?MODULE, {cut, Node, Ms}, ?CALL_MS).
+
 %% @doc Counters: steps delivered, steps lost (their receiver was not
 %% there), timers pending, the simulated time.
 -spec info() -> map().
@@ -298,6 +352,7 @@ handle_call(stop, _From, S) ->
     _ = persistent_term:erase(?MODULE),
     ok = toroco_clock:lockstep_cell(undefined),
     _ = [forward(To, Pid, Msg) || {To, Pid, Msg} <- queue:to_list(Q)],
+    ok = toroco_lockstep_nodes:leave(S#s.world),
     {reply, ok, #s{}};
 handle_call({tick, _, _}, _From, S = #s{cell = undefined}) ->
     {reply, {error, not_lockstep}, S};
@@ -314,6 +369,15 @@ handle_call({up, Pid, Name, Sup, Layer}, _From, S = #s{cell = Cell}) when Cell =
     {reply, ok, run(progress(up(Pid, Name, Sup, Layer, predecessor(Name, S))))};
 handle_call({up, _, _, _, _}, _From, S) ->
     {reply, ok, S};
+handle_call({join, _}, _From, S = #s{cell = undefined}) ->
+    {reply, {error, {not_lockstep, node()}}, S};
+handle_call({join, Nodes}, _From, S) ->
+    case toroco_lockstep_nodes:join(Nodes, self()) of
+        {ok, W} -> {reply, ok, S#s{world = W}};
+        Error -> {reply, Error, S}
+    end;
+handle_call({cut, Node, Ms}, _From, S) ->
+    cut_node(Node, Ms, S);
 handle_call(_Req, _From, S) ->
     {reply, {error, unknown_call}, S}.
 
@@ -342,15 +406,27 @@ handle_info({?TAG, send, To, Pid, Msg, _From}, S = #s{cell = undefined}) ->
     forward(To, Pid, Msg),
     {noreply, S};
 handle_info({?TAG, send, To, Pid, Msg, From}, S = #s{queue = Q, settle = Settle}) ->
-    case is_step(Msg) orelse is_notice(Msg, Pid, S) of
+    case is_step(Msg) orelse is_notice(Msg, Pid, S)
+        orelse (S#s.world =/= none andalso is_sub(Msg)) of
+        true when S#s.world =/= none -> {noreply, across(To, Pid, Msg, From, S)};
         true when Settle =/= none -> {noreply, hold(From, {send, To, Pid, Msg}, S)};
         true -> {noreply, run(S#s{queue = queue:in({To, Pid, Msg}, Q)})};
         false -> forward(To, Pid, Msg), {noreply, S}
     end;
 handle_info({?TAG, timer, Pid, Kind, Deadline, Msg}, S = #s{settle = #settle{}}) ->
     {noreply, hold(Pid, {timer, Pid, Kind, Deadline, Msg}, S)};
-handle_info({?TAG, timer, Pid, Kind, Deadline, Msg}, S) ->
+handle_info({?TAG, timer, Pid, Kind, Deadline, Msg}, S = #s{world = none}) ->
     {noreply, run(set_timer(Pid, Kind, Deadline, Msg, S))};
+handle_info({?TAG, timer, Pid, Kind, Deadline, Msg}, S) ->
+    {noreply, run(world_timer(Pid, Kind, Deadline, Msg, S))};
+handle_info({?TAG, at, Token, Pid, By}, S) ->
+    {noreply, run(at(Token, Pid, By, S))};
+handle_info({?TAG, batched, Token, Lost, Rest}, S) ->
+    {noreply, run(batched(Token, Lost, Rest, S))};
+handle_info({?TAG, monitor, C, Pid, Ref}, S = #s{world = W}) when W =/= none ->
+    {noreply, S#s{world = toroco_lockstep_nodes:monitor(C, Pid, Ref, W)}};
+handle_info({?TAG, demonitor, Ref}, S = #s{world = W}) when W =/= none ->
+    {noreply, S#s{world = toroco_lockstep_nodes:demonitor(Ref, W)}};
 handle_info({?TAG, cancel, Pid, Kind}, S = #s{settle = #settle{}}) ->
     {noreply, hold(Pid, {cancel, Pid, Kind}, S)};
 handle_info({?TAG, cancel, Pid, Kind}, S) ->
@@ -424,7 +500,7 @@ up(Pid, Name, Sup, Layer, S = #s{procs = Procs, sups = Sups}) ->
             end,
     S#s{procs = Procs#{Pid => #{name => Name, sup => Sup, layer => Layer,
                                 mon => erlang:monitor(process, Pid)}},
-        sups = Sups1}.
+        sups = Sups1, world = toroco_lockstep_nodes:remember(Pid, S#s.world)}.
 
 %% A restart in a layer: more than the intensity allows within its period
 %% of simulated time takes the layer out, as its supervisor would.
@@ -553,6 +629,8 @@ apply_held({cancel, Pid, Kind}, S) ->
 hold(From, H, S = #s{held = Held, arrival = A}) ->
     S#s{held = [{A, From, H} | Held], arrival = A + 1}.
 
+pname(Pid) when node(Pid) =/= node() ->
+    toroco_lockstep_nodes:regname(Pid);
 pname(Pid) ->
     case erlang:process_info(Pid, registered_name) of
         {registered_name, Reg} -> atom_to_list(Reg);
@@ -568,8 +646,10 @@ reason(Reason) ->
 
 note(_Line, S = #s{trace = off}) ->
     S;
+note(Line, S = #s{trace = Lines, now = Now, world = none}) ->
+    S#s{trace = [io_lib:format("~b ~ts~n", [Now, Line]) | Lines]};
 note(Line, S = #s{trace = Lines, now = Now}) ->
-    S#s{trace = [io_lib:format("~b ~ts~n", [Now, Line]) | Lines]}.
+    S#s{trace = [io_lib:format("~b ~s ~ts~n", [Now, node(), Line]) | Lines]}.
 
 %%====================================================================
 %% Stepping
@@ -592,7 +672,18 @@ run(S = #s{queue = Q}) ->
             due(S)
     end.
 
-due(S = #s{timers = Ts, target = Target}) ->
+due(S = #s{world = W}) when W =/= none ->
+    case toroco_lockstep_nodes:due(next_deadline(S), W) of
+        {Event, Node, At} ->
+            S1 = set_now(max(S#s.now, At), S),
+            run(world_event(Event, Node, S1));
+        none ->
+            due_timer(S)
+    end;
+due(S) ->
+    due_timer(S).
+
+due_timer(S = #s{timers = Ts, target = Target}) ->
     case gb_trees:is_empty(Ts) of
         false ->
             case gb_trees:smallest(Ts) of
@@ -642,6 +733,12 @@ deliver(To, Target, {exit, Reason} = Msg, S = #s{steps = N}) when is_pid(Target)
     S1 = watch(Target, S),
     exit(Target, Reason),
     trace(To, Target, Msg, S1#s{inflight = {none, Mon, Target}, steps = N + 1});
+deliver({Reg, Node} = To, remote, Msg, S = #s{world = W}) when W =/= none, Node =:= node() ->
+    %% sent from another node to this one: found here, as it arrives
+    deliver(To, whereis(Reg), Msg, S);
+deliver(To, Target, Msg, S = #s{world = W}) when W =/= none, Target =/= undefined,
+                                              not is_pid(Target) orelse node(Target) =/= node() ->
+    deliver_node(To, Target, Msg, S);
 deliver(To, Target, Msg, S = #s{steps = N}) ->
     case Target of
         Pid when is_pid(Pid) ->
@@ -655,7 +752,7 @@ deliver(To, Target, Msg, S = #s{steps = N}) ->
                                     end),
             trace(To, Pid, Msg, S1#s{inflight = {Token, Mon, Pid}, steps = N + 1});
         remote ->
-            toroco_wire:send(To, Msg),
+            toroco_lockstep_nodes:send_out(To, Msg),
             S;
         undefined ->
             trace(To, undefined, Msg, S#s{lost = S#s.lost + 1})
@@ -664,7 +761,7 @@ deliver(To, Target, Msg, S = #s{steps = N}) ->
 %% Who will hand over `Pid''s DOWN should it die now: the consumers that
 %% monitor it (read as its step goes, when only it works, or before it is
 %% killed). Only processes of the path are looked at.
-watch(Pid, S = #s{procs = Procs, watch = W}) when is_map_key(Pid, Procs) ->
+watch(Pid, S = #s{procs = Procs, watch = W}) when is_map_key(Pid, Procs), node(Pid) =:= node() ->
     case erlang:process_info(Pid, monitored_by) of
         {monitored_by, By} ->
             S#s{watch = W#{Pid => [C || C <- By, is_pid(C),
@@ -693,17 +790,23 @@ is_step(?WIRE_STATE(_, _, _, _)) -> true;
 is_step(?WIRE_RX(_, _)) -> true;
 is_step(?WIRE_UNSUB(_, _)) -> true;
 is_step(?WIRE_RESUBSCRIBE) -> true;
+is_step(?WIRE_ALIVE(_, _, _)) -> true;
 is_step(_) -> false.
 
 %% A notice (toroco_clock:notify/2) to a process of the path is a step.
 is_notice({notice, _, _}, Pid, #s{procs = Procs}) -> is_map_key(Pid, Procs);
 is_notice(_Msg, _Pid, _S) -> false.
 
+%% A subscription to another node's upstream: a step in a world of several
+%% nodes (toroco_wire sends no other through the clock).
+is_sub(?WIRE_SUB(_, _)) -> true;
+is_sub(_) -> false.
+
 %% Sent as in real time, to the process the address named when it was sent.
 forward(_To, _Pid, {exit, _}) -> ok;
 forward(_To, Pid, {notice, Msg, _}) when is_pid(Pid) -> Pid ! Msg, ok;
 forward(_To, Pid, Msg) when is_pid(Pid) -> Pid ! Msg, ok;
-forward(To, remote, Msg) -> toroco_wire:send(To, Msg);
+forward(To, remote, Msg) -> toroco_lockstep_nodes:send_out(To, Msg);
 forward(_To, undefined, _Msg) -> ok.
 
 whereis_local(Pid) when is_pid(Pid), node(Pid) =:= node() -> Pid;
@@ -726,13 +829,22 @@ drop_timer(Pid, Kind, S = #s{owned = Owned, timers = Ts}) ->
 
 trace(_To, _Pid, _Msg, S = #s{trace = off}) ->
     S;
-trace(To, Pid, Msg, S = #s{trace = Lines, now = Now}) ->
+trace(To, Pid, Msg, S = #s{trace = Lines, now = Now, world = none}) ->
     %% as io_lib:format("~b ~ts ~ts~n") would write it, without its cost
     %% (a run's steps are most of the lab's work)
-    S#s{trace = [[integer_to_list(Now), $\s, name(To, Pid), $\s, line(Msg), $\n] | Lines]}.
+    S#s{trace = [[integer_to_list(Now), $\s, name(To, Pid), $\s, line(Msg), $\n] | Lines]};
+trace(To, Pid, Msg, S = #s{trace = Lines, now = Now}) ->
+    Node = toroco_lockstep_nodes:node_of(case Pid of
+                                             _ when is_pid(Pid) -> Pid;
+                                             _ -> To
+                                         end),
+    S#s{trace = [[integer_to_list(Now), $\s, text(Node), $\s, name(To, Pid), $\s, line(Msg), $\n]
+                 | Lines]}.
 
 name({Reg, _Node}, _Pid) -> atom_to_list(Reg);
 name(Reg, _Pid) when is_atom(Reg) -> atom_to_list(Reg);
+name(_To, Pid) when is_pid(Pid), node(Pid) =/= node() ->
+    pname(Pid);
 name(_To, Pid) when is_pid(Pid) ->
     case erlang:process_info(Pid, registered_name) of
         {registered_name, Reg} -> atom_to_list(Reg);
@@ -746,6 +858,9 @@ line(?WIRE_GATED({E, O}, Op)) -> ["gated ", text(E), $., text(O), $\s, op(Op)];
 line(?WIRE_IN(I, V)) -> ["deliver ", text(I), $\s, term(V)];
 line(?WIRE_IN(I, V, _)) -> ["deliver ", text(I), $\s, term(V)];
 line(?WIRE_ACK(I)) -> ["ack ", text(I)];
+line(?WIRE_ALIVE(_, {E, O}, _)) -> ["alive ", text(E), $., text(O)];
+%% a link timer (toroco_clock:link_timer/3) shows as the timer it is
+line(?WIRE_TIMER(Kind, {'$toroco_link', Msg})) -> ["timer ", term(Kind), $\s, term(Msg)];
 line(?WIRE_TIMER(Kind, Msg)) -> ["timer ", term(Kind), $\s, term(Msg)];
 line({stimulus, Msg}) -> ["stimulus ", term(Msg)];
 line({notice, _, Shown}) -> ["notice ", term(strip(Shown))];
@@ -777,3 +892,95 @@ strip(T) when is_reference(T) -> ref;
 strip(T) when is_tuple(T) -> list_to_tuple([strip(E) || E <- tuple_to_list(T)]);
 strip(T) when is_list(T) -> [strip(E) || E <- T];
 strip(T) -> T.
+
+%%====================================================================
+%% Several nodes (the world's side is toroco_lockstep_nodes)
+%%====================================================================
+
+%% A step sent in a world of several nodes: lost if it crosses a cut.
+across(To, Pid, Msg, From, S = #s{world = W}) ->
+    case toroco_lockstep_nodes:lost(node(From), toroco_lockstep_nodes:dest(To, Pid, From), W) of
+        true -> S#s{lost = S#s.lost + 1};
+        false when S#s.settle =/= none -> hold(From, {send, To, Pid, Msg}, S);
+        false -> run(S#s{queue = queue:in({To, Pid, Msg}, S#s.queue)})
+    end.
+
+%% A timer set inside its owner's step is ordered as on one node; one set
+%% outside any step is ordered by its owner's name (toroco_lockstep_nodes).
+world_timer(Pid, Kind, Deadline, Msg, S = #s{inflight = {_, _, Pid}}) ->
+    set_timer(Pid, Kind, Deadline, Msg, S);
+world_timer(Pid, Kind, Deadline, Msg, S = #s{inflight = {_, _, {pending, Node}}})
+  when node(Pid) =:= Node ->
+    %% set by a step of the batch in flight there
+    set_timer(Pid, Kind, Deadline, Msg, S);
+world_timer(Pid, Kind, Deadline, Msg, S) ->
+    S1 = #s{timers = Ts, owned = Owned} = drop_timer(Pid, Kind, S),
+    Key = toroco_lockstep_nodes:timer_key(Deadline, {pname(Pid), Kind}, Ts),
+    S1#s{timers = gb_trees:insert(Key, {Pid, Kind, Msg}, Ts),
+         owned = Owned#{{Pid, Kind} => Key}}.
+
+%% A step for a process of another node, through its agent (which answers
+%% `at'); none goes to a node killed.
+deliver_node(To, Target, Msg, S = #s{steps = N, world = W, now = Now, queue = Q}) ->
+    {More, Q1} = toroco_lockstep_nodes:batch({To, Target, Msg}, Q, W),
+    case More of
+        [] ->
+            case toroco_lockstep_nodes:step(To, Target, Msg, Now, W) of
+                lost -> S#s{lost = S#s.lost + 1};
+                {sent, Token, Node} ->
+                    trace(To, Target, Msg, S#s{inflight = {Token, make_ref(), {pending, Node}},
+                                               steps = N + 1})
+            end;
+        _ ->
+            %% the steps for that node next in the queue go as one batch
+            Items = [{To, Target, Msg} | More],
+            {Token, Node} = toroco_lockstep_nodes:step_batch(Items, Now),
+            lists:foldl(fun({T, P, M}, Acc) -> trace(T, P, M, Acc) end,
+                        S#s{queue = Q1, inflight = {Token, make_ref(), {pending, Node}},
+                            steps = N + length(Items)}, Items)
+    end.
+
+%% A batch is done (`Rest': the steps not run, since one's receiver died:
+%% they go first again).
+batched(Token, Lost, Rest, S = #s{inflight = {Token, _, {pending, _}}, queue = Q}) ->
+    S#s{inflight = none, lost = S#s.lost + Lost,
+        queue = queue:join(queue:from_list(Rest), Q)};
+batched(_Token, _Lost, _Rest, S) ->
+    S.
+
+%% The agent found the step's receiver (`undefined': none had the name)
+%% and who monitors it; the step is in flight to it.
+at(Token, Pid, By, S = #s{inflight = {Token, _, {pending, _}}, procs = Procs, watch = W})
+  when is_pid(Pid) ->
+    Consumers = [C || C <- By, case Procs of
+                                   #{C := #{layer := consumer}} -> true;
+                                   #{} -> false
+                               end],
+    S#s{inflight = {Token, erlang:monitor(process, Pid), Pid},
+        watch = case Procs of
+                    #{Pid := _} -> W#{Pid => Consumers};
+                    #{} -> W
+                end};
+at(Token, _Pid, _By, S = #s{inflight = {Token, _, {pending, _}}}) ->
+    S#s{inflight = none, lost = S#s.lost + 1};
+at(_Token, _Pid, _By, S) ->
+    S.
+
+%% How far time may go before the next timer: a world's event due by
+%% then comes first.
+next_deadline(#s{timers = Ts, target = Target}) ->
+    case gb_trees:is_empty(Ts) of
+        true -> Target;
+        false -> min(Target, element(1, element(1, gb_trees:smallest(Ts))))
+    end.
+
+%% A heal, or the net kernel noticing a cut: its line, and what it sends.
+world_event(Event, Node, S = #s{world = W, queue = Q}) ->
+    {W1, Line, Steps} = toroco_lockstep_nodes:event(Event, Node, fun pname/1, W),
+    note(Line, S#s{world = W1, queue = lists:foldl(fun queue:in/2, Q, Steps)}).
+
+cut_node(Node, Ms, S = #s{world = W, now = Now}) ->
+    case toroco_lockstep_nodes:cut(Node, Ms, Now, W) of
+        {ok, W1, Line} -> {reply, ok, note(Line, S#s{world = W1})};
+        Error -> {reply, Error, S}
+    end.

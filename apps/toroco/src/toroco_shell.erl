@@ -101,6 +101,9 @@ own(Type, Content, St, D, {_, _, Handle}) ->
 
 %% A step of lockstep: a simulated timer that is still set fires; any other
 %% message ends a simulated event timeout.
+step(?WIRE_TIMER(Kind, {'$toroco_link', Msg}), St, D, Host) ->
+    %% a link timer (toroco_clock:link_timer/3): the world keeps it, not the shell
+    event(Kind, Msg, St, D, Host);
 step(?WIRE_TIMER(Kind, Msg), St, D, Host = {Get, Put, _}) ->
     Sh = Get(D),
     case toroco_timeouts:fired(Kind, Sh#shell.timers) of

@@ -116,8 +116,9 @@ address(Reg) -> {Reg, node()}.
 %% gone), or a node that is not connected or whose connection is congested
 %% (a frozen peer), swallows the message, as a cut wire would: the event
 %% path never waits for another node.
-%% In lockstep (`toroco_clock:lockstep/1') a send to this node is handed to
-%% `toroco_lockstep', which delivers it as a step in its turn.
+%% In lockstep (`toroco_clock:lockstep/1') a send is handed to
+%% `toroco_lockstep', which delivers it as a step in its turn (one to
+%% another node too: in a world of several nodes it is a step there).
 -spec send(address() | atom(), term()) -> ok.
 send({Reg, Node} = To, Msg) when Node =:= node() ->
     %% the event path's common case: a plain send to a local name
@@ -137,6 +138,13 @@ send(Pid, Msg) when is_pid(Pid), node(Pid) =:= node() ->
         Lockstep -> toroco_lockstep:send(Lockstep, Pid, Msg)
     end;
 send(To, Msg) ->
+    case persistent_term:get(toroco_lockstep, none) of
+        none -> send_remote(To, Msg);
+        %% a robot over several nodes in one lockstep world (SPEC §13, §17)
+        Lockstep -> toroco_lockstep:send(Lockstep, To, Msg)
+    end.
+
+send_remote(To, Msg) ->
     try erlang:send(To, Msg, [noconnect, nosuspend]) of
         ok -> ok;
         nosuspend -> swallowed(1, congested, To);
@@ -328,7 +336,7 @@ carries(Tag, Src, #{ups := Ups}) ->
 %% handling `WIRE_STEP(Token, Msg)' with, after its own actions, the
 %% internal event that says so, so that the events it inserts are handled
 %% first. A process that stops says so by its death.
--spec step_done(reference(), gen_statem:event_handler_result(term())) ->
+-spec step_done(toroco_lockstep:token(), gen_statem:event_handler_result(term())) ->
           gen_statem:event_handler_result(term()).
 step_done(Token, R) ->
     Done = {next_event, internal, ?WIRE_STEP_DONE(Token)},
@@ -353,9 +361,22 @@ listen(Src, Pid, Links) ->
     L1 = #{pids := Pids, mons := Mons} = forget(Src, Links),
     Mons1 = case Mons of
                 #{Pid := _} -> Mons;
-                #{} -> Mons#{Pid => erlang:monitor(process, Pid)}
+                #{} -> Mons#{Pid => monitor_up(Pid)}
             end,
     L1#{pids := Pids#{Src => Pid}, mons := Mons1}.
+
+%% A monitor of an upstream on another node is told to a lockstep world
+%% over several nodes, which fires it as `noconnection' when it cuts that
+%% node off (toroco_lockstep_nodes).
+monitor_up(Pid) ->
+    Ref = erlang:monitor(process, Pid),
+    _ = node(Pid) =/= node() andalso toroco_lockstep:monitored(Pid, Ref),
+    Ref.
+
+demonitor_up(Pid, Ref) ->
+    erlang:demonitor(Ref, [flush]),
+    _ = node(Pid) =/= node() andalso toroco_lockstep:demonitored(Ref),
+    ok.
 
 %% Drops a source's pid, and the monitor of that pid if no other source uses it.
 forget(Src, Links = #{pids := Pids, mons := Mons}) ->
@@ -366,7 +387,7 @@ forget(Src, Links = #{pids := Pids, mons := Mons}) ->
                 true -> Links#{pids := Pids1};
                 false ->
                     case Mons of
-                        #{Pid := Ref} -> erlang:demonitor(Ref, [flush]);
+                        #{Pid := Ref} -> demonitor_up(Pid, Ref);
                         #{} -> ok
                     end,
                     Links#{pids := Pids1, mons := maps:remove(Pid, Mons)}
@@ -375,8 +396,16 @@ forget(Src, Links = #{pids := Pids, mons := Mons}) ->
     end.
 
 %% A subscription may be the first message to another node: it connects.
+%% In a lockstep world over several nodes one to another node is a step.
 subscribe(Src, {_Tag, Up}, Me) ->
-    try erlang:send(address(Up), ?WIRE_SUB(Src, Me), [nosuspend]) of
+    case {persistent_term:get(toroco_lockstep, none), address(Up)} of
+        {none, To} -> subscribe_now(To, ?WIRE_SUB(Src, Me));
+        {_, {_, Node} = To} when Node =:= node() -> subscribe_now(To, ?WIRE_SUB(Src, Me));
+        {Lockstep, To} -> toroco_lockstep:send(Lockstep, To, ?WIRE_SUB(Src, Me))
+    end.
+
+subscribe_now(To, Msg) ->
+    try erlang:send(To, Msg, [nosuspend]) of
         _ -> ok
     catch
         error:badarg -> ok

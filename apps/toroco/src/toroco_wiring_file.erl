@@ -19,11 +19,11 @@
 
 %% What a wiring file adds (`toroco:read_wiring/1'): its behaviors and
 %% devices in the file's order, each one's module, the inputs it wires
-%% (`{Receiver, Input}'), and the nodes other than this one it places
-%% things on (SPEC §13).
+%% (`{Receiver, Input}'), the nodes other than this one it places things
+%% on (SPEC §13) and where each of those things goes (`placement').
 -type summary() :: #{behaviors := [atom()], devices := [atom()],
                      modules := #{atom() => module()}, inputs := [{atom(), atom()}],
-                     nodes := [node()]}.
+                     nodes := [node()], placement := #{atom() => node()}}.
 
 %% @doc A behavior or device term: the spec its process is started from and
 %% its entry in the wiring, or an error naming it.
@@ -50,7 +50,9 @@ summary(Terms) ->
       devices => [N || {device, N, _, _} <- Added],
       modules => maps:from_list([{N, M} || {_, N, M, _} <- Added]),
       inputs => lists:usort([{R, I} || {inputs, R, M} <- Terms, is_map(M), I <- maps:keys(M)]),
-      nodes => lists:usort([N || {_, _, _, #{node := N}} <- Added, N =/= node()])}.
+      nodes => lists:usort([N || {_, _, _, #{node := N}} <- Added, N =/= node()]),
+      placement => maps:from_list([{Name, N} || {_, Name, _, #{node := N}} <- Added,
+                                                N =/= node()])}.
 
 %% @doc A file's terms checked in order against `W': the wiring they make
 %% and the specs of the behaviors and devices to start, in the file's order.

@@ -1,10 +1,24 @@
 %% Helpers shared by the runtime's suites.
 -module(toroco_test_lib).
--export([root/0, start/0, stop/0, clear/0, values/1, values/2, await_values/2, await_values/3,
+-export([distributed/1, root/0, start/0, stop/0, clear/0, values/1, values/2, await_values/2, await_values/3,
          await_input/4, settle/1, lockstep/0, settle/0, pass/1, await_runtime/3,
          sensor/2, actuator/2, wait_until/2, wait_until/3, poll/2, poll/3]).
 
 %% The project's top folder (this file is apps/toroco/test/toroco_test_lib.erl).
+%% Makes this node distributed on loopback (longnames), named `Prefix'
+%% and a unique number, unless it is already: whether it started it.
+distributed(Prefix) ->
+    _ = os:cmd("epmd -daemon"),
+    case node() of
+        nonode@nohost ->
+            Name = list_to_atom(Prefix ++ integer_to_list(erlang:unique_integer([positive]))
+                                ++ "@127.0.0.1"),
+            {ok, _} = net_kernel:start([Name, longnames]),
+            true;
+        _ ->
+            false
+    end.
+
 root() ->
     Source = proplists:get_value(source, ?MODULE:module_info(compile)),
     filename:dirname(filename:dirname(filename:dirname(filename:dirname(Source)))).
