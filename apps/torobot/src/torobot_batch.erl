@@ -175,7 +175,7 @@ worlds(Other, _GenOpts) ->
 %% send to the other nodes.
 try_wiring(Wiring, [{_, Spec} | _]) ->
     case {toroco:read_wiring(Wiring), file:read_file(Wiring)} of
-        {{error, {wiring_file, _, Reason}}, _} ->
+        {{error, {wiring_file, {_, Reason}}}, _} ->
             {error, {wiring, Wiring, Reason}};
         {_, {error, Reason}} ->
             {error, {wiring, Wiring, Reason}};

@@ -416,7 +416,7 @@ names(Wiring) ->
                    inputs => Inputs,
                    ports => [pru_port | [lua_port || Lua]],
                    nodes => Nodes}};
-        {error, {wiring_file, _, Reason}} ->
+        {error, {wiring_file, {_, Reason}}} ->
             {error, {wiring, {Wiring, Reason}}}
     end.
 

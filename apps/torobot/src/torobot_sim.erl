@@ -201,7 +201,7 @@ observe(WorldSpec, Opts, Observing) ->
             {error, {trace, Trace}};
         {{error, Reason}, _} ->
             {error, {world, WorldSpec, Reason}};
-        {_, {error, {wiring_file, _, Reason}}} ->
+        {_, {error, {wiring_file, {_, Reason}}}} ->
             {error, {wiring, WiringFile, Reason}};
         {_, _} when not is_number(Speed); Speed =< 0 ->
             {error, {speed, Speed}};

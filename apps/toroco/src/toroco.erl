@@ -228,7 +228,7 @@ load_wiring(File) ->
 read_wiring(File) ->
     case file:consult(File) of
         {ok, Terms} -> {ok, toroco_wiring_file:summary(Terms)};
-        {error, Reason} -> {error, {wiring_file, File, Reason}}
+        {error, Reason} -> {error, {wiring_file, {File, Reason}}}
     end.
 
 %%====================================================================

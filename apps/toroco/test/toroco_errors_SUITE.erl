@@ -193,5 +193,5 @@ read_wiring_says_what_a_file_adds(Config) ->
                         placement => #{}}},
                  toroco:read_wiring(F)),
     Before = snapshot(),
-    ?assertMatch({error, {wiring_file, "/nonexistent/x.wiring", enoent}},
+    ?assertMatch({error, {wiring_file, {"/nonexistent/x.wiring", enoent}}},
                  toroco:read_wiring("/nonexistent/x.wiring")).
