@@ -23,15 +23,11 @@
 
 -define(LOG, #{domain => [toroco, lua]}).
 
-%% @doc Runs a `main.lua' of the original (`toroco_lua:load_main/2') and turns its `load_behavior',
-%% `set_inputs', `set_inhibitors' (and `suspend_behavior',
-%% `resume_behavior', `remove_behavior') calls into the node's behaviors and
-%% wiring, in the order it made them; `run()' is where it ends. Behavior
-%% paths are relative to the main file, `.lua' optional. Devices it names
-%% must be on the node already (`device.mouse.left' is the source `{mouse,
-%% left}'). Its source lists are the original's, lowest priority first;
-%% the runtime's are highest first, so each is turned round. The first
-%% call refused stops there, with the main file's line.
+%% @doc `toroco_lua:load_main/2': the main file runs in a Lua state of its
+%% own, its wiring calls are gathered and made here in its order (a
+%% converter's `configure_polling' first, so the wiring names what it
+%% emits), and the state is closed once they are (it lives on while a
+%% behavior it hosts does).
 -spec load(file:filename_all(), toroco_lua:main_opts()) ->
           {ok, #{behaviors := [atom()]}} | {error, {file:filename_all(), non_neg_integer(), term()}}.
 load(Path, Opts) ->
