@@ -335,6 +335,9 @@ event({timeout, '$toroco_tap'}, flush, _S, E = #e{batch = B}) ->
 %% The observer tap changed: keep the sinks that concern this process.
 event(info, ?WIRE_TAP(Subs), _S, E = #e{name = Name}) ->
     {keep_state, E#e{tap = tap(Subs, Name)}};
+%% A subscriber wants everything tapped so far (toroco_tap:sync/1).
+event(info, ?WIRE_TAP_FLUSH(Feeder, Tag), _S, E = #e{batch = B}) ->
+    {keep_state, E#e{batch = toroco_tap:flushed(Feeder, Tag, B)}};
 %% The event path: one input delivered by a router.
 event(info, ?WIRE_IN(Input, V), S, E = #e{suspended = false}) ->
     input(Input, V, S, E);

@@ -268,6 +268,9 @@ event({call, From}, ready, ready, _C) ->
 %% The kind's tapped events are due (toroco_tap:after_event/3).
 event({timeout, '$toroco_tap'}, flush, _, C = #c{mod = Mod, data = D}) ->
     {keep_state, C#c{data = Mod:tap_batch(toroco_tap:flush(Mod:tap_batch(D)), D)}};
+%% A subscriber wants everything tapped so far (toroco_tap:sync/1).
+event(info, ?WIRE_TAP_FLUSH(Feeder, Tag), _, C = #c{mod = Mod, data = D}) ->
+    {keep_state, C#c{data = Mod:tap_batch(toroco_tap:flushed(Feeder, Tag, Mod:tap_batch(D)), D)}};
 %% The observer tap, and whatever is the kind's own.
 event(Type, Content, _, C) ->
     kind(Type, Content, C).
