@@ -207,19 +207,9 @@ event(Event, F0 = #flight{recording = R}) ->
     F1.
 
 %% A dump, and stopping a recording, take every event emitted before the
-%% call: the tap passes on what its producers and feeder hold
-%% (toroco:flush_events/1), then it is all in the mailbox.
+%% call (toroco_live_tap:flush/1).
 drain(F = #flight{tap = T}) ->
-    case toroco_live_tap:ref(T) of
-        none -> F;
-        Tap -> _ = toroco:flush_events(Tap), take(Tap, F)
-    end.
-
-take(Tap, F) ->
-    receive
-        {toroco_events, Tap, Events} -> take(Tap, lists:foldl(fun event/2, F, Events))
-    after 0 -> F
-    end.
+    lists:foldl(fun event/2, F, toroco_live_tap:flush(T)).
 
 %% An event joins the open batch; the batch is sealed into a segment when
 %% it spans a second, holds ?SEGMENT_EVENTS events or a slice of the bytes
