@@ -39,8 +39,9 @@
                %% newest first
                events = [] :: [term()]}).
 
-%% `[]' when the producer holds nothing: the engines test for it.
--opaque batch() :: [#part{}].
+%% `[]' when the producer holds nothing (the engines test for it); its
+%% parts are this module's business.
+-type batch() :: [#part{}].
 
 %% A part that goes: its events in the order they came, how many, the room
 %% it took and did not use (given back), and the events it dropped.

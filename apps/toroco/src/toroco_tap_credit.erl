@@ -87,7 +87,7 @@ admit({A, Max}, N) ->
 -spec passed(credit(), {non_neg_integer(), non_neg_integer()}) -> ok.
 passed({A, _}, {N, Held}) ->
     atomics:add(A, ?SEEN, N),
-    give_back({A, 0}, Held).
+    atomics:sub(A, ?HELD, Held).
 
 %% @doc The events pending at the subscriber, as its queue says; whether
 %% there is room for one more message.
