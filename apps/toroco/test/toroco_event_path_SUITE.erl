@@ -19,7 +19,7 @@ groups() ->
                 idle_subscription_costs_nothing, network_hears_through_pg,
                 flush_takes_in_every_emission, unsubscribe_takes_in_every_emission,
                 flush_takes_in_the_whole_path, flush_of_an_unknown_subscription,
-                feeder_is_inspectable]},
+                feeder_is_inspectable, feeder_not_starved_by_busy_processes]},
      {resilience, [], [wiring_server_crashes_100_times_under_load, inject_into_own_output_is_refused,
                        inject_unknown_and_stopped_names, restarts_counted_from_lifecycle,
                        reset_cancels_named_timeouts, unknown_events_fall_to_the_engine,
@@ -151,6 +151,23 @@ flush_of_an_unknown_subscription() ->
 flush_of_an_unknown_subscription(_Config) ->
     Ref = make_ref(),
     {error, {unknown_subscription, Ref}} = toroco:flush_events(Ref).
+
+feeder_not_starved_by_busy_processes() ->
+    [{doc, "While twice as many normal-priority processes as schedulers spin, every event "
+      "still reaches the subscriber without a flush: the low-priority feeder is interleaved "
+      "with them, not starved."}].
+feeder_not_starved_by_busy_processes(_Config) ->
+    sensor(s, [v]),
+    {ok, Ref} = toroco:subscribe_events(#{kinds => [emit], names => [s]}),
+    Spinners = [spawn(fun Spin() -> Spin() end)
+                || _ <- lists:seq(1, 2 * erlang:system_info(schedulers_online))],
+    try
+        [ok = toroco:inject({s, v}, I) || I <- lists:seq(1, 50)],
+        Values = [V || {emit, _, {s, v}, send, V} <- take_events(Ref, 50, [])],
+        Values = lists:seq(1, 50)
+    after
+        [exit(P, kill) || P <- Spinners]
+    end.
 
 feeder_is_inspectable() ->
     [{doc, "A subscription's feeder is an OTP process: sys:get_state/1 shows its state and data."}].
@@ -378,7 +395,7 @@ burst_goes_in_batches(_Config) ->
     Feeder = toroco_tap:feeder(Ref),
     1 = erlang:trace(Feeder, true, ['receive']),
     ok = toroco:inject({s, v}, 500),
-    Values = [V || {emit, _, {burst, out}, send, V} <- events(Ref, 500)],
+    Values = [V || {emit, _, {burst, out}, send, V} <- take_events(Ref, 500, [])],
     Values = lists:seq(1, 500),
     _ = erlang:trace(Feeder, false, ['receive']),
     Batches = length([M || {trace, F, 'receive', M} <- traces(), F =:= Feeder,
@@ -398,7 +415,7 @@ idle_subscription_costs_nothing(_Config) ->
     {ok, Ref} = toroco:subscribe_events(#{}),
     Feeder = toroco_tap:feeder(Ref),
     %% Each router reports its state to a new subscription first.
-    [_, _] = [R || {router, _, R, _} <- events(Ref, 200)],
+    [_, _] = [R || {router, _, R, _} <- flushed(Ref)],
     ok = wait_until(fun() -> process_info(Feeder, status) =:= {status, waiting} end, 2000),
     1 = erlang:trace(Feeder, true, [running]),
     %% Three of the old watcher's idle periods (50 ms) without an event: at

@@ -384,6 +384,7 @@ simulated_run_replays(Config) ->
     Path = path(Config, "sim.mcap"),
     ok = toroco_live:record(Path, #{}),
     {ok, Summary} = torobot_sim:run(World, #{wiring => WiringFile}),
+    ok = settle_robot(),
     {ok, #{messages := M, dropped := 0}} = toroco_live:stop_recording(),
     ct:log("run ~p, ~b messages, ~b bytes", [Summary, M, filelib:file_size(Path)]),
     #{<<"ok">> := true, <<"messages">> := M, <<"perTopic">> := P} = read(Path),
@@ -401,8 +402,18 @@ ros2_recording_replays(Config) ->
     Path = path(Config, "sim_ros2_replay.mcap"),
     ok = toroco_live:record(Path, #{profile => ros2}),
     {ok, _} = torobot_sim:run(World, #{wiring => wiring_file()}),
+    ok = settle_robot(),
     {ok, #{dropped := 0}} = toroco_live:stop_recording(),
     replays_on_fakes(Path, wiring_file()).
+
+%% The recording takes in what was emitted before it stops: what the run's
+%% last readings cause is let happen first. Each process of the path
+%% answers an inspection once it has handled what came before, as many
+%% rounds as the path (sensor, behavior, motors) is deep.
+settle_robot() ->
+    #{behaviors := Behaviors, devices := Devices} = toroco:inspect(),
+    _ = [toroco:inspect(N) || _ <- lists:seq(1, 3), N <- Behaviors ++ Devices],
+    ok.
 
 %% The wiring of a recorded run, with fake sensors and motors standing for
 %% the devices, replays the recording's sensors to the same motors.
