@@ -1,6 +1,7 @@
 %% Runs the properties of `prop_router': the router and gate cores against the
 %% brute-force oracles of SPEC §4, and the running processes against a model
-%% built from those oracles. A case fails when its property fails; the shrunk
+%% built from those oracles; and those of `prop_tap_batch': a producer's tap
+%% batch against a model of what it keeps and drops (SPEC §10). A case fails when its property fails; the shrunk
 %% counterexample and the disagreement are in the case's log.
 -module(prop_SUITE).
 
@@ -13,13 +14,16 @@
          gate_core_untimed_matches_oracle/0, gate_core_untimed_matches_oracle/1,
          network_matches_model/0, network_matches_model/1,
          gate_attach_keeps_send_hold/0, gate_attach_keeps_send_hold/1,
-         activation_stamp_keeps_order/0, activation_stamp_keeps_order/1]).
+         activation_stamp_keeps_order/0, activation_stamp_keeps_order/1,
+         tap_batch_keeps_order/0, tap_batch_keeps_order/1,
+         tap_batch_counts_exactly/0, tap_batch_counts_exactly/1]).
 
 suite() -> [{timetrap, {minutes, 10}}].
 
 all() ->
     [router_core_matches_oracle, gate_core_matches_oracle, gate_core_untimed_matches_oracle,
-     network_matches_model, gate_attach_keeps_send_hold, activation_stamp_keeps_order].
+     network_matches_model, gate_attach_keeps_send_hold, activation_stamp_keeps_order,
+     tap_batch_keeps_order, tap_batch_counts_exactly].
 
 init_per_suite(Config) ->
     Config.
@@ -108,6 +112,19 @@ activation_stamp_keeps_order() ->
 activation_stamp_keeps_order(_Config) ->
     ok = prop_tap:setup(),
     check(prop_tap:prop_activation_order(), 200, 20).
+
+tap_batch_keeps_order() ->
+    [{doc, "A producer's tap batch sends each subscription the events the model keeps, "
+           "in the order they were tapped (1000 random sequences over three subscriptions)."}].
+tap_batch_keeps_order(_Config) ->
+    check(prop_tap_batch:prop_order(), 1000, 100).
+
+tap_batch_counts_exactly() ->
+    [{doc, "Every event tapped is kept or counted as dropped once, the drops are the "
+           "model's, and the room a part gives back is what it took and did not use "
+           "(1000 random sequences)."}].
+tap_batch_counts_exactly(_Config) ->
+    check(prop_tap_batch:prop_counts(), 1000, 100).
 
 %%====================================================================
 %% Running a property

@@ -15,7 +15,7 @@
 %% unwatch/0}, {@link wiring_dot/0}, {@link reload/1}.
 %%
 %% <b>Observing the event path</b> (SPEC §10): {@link subscribe_events/1},
-%% {@link unsubscribe_events/1}.
+%% {@link unsubscribe_events/1}, {@link flush_events/1}.
 %%
 %% <b>Several nodes</b> (SPEC §13): `#{node => Node}' in the options of
 %% {@link add_behavior/3} and {@link add_device/3} (and of a wiring file's
@@ -44,7 +44,7 @@
          set_inputs/2, set_inhibitors/2, set_reset/2, load_wiring/1, read_wiring/1,
          inject/2, inject/3, inspect/0, inspect/1,
          top/0, watch/2, unwatch/0, wiring_dot/0, reload/1,
-         subscribe_events/1, unsubscribe_events/1]).
+         subscribe_events/1, unsubscribe_events/1, flush_events/1]).
 
 -export_type([wiring_summary/0]).
 -export_type([name/0, source/0, source_spec/0, input_spec/0, behavior_opts/0,
@@ -78,7 +78,7 @@
          | bad_kinds | bad_names | bad_watch | bad_wiring_term | wiring_file | file
          | start_failed | restart_failed | suspend_failed | code_change_failed
          | load_failed | no_object_code | old_code_in_use | unchanged | relay_failed
-         | watch_failed | dot_failed | no_graphviz, term()}
+         | watch_failed | dot_failed | no_graphviz | unknown_subscription, term()}
       | {bad_option, term(), term()}
       | not_running | unknown_request.
 
@@ -422,8 +422,19 @@ subscribe_events(Opts) ->
         Err -> Err
     end.
 
-%% @doc Ends a subscription.
+%% @doc Ends a subscription. Every event this node's processes emitted
+%% before the call is in the subscriber's mailbox (or counted in a
+%% `{dropped, N}' there) when it returns, and none comes after.
 -spec unsubscribe_events(reference()) -> ok.
 unsubscribe_events(Ref) ->
     ok = toroco_tap:unsubscribe(Ref),
     toroco_tap_relay:stop(Ref).
+
+%% @doc Returns once every event this node's processes emitted before the
+%% call is in the subscriber's mailbox, or counted in a `{dropped, N}'
+%% there: a subscriber that is about to stop, write or count what it got
+%% takes the rest with a `receive ... after 0'. The calling process's own
+%% events, if it is a behavior, are not waited for.
+-spec flush_events(reference()) -> ok | {error, error_reason()}.
+flush_events(Ref) ->
+    toroco_tap:sync(Ref).

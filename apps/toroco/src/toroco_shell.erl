@@ -93,9 +93,13 @@ event(Type, Content, St, D, Host = {Get, Put, _}) ->
         #shell{} -> own(Type, Content, St, D, Host)
     end.
 
-%% The tap's batch is due (toroco_tap:after_event/3); else the host's event.
+%% The tap's batch is due (toroco_tap:after_event/3), or a subscriber wants
+%% everything tapped so far (toroco_tap:sync/1); else the host's event.
 own({timeout, '$toroco_tap'}, flush, _St, D, {Get, Put, _}) ->
     {keep_state, Put(flush(Get(D)), D)};
+own(info, ?WIRE_TAP_FLUSH(Feeder, Tag), _St, D, {Get, Put, _}) ->
+    Sh = Get(D),
+    {keep_state, Put(Sh#shell{batch = toroco_tap:flushed(Feeder, Tag, Sh#shell.batch)}, D)};
 own(Type, Content, St, D, {_, _, Handle}) ->
     Handle(Type, Content, St, D).
 

@@ -2,56 +2,48 @@
 %% robot (watch, top's restart counts, the dashboard, the Foxglove bridge,
 %% recording, a user's own process) subscribes here.
 %%
-%% It sits in `toroco_sup' before the wiring and the network. Three parts:
+%% This module is the tap server (registered `toroco_tap', in `toroco_sup'
+%% before the wiring and the network) and the tap's API, for subscribers
+%% and for the event path's processes that produce its events:
 %% <ul>
-%% <li>the tap server (this module, registered `toroco_tap') keeps the
-%%     subscriptions in a table and, when they change, tells every process of
-%%     the network (`{'$toroco_tap', Subs}'), which find each other in the
-%%     `pg' scope `toroco_tap_pg' (they join it when they start, {@link join/0}).
-%%     Each process keeps, in its own state, only the sinks that concern it
-%%     ({@link select/3}): with no subscriber an emission does no send and no
-%%     lookup;</li>
-%% <li>the producers' side: {@link tap/3} takes room for an event and keeps
-%%     it in the producer's own batch, sealed and sent as one message at
-%%     `?BATCH_MAX' events; {@link after_event/3} says when the rest goes:
-%%     the first event of a batch arms the producer's named gen_statem
-%%     timeout `'$toroco_tap'' (`?FLUSH_MS'), whose event comes after what
-%%     was already waiting, so the batch goes once the producer has handled
-%%     it. A busy period costs the subscriber one message per batch, not one
-%%     per event, and the scheduler that runs the subscriber is not woken at
-%%     each event. A behavior whose callback just set an event timeout
-%%     (which any event would cancel) sends its batch at once instead; in
-%%     lockstep a batch goes at the end of the event that made it (no real
-%%     timer: SPEC §14);</li>
-%% <li>one feeder process per subscription, beside the subscriber: it holds
-%%     the batches that come within `?MERGE_MS' of each other, merges them by
-%%     time stamp (each producer's own order kept), unpacks them into
-%%     `{toroco_event, Ref, Event}' messages (or, for a subscriber that
-%%     asked for `delivery => batch', sends the merged events as one
-%%     `{toroco_events, Ref, Events}', whose events the credit counts) and
-%%     reports what the producers dropped.</li>
+%% <li>Subscribers: {@link subscribe/1}, {@link unsubscribe/1},
+%%     {@link sync/1}, {@link feeder/1}. Each subscription has a feeder
+%%     (`toroco_tap_feeder'), the one process that sends to the
+%%     subscriber, and a credit (`toroco_tap_credit') that bounds what it
+%%     has pending.</li>
+%% <li>Producers (behaviors, devices, routers; the wiring server for
+%%     lifecycle events): {@link join/0}, {@link current/0},
+%%     {@link select/3}, {@link tap/3}, {@link after_event/3},
+%%     {@link flush/1}, {@link flushed/3}, {@link notify/2},
+%%     {@link lifecycle/2}, {@link lifecycle/3}, {@link lifecycle/4},
+%%     {@link timestamp/0}; a relay of another node: {@link relayed/4}.</li>
 %% </ul>
 %%
-%% Credit. A sink carries an `atomics' array: (1) room the producers took
-%% and the feeder has not passed on yet (a producer takes it 16 events at a
-%% time and gives back what its batch did not use), (2) events dropped, (3)
-%% how many of the subscriber's messages the feeder counts as pending. A
-%% producer takes room only while taken + pending &lt;= buffer, else counts
-%% a drop; having found the sink full, it counts the rest of that batch's
-%% events as dropped without looking again (at most `?FLUSH_MS'). The
-%% feeder adds what it passes on to the pending count and gives the room
-%% back by looking at the subscriber's queue: when a batch leaves
-%% the subscriber half full or more, and then every 5 ms only while it
-%% stays so or drops wait to be reported (a subscriber that keeps up costs
-%% no timer and no polling). As soon as the subscriber has room the
-%% feeder sends `{dropped, N}', even if no later event comes. Every event
-%% is either received or counted; the count errs on the side of dropping
-%% early, never of growing the queue.
+%% The server keeps the subscriptions in a table and, when they change,
+%% tells every process of the network (`WIRE_TAP(Subs)'), which find each
+%% other in the `pg' scope `toroco_tap_pg' (they join it when they start,
+%% {@link join/0}). Each process keeps, in its own state, only the sinks
+%% that concern it ({@link select/3}): with no subscriber an emission does
+%% no send and no lookup.
+%%
+%% A producer keeps what it taps in its own batch (`toroco_tap_batch'),
+%% sealed and sent as one message per subscription at `?BATCH_MAX' events;
+%% {@link after_event/3} says when the rest goes: the first event of a
+%% batch arms the producer's named gen_statem timeout `'$toroco_tap''
+%% (`?FLUSH_MS'), whose event comes after what was already waiting, so the
+%% batch goes once the producer has handled it. A busy period costs the
+%% subscriber one message per batch, not one per event. A behavior whose
+%% callback just set an event timeout (which any event would cancel) sends
+%% its batch at once instead; in lockstep a batch goes at the end of the
+%% event that made it (no real timer: SPEC §14). A subscriber that wants
+%% everything emitted so far (a recording that stops, a dump, an
+%% unsubscription) asks the feeder to drain ({@link sync/1}): it asks every
+%% producer of the node for its batch (`WIRE_TAP_FLUSH', answered by
+%% {@link flushed/3}), passes on all it holds, and answers.
 %%
 %% A subscriber on another node's events is fed the same way: the relay
 %% there (`toroco_tap_relay') hands its batches to this node's feeder
-%% ({@link relayed/4}), which takes room for them as a producer would and
-%% counts what does not fit into the same `{dropped, N}'.
+%% ({@link relayed/4}), which takes room for them as a producer would.
 %%
 %% Order: each producer's batches go to one feeder, which alone sends to
 %% the subscriber, so the events of one source arrive in emission order.
@@ -60,9 +52,9 @@
 
 -include("toroco_wire.hrl").
 
--export([start_link/0, subscribe/1, unsubscribe/1, feeder/1]).
--export([current/0, join/0, select/3, tap/3, after_event/3, flush/1, notify/2, timestamp/0]).
--export([lifecycle/2, lifecycle/3, lifecycle/4, relayed/4]).
+-export([start_link/0, subscribe/1, unsubscribe/1, sync/1, feeder/1]).
+-export([current/0, join/0, select/3, tap/3, after_event/3, flush/1, flushed/3, notify/2,
+         timestamp/0, lifecycle/2, lifecycle/3, lifecycle/4, relayed/4]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 -export_type([sinks/0, batch/0, kind/0, event/0, opts/0, sub/0, delivery/0]).
 
@@ -80,44 +72,30 @@
 %% (`event', the default), or `{toroco_events, Ref, [Event]}', several in
 %% order to a message (`batch').
 -type delivery() :: event | batch.
-%% One subscription as the producers see it: its feeder, credit and bound.
--opaque sub() :: {reference(), pid(), atomics:atomics_ref(), pos_integer(),
-                  [kind()], all | [atom()]}.
--type sink() :: {reference(), pid(), atomics:atomics_ref(), pos_integer()}.  % feeder
+%% One subscription as the producers see it: its feeder, credit, kinds and
+%% names.
+-opaque sub() :: {reference(), pid(), toroco_tap_credit:credit(), [kind()], all | [atom()]}.
 %% What a producer keeps: the sinks of each kind that concern it.
--type sinks() :: #{kind() => [sink()]}.
-%% The events a producer tapped and has not sent yet, per subscription
-%% (newest first); `[]' when there are none.
-%% With each, the room taken for it and not used yet (`full': none is left,
-%% see {@link tap/3}), and the events dropped.
--type batch() :: [{reference(), pid(), atomics:atomics_ref(), non_neg_integer(),
-                   non_neg_integer() | full, non_neg_integer(), [event()]}].
+-type sinks() :: #{kind() => [toroco_tap_batch:sink()]}.
+%% The events a producer tapped and has not sent yet; `[]' when there are
+%% none.
+-type batch() :: toroco_tap_batch:batch().
 
 -define(TABLE, toroco_tap).
 -define(SCOPE, toroco_tap_pg).
 -define(GROUP, network).
 -define(KINDS, [emit, deliver, router, lifecycle]).
 -define(DEFAULT_BUFFER, 10000).
--define(BATCH_MAX, 128).
 -define(FLUSH_MS, 2).
--define(CREDIT, 16).
-%% How long a feeder holds the batches that came, to merge them.
--define(MERGE_MS, 3).
 -define(FLUSH_TIMER, {timeout, '$toroco_tap'}).
--define(LOOK_MS, 5).
-%% Cells of a sink's atomics array.
--define(HELD, 1).
--define(DROPPED, 2).
--define(SEEN, 3).
-%% producer -> feeder: events in emission order, N of them.
--define(BATCH(Ref, Producer, Events, N), {'$toroco_tap_batch', Ref, Producer, Events, N}).
-%% producer -> feeder: drops wait to be reported.
--define(NUDGE, '$toroco_tap_nudge').
-%% relay -> feeder: events of another node, and what was dropped there.
--define(RELAYED(Ref, Events, N, Dropped), {'$toroco_tap_relayed', Ref, Events, N, Dropped}).
+%% How long a drain waits for the producers' batches.
+-define(SYNC_MS, 5000).
+
+-record(state, {subs = #{} :: #{reference() => sub()},
+                feeders = #{} :: #{reference() => pid()}}).
 
 %%====================================================================
-%% API
+%% Subscribers
 %%====================================================================
 
 -spec start_link() -> {ok, pid()} | {error, term()}.
@@ -142,22 +120,43 @@ subscribe(Opts) when is_map(Opts) ->
 subscribe(Opts) ->
     {error, {bad_options, Opts}}.
 
-%% @doc Ends a subscription; no event of it is sent after this returns
-%% (those already in the caller's mailbox stay there).
+%% @doc Ends a subscription, once every event this node emitted before the
+%% call has been sent to the subscriber or counted ({@link sync/1}); no
+%% event of it is sent after this returns (those already in the
+%% subscriber's mailbox stay there).
 -spec unsubscribe(reference()) -> ok.
 unsubscribe(Ref) when is_reference(Ref) ->
+    _ = sync(Ref),
     try gen_server:call(?MODULE, {unsubscribe, Ref}, 10000)
     catch exit:{noproc, _} -> ok
     end;
 unsubscribe(_) ->
     ok.
 
+%% @doc Returns once every event the processes of this node emitted before
+%% the call is in the subscriber's mailbox or counted in a `{dropped, N}'
+%% there: the subscription's feeder asks each of them for its batch and
+%% passes on all it holds. The caller's own batch, if it is a producer,
+%% is not waited for. `{error, {timeout, Pids}}' names the producers that
+%% did not answer within 5 s (what the others sent is passed on).
+-spec sync(reference()) -> ok | {error, term()}.
+sync(Ref) ->
+    case feeder(Ref) of
+        none -> {error, {unknown_subscription, Ref}};
+        Feeder -> toroco_tap_feeder:drain(Feeder, producers() -- [self()], ?SYNC_MS)
+    end.
+
 %% @doc The feeder of subscription `Ref' (where a relay sends), or `none'.
 -spec feeder(reference()) -> pid() | none.
 feeder(Ref) ->
-    case [F || {R, F, _, _, _, _} <- current(), R =:= Ref] of
+    case [F || {R, F, _, _, _} <- current(), R =:= Ref] of
         [F] -> F;
         [] -> none
+    end.
+
+producers() ->
+    try pg:get_local_members(?SCOPE, ?GROUP)
+    catch error:badarg -> []                    % the tap is not running
     end.
 
 options(Opts) ->
@@ -183,12 +182,12 @@ options(Opts) ->
     end.
 
 %%====================================================================
-%% The producers' side
+%% Producers
 %%====================================================================
 
 %% @doc The subscriptions now in force (read once by a process when it
 %% starts, after {@link join/0}; later changes reach it as
-%% `{'$toroco_tap', Subs}').
+%% `WIRE_TAP(Subs)').
 -spec current() -> [sub()].
 current() ->
     try ets:lookup(?TABLE, subs) of
@@ -198,7 +197,8 @@ current() ->
     end.
 
 %% @doc Makes the calling process (a behavior, device or router) one that
-%% hears of subscription changes; call it before {@link current/0}.
+%% hears of subscription changes and of drains; call it before
+%% {@link current/0}.
 -spec join() -> ok.
 join() ->
     try pg:join(?SCOPE, ?GROUP, self())
@@ -208,14 +208,12 @@ join() ->
 %% @doc The sinks of `Kinds' that concern a producer whose events are about
 %% `Name'.
 -spec select([sub()], [kind()], atom()) -> sinks().
-select([], _Kinds, _Name) ->
-    #{};
 select(Subs, Kinds, Name) ->
     lists:foldl(
-      fun({Ref, Feeder, A, Max, SubKinds, Names}, Acc) ->
+      fun({Ref, Feeder, Credit, SubKinds, Names}, Acc) ->
               case Names =:= all orelse lists:member(Name, Names) of
                   true ->
-                      Sink = {Ref, Feeder, A, Max},
+                      Sink = {Ref, Feeder, Credit},
                       lists:foldl(fun(K, Acc1) ->
                                           case lists:member(K, SubKinds) of
                                               true -> maps:update_with(K, fun(L) -> L ++ [Sink] end,
@@ -228,65 +226,32 @@ select(Subs, Kinds, Name) ->
       end, #{}, Subs).
 
 %% @doc Keeps `Event' in the producer's batch for each sink with room for
-%% it, counting a drop where there is none; a batch that reaches
-%% `?BATCH_MAX' events is sent at once. A sink found full stays full for
-%% the rest of the batch (`full'): what comes until the batch goes is
-%% counted as dropped without looking at the sink again, so a producer
-%% tapping faster than its subscriber reads pays no more per event than
-%% one with room.
--spec tap([sink()], event(), batch()) -> batch().
+%% it, counting a drop where there is none; a sink's part that reaches
+%% `?BATCH_MAX' events is sent at once. A sink found full stays full until
+%% the batch goes: what comes meanwhile is counted as dropped without
+%% looking at the sink again, so a producer tapping faster than its
+%% subscriber reads pays no more per event than one with room.
+-spec tap([toroco_tap_batch:sink()], event(), batch()) -> batch().
 tap([], _Event, Batch) ->
     Batch;
-tap([{Ref, Feeder, A, Max} | Rest], Event, Batch) ->
-    case lists:keytake(Ref, 1, Batch) of
-        {value, {_, _, _, N, full, D, Evs}, Others} ->
-            tap(Rest, Event, [{Ref, Feeder, A, N, full, D + 1, Evs} | Others]);
-        {value, {_, _, _, N, Room, D, Evs}, Others} when Room > 0 ->
-            tap(Rest, Event, add(Ref, Feeder, A, N + 1, Room - 1, D, [Event | Evs], Others));
-        {value, {_, _, _, N, 0, D, Evs}, Others} ->
-            case reserve(A, Max) of
-                0 -> tap(Rest, Event, [{Ref, Feeder, A, N, full, D + 1, Evs} | Others]);
-                Room -> tap(Rest, Event, add(Ref, Feeder, A, N + 1, Room - 1, D, [Event | Evs], Others))
-            end;
-        false ->
-            case reserve(A, Max) of
-                0 -> tap(Rest, Event, [{Ref, Feeder, A, 0, full, 1, []} | Batch]);
-                Room -> tap(Rest, Event, add(Ref, Feeder, A, 1, Room - 1, 0, [Event], Batch))
-            end
-    end.
+tap([Sink = {Ref, _, Credit} | Rest], Event, Batch) ->
+    Grant = case toroco_tap_batch:needs_room(Ref, Batch) of
+                true -> toroco_tap_credit:reserve(Credit);
+                false -> 0
+            end,
+    {Batch1, Sealed} = toroco_tap_batch:add(Sink, Event, Grant, Batch),
+    lists:foreach(fun send/1, Sealed),
+    tap(Rest, Event, Batch1).
 
-%% Room for up to ?CREDIT events taken at once, or 0: the event is dropped
-%% (and counted in the batch, added to the sink's count when it goes). A
-%% full sink is seen with reads alone.
-reserve(A, Max) ->
-    case atomics:get(A, ?HELD) + atomics:get(A, ?SEEN) >= Max of
-        true ->
-            0;
-        false ->
-            Over = atomics:add_get(A, ?HELD, ?CREDIT) + atomics:get(A, ?SEEN) - Max,
-            if
-                Over =< 0 -> ?CREDIT;
-                Over >= ?CREDIT -> atomics:sub(A, ?HELD, ?CREDIT), 0;
-                true -> atomics:sub(A, ?HELD, Over), ?CREDIT - Over
-            end
-    end.
-
-add(Ref, Feeder, A, N, Room, D, Evs, Batch) when N >= ?BATCH_MAX ->
-    send({Ref, Feeder, A, N, Room, D, Evs}),
-    Batch;
-add(Ref, Feeder, A, N, Room, D, Evs, Batch) ->
-    [{Ref, Feeder, A, N, Room, D, Evs} | Batch].
-
-%% A batch goes; the room it did not use is given back, what it dropped is
-%% counted.
-send({Ref, Feeder, A, N, Room, D, Evs}) ->
+%% A part of a batch goes; the room it did not use is given back, what it
+%% dropped is counted.
+send(#{ref := Ref, feeder := Feeder, credit := Credit, events := Events, n := N,
+       unused := Unused, dropped := D}) ->
     %% The first drops since the feeder last reported: it may have stopped
     %% looking, so it is told (while drops wait it keeps looking).
-    _ = D > 0 andalso atomics:add_get(A, ?DROPPED, D) =:= D andalso N =:= 0
-        andalso (Feeder ! ?NUDGE),
-    _ = N > 0 andalso (Feeder ! ?BATCH(Ref, self(), lists:reverse(Evs), N)),
-    _ = is_integer(Room) andalso Room > 0 andalso atomics:sub(A, ?HELD, Room),
-    ok.
+    _ = toroco_tap_credit:dropped(Credit, D) andalso N =:= 0 andalso toroco_tap_feeder:nudge(Feeder),
+    _ = N > 0 andalso toroco_tap_feeder:batch(Feeder, Ref, Events, N),
+    toroco_tap_credit:give_back(Credit, Unused).
 
 %% @doc What a producer (a gen_statem) does with its batch after an event:
 %% `Was' says whether it had a batch before the event, `Hurry' whether the
@@ -309,14 +274,22 @@ after_event(_Was, Batch, Hurry) ->
 %% @doc Sends the producer's batch now.
 -spec flush(batch()) -> [].
 flush(Batch) ->
-    lists:foreach(fun send/1, Batch),
+    lists:foreach(fun send/1, toroco_tap_batch:seal(Batch)),
+    [].
+
+%% @doc A producer's answer to `WIRE_TAP_FLUSH(Feeder, Tag)': its batch
+%% now, then the word that it went.
+-spec flushed(pid(), reference(), batch()) -> [].
+flushed(Feeder, Tag, Batch) ->
+    [] = flush(Batch),
+    ok = toroco_tap_feeder:flushed(Feeder, Tag),
     [].
 
 %% @doc Sends `Event' at once to each sink with room for it, counting a
 %% drop where there is none (a producer that keeps no batch).
--spec notify([sink()], event()) -> ok.
+-spec notify([toroco_tap_batch:sink()], event()) -> ok.
 notify(Sinks, Event) ->
-    [] = flush(tap(Sinks, Event, [])),
+    [] = flush(tap(Sinks, Event, toroco_tap_batch:new())),
     ok.
 
 %% @doc The time stamp of events: when the runtime saw it (in lockstep, the
@@ -345,40 +318,38 @@ lifecycle(#{lifecycle := Sinks}, Name, What, Batch) ->
 lifecycle(#{}, _Name, _What, Batch) ->
     Batch.
 
-%% @doc Hands events of another node (in order, `N' of them) and the count
-%% dropped there to `Feeder', the feeder of subscription `Ref' (a relay's
-%% side). Returns `ok', or `busy' if the connection to the feeder's node is
+%% @doc Hands events of another node (in order) and the count dropped
+%% there to `Feeder', the feeder of subscription `Ref' (a relay's side).
+%% Returns `ok', or `busy' if the connection to the feeder's node is
 %% congested (nothing was sent: the caller counts them as dropped).
 -spec relayed(pid(), reference(), [event()], non_neg_integer()) -> ok | busy.
 relayed(Feeder, Ref, Events, Dropped) ->
-    Msg = ?RELAYED(Ref, Events, length(Events), Dropped),
-    case erlang:send(Feeder, Msg, [nosuspend, noconnect]) of
-        ok -> ok;
-        _ -> busy
-    end.
+    toroco_tap_feeder:relayed(Feeder, Ref, Events, Dropped).
 
 %%====================================================================
 %% The tap server
 %%====================================================================
 
-%% The server's state: the subscriptions, and the feeder of each.
--spec init([]) -> {ok, {#{reference() => sub()}, #{reference() => pid()}}}.
+-spec init([]) -> {ok, #state{}}.
 init([]) ->
     process_flag(trap_exit, true),
     _ = ets:new(?TABLE, [named_table, protected, set, {read_concurrency, true}]),
     ets:insert(?TABLE, {subs, []}),
-    {ok, {#{}, #{}}}.
+    {ok, #state{}}.
 
--spec handle_call(term(), gen_server:from(), State) -> {reply, term(), State}
-              when State :: {map(), map()}.
-handle_call({subscribe, Pid, Kinds, Names, Buffer, Delivery}, _From, {Subs, Fs}) ->
+-spec handle_call(term(), gen_server:from(), #state{}) -> {reply, term(), #state{}}.
+handle_call({subscribe, Pid, Kinds, Names, Buffer, Delivery}, _From, S = #state{subs = Subs, feeders = Fs}) ->
     Ref = make_ref(),
-    A = atomics:new(3, [{signed, true}]),
-    F = spawn_feeder(Pid, Ref, A, Buffer, Delivery),
-    Subs1 = Subs#{Ref => {Ref, F, A, Buffer, Kinds, Names}},
-    publish(Subs1),
-    {reply, {ok, Ref}, {Subs1, Fs#{Ref => F}}};
-handle_call({unsubscribe, Ref}, _From, {Subs, Fs}) ->
+    Credit = toroco_tap_credit:new(Buffer),
+    case toroco_tap_feeder:start_link(Pid, Ref, Credit, Delivery) of
+        {ok, F} ->
+            Subs1 = Subs#{Ref => {Ref, F, Credit, Kinds, Names}},
+            publish(Subs1),
+            {reply, {ok, Ref}, S#state{subs = Subs1, feeders = Fs#{Ref => F}}};
+        {error, Why} ->
+            {reply, {error, {feeder_failed, Why}}, S}
+    end;
+handle_call({unsubscribe, Ref}, _From, S = #state{subs = Subs, feeders = Fs}) ->
     case Fs of
         #{Ref := F} ->
             Subs1 = maps:remove(Ref, Subs),
@@ -387,30 +358,30 @@ handle_call({unsubscribe, Ref}, _From, {Subs, Fs}) ->
             %% nothing more of this subscription arrives.
             exit(F, kill),
             receive {'EXIT', F, _} -> ok end,
-            {reply, ok, {Subs1, maps:remove(Ref, Fs)}};
+            {reply, ok, S#state{subs = Subs1, feeders = maps:remove(Ref, Fs)}};
         #{} ->
-            {reply, ok, {Subs, Fs}}
+            {reply, ok, S}
     end;
-handle_call(_Req, _From, State) ->
-    {reply, {error, unknown_request}, State}.
+handle_call(_Req, _From, S) ->
+    {reply, {error, unknown_request}, S}.
 
--spec handle_cast(term(), State) -> {noreply, State} when State :: {map(), map()}.
-handle_cast(_Msg, State) ->
-    {noreply, State}.
+-spec handle_cast(term(), #state{}) -> {noreply, #state{}}.
+handle_cast(_Msg, S) ->
+    {noreply, S}.
 
 %% A feeder ends when its subscriber dies: the subscription goes with it.
--spec handle_info(term(), State) -> {noreply, State} when State :: {map(), map()}.
-handle_info({'EXIT', Pid, _}, {Subs, Fs}) ->
+-spec handle_info(term(), #state{}) -> {noreply, #state{}}.
+handle_info({'EXIT', Pid, _}, S = #state{subs = Subs, feeders = Fs}) ->
     case [R || {R, F} <- maps:to_list(Fs), F =:= Pid] of
         [Ref] ->
             Subs1 = maps:remove(Ref, Subs),
             publish(Subs1),
-            {noreply, {Subs1, maps:remove(Ref, Fs)}};
+            {noreply, S#state{subs = Subs1, feeders = maps:remove(Ref, Fs)}};
         [] ->
-            {noreply, {Subs, Fs}}
+            {noreply, S}
     end;
-handle_info(_Msg, State) ->
-    {noreply, State}.
+handle_info(_Msg, S) ->
+    {noreply, S}.
 
 %% The table first, then every running process of the network: a process
 %% joins the group before it reads the table in init, so none is missed.
@@ -420,147 +391,3 @@ publish(SubsMap) ->
     Msg = ?WIRE_TAP(Subs),
     _ = [Pid ! Msg || Pid <- pg:get_local_members(?SCOPE, ?GROUP)],
     ok.
-
-%%====================================================================
-%% The feeder
-%%====================================================================
-
--record(feed, {sub :: pid(),
-               mon :: reference(),
-               ref :: reference(),
-               a :: atomics:atomics_ref(),
-               max :: pos_integer(),
-               delivery :: delivery(),
-               %% with batch delivery: how many events each message sent
-               %% and maybe not read yet holds, newest first
-               sent = [] :: [pos_integer()],
-               %% batches held for the merge, per producer (each newest
-               %% first), how many events, and whether the release is due
-               held = #{} :: #{pid() => [[event()]]},
-               n = 0 :: non_neg_integer(),
-               %% whether a look timer is set
-               timer = off :: off | on}).
-
-%% A feeder that fell behind a busy CPU holds many batches for a while;
-%% what they leave in its old heap goes at the next full sweep, not at the
-%% default's 65,535th collection (a 10-minute soak under load grew 13 %,
-%% most of it in feeders' old heaps).
-spawn_feeder(Sub, Ref, A, Max, Delivery) ->
-    spawn_opt(fun() ->
-                      %% The robot first: under load the feeder waits, its
-                      %% credit runs out, and the producers drop (cheaply).
-                      process_flag(priority, low),
-                      Mon = erlang:monitor(process, Sub),
-                      feed(#feed{sub = Sub, mon = Mon, ref = Ref, a = A, max = Max,
-                                 delivery = Delivery})
-              end, [link, {fullsweep_after, 10}]).
-
-feed(F = #feed{ref = Ref, mon = Mon, a = A}) ->
-    receive
-        ?BATCH(Ref, Producer, Events, N) ->
-            %% Room was taken for these by their producer; they wait for
-            %% the batches of the other producers (?MERGE_MS).
-            feed(hold(Producer, Events, N, F));
-        release ->
-            feed(settle(release(F)));
-        ?RELAYED(Ref, Events, N, Dropped) ->
-            Admitted = admit(N, F),
-            _ = Dropped + N - Admitted > 0
-                andalso atomics:add(A, ?DROPPED, Dropped + N - Admitted),
-            F1 = pass(lists:sublist(Events, Admitted), Admitted, F),
-            atomics:sub(A, ?HELD, Admitted),
-            feed(settle(F1));
-        look ->
-            feed(look(F#feed{timer = off}));
-        ?NUDGE ->
-            feed(look(F));
-        {'DOWN', Mon, process, _, _} ->
-            exit(normal)
-    end.
-
-hold(Producer, Events, N, F = #feed{held = H, n = 0}) ->
-    _ = erlang:send_after(?MERGE_MS, self(), release),
-    F#feed{held = H#{Producer => [Events]}, n = N};
-hold(Producer, Events, N, F = #feed{held = H, n = Held}) ->
-    F#feed{held = maps:update_with(Producer, fun(L) -> [Events | L] end, [Events], H), n = Held + N}.
-
-%% The held batches go on, merged by time stamp: each producer's events
-%% keep their order, and an event caused by another (an emission, then its
-%% delivery) mostly comes after it even though their producers' batches
-%% came in either order.
-release(F = #feed{held = H, n = N, a = A}) ->
-    Runs = [lists:append(lists:reverse(Bs)) || Bs <- maps:values(H)],
-    Merged = lists:foldl(fun(Run, Acc) -> lists:merge(fun earlier/2, Acc, Run) end, [], Runs),
-    F1 = pass(Merged, N, F),
-    atomics:sub(A, ?HELD, N),
-    F1#feed{held = #{}, n = 0}.
-
-earlier(A, B) -> element(2, A) =< element(2, B).
-
-%% How many of `N' relayed events fit, room taken for them.
-admit(N, #feed{a = A, max = Max}) ->
-    Over = atomics:add_get(A, ?HELD, N) + atomics:get(A, ?SEEN) - Max,
-    case Over > 0 of
-        true ->
-            Excess = min(N, Over),
-            atomics:sub(A, ?HELD, Excess),
-            N - Excess;
-        false ->
-            N
-    end.
-
-%% The events go on, counted as pending before their room is given back.
-pass(_Events, 0, F) ->
-    F;
-pass(Events, N, F = #feed{sub = Sub, ref = Ref, a = A, delivery = event}) ->
-    atomics:add(A, ?SEEN, N),
-    _ = [Sub ! {toroco_event, Ref, E} || E <- Events],
-    F;
-pass(Events, N, F = #feed{sub = Sub, ref = Ref, a = A, delivery = batch, sent = Sent}) ->
-    atomics:add(A, ?SEEN, N),
-    Sub ! {toroco_events, Ref, Events},
-    F#feed{sent = [N | Sent]}.
-
-%% Events pending in the subscriber's queue of `Len' messages: one each,
-%% or with batch delivery what the newest `Len' batches held (the older
-%% ones were read).
-pending(Len, F = #feed{delivery = event}) ->
-    {Len, F};
-pending(Len, F = #feed{sent = Sent}) ->
-    Unread = lists:sublist(Sent, Len),
-    {lists:sum(Unread), F#feed{sent = Unread}}.
-
-%% After passing a batch on: look at the subscriber's queue only if it may
-%% be filling up or drops wait to be reported.
-settle(F = #feed{a = A, max = Max}) ->
-    case tight(A, Max) of
-        true -> look(F);
-        false -> F
-    end.
-
-tight(A, Max) ->
-    Pending = atomics:get(A, ?SEEN) + atomics:get(A, ?HELD),
-    (Pending > 0 andalso 2 * Pending >= Max) orelse atomics:get(A, ?DROPPED) > 0.
-
-look(F0 = #feed{sub = Sub, a = A, max = Max, timer = T}) ->
-    case erlang:process_info(Sub, message_queue_len) of
-        {message_queue_len, Len} ->
-            {Pending, F1} = pending(Len, F0),
-            atomics:put(A, ?SEEN, Pending),
-            Dropped = atomics:get(A, ?DROPPED),
-            F = case Dropped > 0 andalso Pending < Max of
-                    true ->
-                        atomics:sub(A, ?DROPPED, Dropped),
-                        pass([{dropped, Dropped}], 1, F1);
-                    false ->
-                        F1
-                end,
-            case {tight(A, Max), T} of
-                {false, _} -> F;
-                {true, off} -> _ = erlang:send_after(?LOOK_MS, self(), look),
-                               F#feed{timer = on};
-                {true, _} -> F
-            end;
-        undefined ->
-            exit(normal)
-    end.

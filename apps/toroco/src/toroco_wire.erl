@@ -48,6 +48,12 @@
 %% <tr><td>`WIRE_TAP(Subs)'</td><td>`toroco_tap' → emitters, routers (the
 %%     members of its `pg' group)</td>
 %%     <td>observer subscriptions change</td><td>none</td></tr>
+%% <tr><td>`WIRE_TAP_FLUSH(Feeder, Tag)'</td><td>a subscription's feeder
+%%     (`toroco_tap_feeder') → emitters, routers</td>
+%%     <td>a subscriber asks for every event emitted so far
+%%         (`toroco_tap:sync/1')</td>
+%%     <td>the process's tapped batch at once, then `FLUSHED' to the
+%%         feeder (`toroco_tap:flushed/3')</td></tr>
 %% <tr><td>`WIRE_RESUBSCRIBE'</td><td>wiring server → consumers</td>
 %%     <td>a node of the robot came back</td>
 %%     <td>the consumer subscribes again to its orphaned remote sources</td></tr>

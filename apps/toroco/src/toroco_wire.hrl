@@ -32,6 +32,9 @@
 %% toroco_tap -> emitters and routers (its pg group): the observer tap's
 %% subscriptions changed (SPEC §10); each keeps the sinks that concern it.
 -define(WIRE_TAP(Subs), {'$toroco_tap', Subs}).
+%% a subscription's feeder -> emitters and routers (toroco_tap_feeder): send
+%% your batch now, then answer toroco_tap:flushed/3 (SPEC §10, a drain).
+-define(WIRE_TAP_FLUSH(Feeder, Tag), {'$toroco_tap_flush', Feeder, Tag}).
 %% the wiring server -> consumers: a node came back, subscribe again to
 %% the remote sources no incarnation answers for (SPEC §13).
 -define(WIRE_RESUBSCRIBE, '$toroco_resubscribe').

@@ -266,6 +266,7 @@ handle_info(Info, H = #hub{module = M, clients = Cl}) ->
     end.
 
 -spec terminate(term(), hub()) -> ok.
-terminate(_, #hub{listener = L, clients = Cl}) ->
-    ok = toroco_live_clients:stop(Cl),
+terminate(_, H = #hub{module = M, listener = L, clients = Cl}) ->
+    %% What was emitted before the stop goes to the clients first.
+    _ = (catch lists:foldl(fun M:handle_event/2, H, toroco_live_clients:stop(Cl))),
     toroco_live_listener:stop(L).

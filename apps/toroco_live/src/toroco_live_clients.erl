@@ -47,11 +47,12 @@ down(Conn, Cl = #clients{conns = Conns}) ->
         _ -> Cl1
     end.
 
-%% @doc The hub stops: the tap is let go.
--spec stop(clients()) -> ok.
+%% @doc The hub stops: the tap is let go, and the events emitted before,
+%% still on their way, are returned for the hub to pass on.
+-spec stop(clients()) -> [term()].
 stop(#clients{tap = Tap}) ->
-    _ = toroco_live_tap:off(Tap),
-    ok.
+    {Events, _} = toroco_live_tap:close(Tap),
+    Events.
 
 -spec member(pid(), clients()) -> boolean().
 member(Conn, #clients{conns = Conns}) -> is_map_key(Conn, Conns).

@@ -41,12 +41,6 @@
 -define(SEGMENT_NS, 1000000000).
 -define(SEGMENT_EVENTS, 1000).
 -define(SEGMENTS_IN_BYTES, 16).
-%% A dump, and stopping a recording, take the events still on their way (the
-%% producers send theirs in batches within a few milliseconds, the tap's
-%% relay forwards them a little later) until the tap is quiet this long,
-%% and waits at most the next.
--define(QUIET_MS, 100).
--define(MAX_DRAIN_MS, 2000).
 %% How soon to subscribe again when the runtime's tap went away.
 -define(RESUBSCRIBE_MS, 500).
 
@@ -128,7 +122,7 @@ init([]) ->
 
 -spec handle_call(term(), gen_server:from(), #flight{}) -> {reply, term(), #flight{}}.
 handle_call({dump, Path}, _From, F0) ->
-    F = drain(F0, erlang:monotonic_time(millisecond) + ?MAX_DRAIN_MS),
+    F = drain(F0),
     {reply, write(Path, F), F};
 handle_call({record, Path, _}, _From, F = #flight{recording = R}) when R =/= none ->
     {reply, {error, {already_recording, toroco_live_recorder:path(R), Path}}, F};
@@ -140,7 +134,7 @@ handle_call({record, Path, Opts}, _From, F = #flight{tap = Tap}) ->
 handle_call(stop_recording, _From, F = #flight{recording = none}) ->
     {reply, {error, not_recording}, F};
 handle_call(stop_recording, _From, F0) ->
-    F = #flight{recording = R} = drain(F0, erlang:monotonic_time(millisecond) + ?MAX_DRAIN_MS),
+    F = #flight{recording = R} = drain(F0),
     {reply, toroco_live_recorder:close(R), F#flight{recording = none}};
 handle_call(window, _From, F = #flight{count = N, bytes = B, segments = Q, dropped = D}) ->
     {reply, #{events => N, bytes => B, segments => queue:len(Q), dropped => D}, F};
@@ -212,13 +206,10 @@ event(Event, F0 = #flight{recording = R}) ->
     end,
     F1.
 
-drain(F = #flight{tap = T}, Until) ->
-    Tap = toroco_live_tap:ref(T),
-    Wait = min(?QUIET_MS, max(0, Until - erlang:monotonic_time(millisecond))),
-    receive
-        {toroco_events, Tap, Events} -> drain(lists:foldl(fun event/2, F, Events), Until)
-    after Wait -> F
-    end.
+%% A dump, and stopping a recording, take every event emitted before the
+%% call (toroco_live_tap:flush/1).
+drain(F = #flight{tap = T}) ->
+    lists:foldl(fun event/2, F, toroco_live_tap:flush(T)).
 
 %% An event joins the open batch; the batch is sealed into a segment when
 %% it spans a second, holds ?SEGMENT_EVENTS events or a slice of the bytes

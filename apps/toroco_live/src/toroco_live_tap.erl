@@ -30,7 +30,7 @@
 %% </pre>
 -module(toroco_live_tap).
 
--export([new/1, on/1, ensure_on/1, off/1, handle/2, subscribed/1, ref/1]).
+-export([new/1, on/1, ensure_on/1, off/1, flush/1, close/1, handle/2, subscribed/1, ref/1]).
 -export_type([tap/0, opts/0]).
 
 %% The options of `toroco:subscribe_events/1', how soon to try again
@@ -98,6 +98,33 @@ off(T = #tap{ref = Ref, mon = Mon}) ->
     catch toroco:unsubscribe_events(Ref),
     world(unsubscribe, T),
     T#tap{ref = none, mon = none}.
+
+%% @doc Every event emitted before the call that is still on its way
+%% (`toroco:flush_events/1'), taken from the mailbox in order: for a client
+%% about to write or count what it got (a dump, a recording's end).
+-spec flush(tap()) -> [term()].
+flush(#tap{ref = none}) ->
+    [];
+flush(#tap{ref = Ref}) ->
+    _ = (catch toroco:flush_events(Ref)),
+    taken(Ref).
+
+%% @doc Unsubscribes ({@link off/1}), with the events emitted before the
+%% call, in order: for a client that stops (a bridge passes them on before
+%% it closes).
+-spec close(tap()) -> {[term()], tap()}.
+close(T = #tap{ref = none}) ->
+    {[], T};
+close(T = #tap{ref = Ref}) ->
+    T1 = off(T),
+    {taken(Ref), T1}.
+
+taken(Ref) ->
+    receive
+        {toroco_events, Ref, Events} -> Events ++ taken(Ref);
+        {toroco_event, Ref, Event} -> [Event | taken(Ref)]
+    after 0 -> []
+    end.
 
 %% @doc What a message means to the client's tap: one of its events, its
 %% subscription gone, time to subscribe again, an event of an earlier

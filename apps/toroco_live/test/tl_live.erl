@@ -4,7 +4,8 @@
 %% as it was afterwards, and the fake sensor `s' wired to the fake
 %% actuator `a'.
 -module(tl_live).
--export([start/1, start/2, stop/1, fake_robot/0, replays_on_fakes/2, wiring_file/0, data/1]).
+-export([start/1, start/2, stop/1, fake_robot/0, replays_on_fakes/2, wiring_file/0, data/1,
+         settle_robot/0]).
 
 -define(KEYS, [enabled, log_dir, client_publish]).
 
@@ -72,3 +73,12 @@ wiring_file() ->
 data(Name) ->
     Src = proplists:get_value(source, ?MODULE:module_info(compile)),
     filename:join(filename:dirname(Src), Name).
+
+%% A recording takes in what was emitted before it stops: what a run's last
+%% readings cause is let happen first. Each process of the path answers an
+%% inspection once it has handled what came before, as many rounds as the
+%% path (sensor, behavior, motors) is deep.
+settle_robot() ->
+    #{behaviors := Behaviors, devices := Devices} = toroco:inspect(),
+    _ = [toroco:inspect(N) || _ <- lists:seq(1, 3), N <- Behaviors ++ Devices],
+    ok.

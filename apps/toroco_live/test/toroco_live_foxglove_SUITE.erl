@@ -8,7 +8,8 @@
 all() ->
     [server_info_and_channels, values_in_order, channels_follow_wiring, connection_graph,
      publish_refused_when_off, publish_injects_when_on, misbehaving_client,
-     client_that_never_reads, not_a_websocket, simulated_world, runtime_restart, {group, tls}].
+     client_that_never_reads, not_a_websocket, simulated_world, runtime_restart,
+     tap_closed_with_every_event, {group, tls}].
 
 %% The bridge's clients again with TLS on the port (wss://, Foxglove's
 %% client trusting a test CA made at the group's start).
@@ -52,6 +53,17 @@ end_per_testcase(_Case, _Config) ->
 %%====================================================================
 %% Cases
 %%====================================================================
+
+tap_closed_with_every_event() ->
+    [{doc, "A bridge's tap closed at its shutdown (toroco_live_tap:close/1) hands over every "
+      "event emitted before, in order, to be passed on before the bridge closes."}].
+tap_closed_with_every_event(_Config) ->
+    {ok, Tap} = toroco_live_tap:on(toroco_live_tap:new(#{kinds => [emit], names => [s]})),
+    [ok = toroco:inject({s, dist}, I) || I <- lists:seq(1, 200)],
+    {Events, Closed} = toroco_live_tap:close(Tap),
+    false = toroco_live_tap:subscribed(Closed),
+    Values = [V || {emit, _, {s, dist}, send, V} <- Events],
+    Values = lists:seq(1, 200).
 
 server_info_and_channels() ->
     [{doc, "The client gets serverInfo (connectionGraph, no clientPublish by default) and "

@@ -7,7 +7,8 @@
 
 all() ->
     [recording_reads_back, recording_filters, unwritable_path_refused, full_disk_refused,
-     flight_recorder_dump, flight_recorder_bounded, flight_recorder_across_segments,
+     flight_recorder_dump, stop_takes_in_every_emission, dump_takes_in_every_emission,
+     flight_recorder_bounded, flight_recorder_across_segments,
      flight_recorder_bounded_by_count, flight_recorder_window_by_time,
      flight_recorder_on_layer_removed,
      flight_recorder_after_restart,
@@ -154,6 +155,26 @@ flight_recorder_dump(Config) ->
     Terms = [T || #{<<"term">> := T} <- maps:get(<<"/toroco/out/s/dist">>, Last)],
     true = lists:member(<<"{flight,20}">>, Terms),
     ok.
+
+stop_takes_in_every_emission() ->
+    [{doc, "stop_recording/0 right after 200 emissions has them all: those still in their "
+      "producer's batch or the tap's feeder are taken in before the file is closed."}].
+stop_takes_in_every_emission(Config) ->
+    Path = path(Config, "right_after.mcap"),
+    ok = toroco_live:record(Path, #{kinds => [emit], names => [s]}),
+    [ok = toroco:inject({s, dist}, I) || I <- lists:seq(1, 200)],
+    {ok, #{messages := 200, dropped := 0}} = toroco_live:stop_recording(),
+    #{<<"ok">> := true, <<"perTopic">> := #{<<"/toroco/out/s/dist">> := 200}} = read(Path).
+
+dump_takes_in_every_emission() ->
+    [{doc, "A dump right after an emission has it, though it was still on its way."}].
+dump_takes_in_every_emission(Config) ->
+    Path = path(Config, "dump_right_after.mcap"),
+    [ok = toroco:inject({s, dist}, {right_after, I}) || I <- lists:seq(1, 5)],
+    {ok, _} = toroco_live:dump(Path),
+    #{<<"ok">> := true, <<"last">> := Last} = read(Path),
+    Terms = [T || #{<<"term">> := T} <- maps:get(<<"/toroco/out/s/dist">>, Last)],
+    true = lists:member(<<"{right_after,5}">>, Terms).
 
 flight_recorder_bounded() ->
     [{doc, "The flight recorder keeps at most flight_max_bytes of events, counted compressed, "
@@ -358,6 +379,7 @@ simulated_run_replays(Config) ->
     Path = path(Config, "sim.mcap"),
     ok = toroco_live:record(Path, #{}),
     {ok, Summary} = torobot_sim:run(World, #{wiring => WiringFile}),
+    ok = tl_live:settle_robot(),
     {ok, #{messages := M, dropped := 0}} = toroco_live:stop_recording(),
     ct:log("run ~p, ~b messages, ~b bytes", [Summary, M, filelib:file_size(Path)]),
     #{<<"ok">> := true, <<"messages">> := M, <<"perTopic">> := P} = read(Path),

@@ -51,6 +51,7 @@ ros2_recording_replays(Config) ->
     Path = path(Config, "sim_ros2_replay.mcap"),
     ok = toroco_live:record(Path, #{profile => ros2}),
     {ok, _} = torobot_sim:run(World, #{wiring => tl_live:wiring_file()}),
+    ok = tl_live:settle_robot(),
     {ok, #{dropped := 0}} = toroco_live:stop_recording(),
     tl_live:replays_on_fakes(Path, tl_live:wiring_file()).
 
