@@ -454,10 +454,12 @@ teardown(#robot{started = Started, behaviors = Behaviors, sensors = Sensors, clo
             true ->
                 ok;
             false ->
-                _ = [toroco:remove_behavior(B) || {behavior, B} <- Behaviors],
-                _ = [toroco:remove_device(D) || {device, D} <- Behaviors],
+                %% the actuators first, as one switches a robot off: what
+                %% the behaviors' removal lets go reaches no motor
+                _ = [toroco:remove_device(D) || D <- [wheels | lists:reverse(?DEVICES)]],
                 _ = [toroco:remove_device(D) || D <- Sensors],
-                [toroco:remove_device(D) || D <- [wheels | lists:reverse(?DEVICES)]]
+                _ = [toroco:remove_device(D) || {device, D} <- Behaviors],
+                [toroco:remove_behavior(B) || {behavior, B} <- Behaviors]
         end,
     restore_clock(Clock),
     _ = [application:stop(App) || App <- lists:reverse(Started)],
