@@ -254,7 +254,9 @@ connect(Node) -> net_kernel:connect_node(Node).
 slots(_Node, Parallel) when is_integer(Parallel) ->
     Parallel;
 slots(Node, auto) ->
-    try erpc:call(Node, erlang, system_info, [schedulers_online], ?ASK_MS)
+    slots(Node, {auto, 1});
+slots(Node, {auto, K}) ->
+    try K * erpc:call(Node, erlang, system_info, [schedulers_online], ?ASK_MS)
     catch Class:Reason -> {error, {Class, Reason}}
     end.
 
@@ -417,7 +419,8 @@ stop_worker_peer(Peer) ->
 %% `nodes', dealt in turn) and answers their results in order; a call
 %% whose node or worker fails is `{error, {node, Node, Reason}}'. The
 %% robustness lab (`torobot_chaos') runs its schedules so.
--spec calls([{module(), atom(), [term()]}], [node(), ...], pos_integer() | auto) -> [term()].
+-spec calls([{module(), atom(), [term()]}], [node(), ...],
+            pos_integer() | auto | {auto, pos_integer()}) -> [term()].
 calls(Calls, Nodes, Parallel) ->
     Setup = #{parallel => Parallel, time => lockstep, speed => 1,
               wiring => "config/torobot.wiring", text => <<>>},

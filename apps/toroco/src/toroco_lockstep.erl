@@ -881,10 +881,23 @@ text(T) -> io_lib:format("~s", [T]).
 %% checks).
 -spec term(term()) -> iolist().
 term(T) when is_integer(T) -> integer_to_list(T);
-term(T) when is_atom(T) -> io_lib:write_atom(T);
+term(T) when is_atom(T) -> atom(T);
 term({}) -> "{}";
 term(T) when is_tuple(T) -> [${, lists:join($,, [term(E) || E <- tuple_to_list(T)]), $}];
 term(T) -> io_lib:format("~0tp", [T]).
+
+%% An atom as ~0tp writes it (quoted where it must be), remembered: a run
+%% names the same few atoms thousands of times, and deciding on the
+%% quotes is most of writing one.
+atom(A) ->
+    case get({?MODULE, A}) of
+        undefined ->
+            Text = io_lib:write_atom(A),
+            _ = length(get()) < 4096 andalso put({?MODULE, A}, Text),
+            Text;
+        Text ->
+            Text
+    end.
 
 %% Pids are not the same from one run to the next: a line names none.
 strip(T) when is_pid(T) -> pid;
