@@ -205,13 +205,12 @@ observe(WorldSpec, Opts, Observing) ->
             {error, {wiring, WiringFile, Reason}};
         {_, _} when not is_number(Speed); Speed =< 0 ->
             {error, {speed, Speed}};
-        {{ok, Worlds}, {ok, #{nodes := WiringNodes}}} when Time =:= lockstep ->
-            case [N || N <- WiringNodes, not lists:member(N, nodes())] of
-                [] -> run_worlds(Worlds, WiringFile, Speed, Time, Opts#{observing => Observing});
+        {{ok, Worlds}, {ok, #{nodes := WiringNodes}}} ->
+            Run = Opts#{observing => Observing, wiring_nodes => WiringNodes},
+            case [N || N <- WiringNodes, Time =:= lockstep, not lists:member(N, nodes())] of
+                [] -> run_worlds(Worlds, WiringFile, Speed, Time, Run);
                 [Node | _] -> {error, {node_not_connected, Node}}
-            end;
-        {{ok, Worlds}, {ok, _}} ->
-            run_worlds(Worlds, WiringFile, Speed, Time, Opts#{observing => Observing})
+            end
     end.
 
 %% The checked worlds run (a robot placed on several nodes, SPEC §13, runs
@@ -303,7 +302,7 @@ with_robots(Worlds, Nodes, Opts) ->
         %% a run in lockstep goes as fast as the CPU allows: given as long
         %% as real time would take, it is stuck; a robot over several nodes
         %% pays round trips between them for its steps, and gets more
-        Others = length(torobot_sim_robot:wiring_nodes(maps:get(wiring, Opts))),
+        Others = length(maps:get(wiring_nodes, Opts, [])),
         Timeout = case Time of
                       realtime -> round(torobot_world:duration_ms(hd(Worlds)) / Speed);
                       lockstep -> torobot_world:duration_ms(hd(Worlds)) * (1 + 4 * Others)

@@ -52,7 +52,7 @@
 -behaviour(gen_server).
 
 -export([start/1, stop/0, go/1, wheels/1, sense/3, step/5, fault/3]).
--export([start_peer/1, stop_peer/1, wiring_nodes/1]).
+-export([start_peer/1, stop_peer/1]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2, terminate/2]).
 
 -export_type([opts/0, handle/0]).
@@ -95,12 +95,10 @@
 -spec start(opts()) -> {ok, inet:port_number()} | {error, term()}.
 start(#{wiring := Wiring} = Opts) ->
     case toroco:read_wiring(Wiring) of
-        {ok, #{behaviors := Bs, devices := Ds}} ->
-            %% What the wiring adds, taken away again by teardown/1.
-            Behaviors = [{behavior, B} || B <- Bs] ++ [{device, D} || D <- Ds],
+        {ok, Added} ->
             case application:ensure_all_started(torobot) of
                 {ok, Started} ->
-                    Init = Opts#{started => Started, behaviors => Behaviors},
+                    Init = Opts#{started => Started, added => Added},
                     case gen_server:start({local, ?MODULE}, ?MODULE, Init, []) of
                         {ok, _} -> {ok, camera_port()};
                         {error, Reason} -> {error, Reason}
@@ -219,14 +217,17 @@ call({peer, Peer}, Request) ->
 %%====================================================================
 
 -spec init(map()) -> {ok, #robot{}} | {stop, term()}.
-init(#{wiring := Wiring, thresholds := Thresholds, speed := Speed,
-       started := Started, behaviors := Behaviors} = Opts) ->
+init(#{wiring := Wiring, thresholds := Thresholds, speed := Speed, started := Started,
+       added := #{behaviors := Bs, devices := Ds, placement := Placed, nodes := Nodes}} = Opts) ->
     Sensors = maps:get(sensors, Opts, []),
     Lockstep = maps:get(time, Opts, realtime) =:= lockstep,
     process_flag(trap_exit, true),
-    S = #robot{started = Started, behaviors = Behaviors, remote = remote_behaviors(Wiring),
+    %% what the wiring adds, taken away again by teardown/1
+    S = #robot{started = Started,
+               behaviors = [{behavior, B} || B <- Bs] ++ [{device, D} || D <- Ds],
+               remote = [B || B <- Bs, is_map_key(B, Placed)],
                sensors = [Name || {Name, _} <- Sensors],
-               clock = set_clock(Speed, Lockstep, maps:get(trace, Opts, false), Wiring)},
+               clock = set_clock(Speed, Lockstep, maps:get(trace, Opts, false), Nodes)},
     try
         ok = step(devices, add_devices(Thresholds, Sensors, Lockstep)),
         ok = step(wheels, toroco:add_device(wheels, torobot_sim_wheels, #{sim => self()})),
@@ -503,28 +504,14 @@ applied(W) ->
 
 %% The runtime's clock runs at the world's speed for the run, or is the
 %% world's in lockstep.
-set_clock(_Speed, true, Trace, Wiring) ->
-    ok = toroco_clock:lockstep(#{trace => Trace, nodes => wiring_nodes(Wiring)}),
+set_clock(_Speed, true, Trace, Nodes) ->
+    %% the other nodes the wiring places things on join the world's clock
+    ok = toroco_clock:lockstep(#{trace => Trace, nodes => Nodes}),
     lockstep;
-set_clock(Speed, false, _Trace, _Wiring) ->
+set_clock(Speed, false, _Trace, _Nodes) ->
     Previous = toroco_clock:speed(),
     ok = toroco_clock:set_speed(Speed),
     {previous, Previous}.
-
-%% @doc The nodes other than this one that a wiring file places things on
-%% (SPEC §13): they join the world's clock in lockstep.
--spec wiring_nodes(file:name_all()) -> [node()].
-wiring_nodes(Wiring) ->
-    case toroco:read_wiring(Wiring) of
-        {ok, #{nodes := Nodes}} -> Nodes;
-        {error, _} -> []
-    end.
-
-remote_behaviors(Wiring) ->
-    case toroco:read_wiring(Wiring) of
-        {ok, #{behaviors := Bs, placement := Placed}} -> [B || B <- Bs, is_map_key(B, Placed)];
-        {error, _} -> []
-    end.
 
 restore_clock(lockstep) ->
     toroco_clock:realtime();
