@@ -20,7 +20,8 @@ all() ->
     [{group, exits}, {group, faults}, {group, bad_input}, {group, explore}].
 
 groups() ->
-    [{exits, [], [crashing_follower_is_exact, layer_out_in_simulated_time]},
+    [{exits, [], [crashing_follower_is_exact, layer_out_in_simulated_time,
+                    devices_out_in_simulated_time]},
      {faults, [], [no_fault_keeps_the_plain_trace, dropout_removes_readings,
                    stuck_repeats_the_reading, every_kind_changes_the_run, kill_restarts_in_place,
                    pru_port_restarts_in_place, lua_port_restarts_in_place,
@@ -99,6 +100,34 @@ layer_out_in_simulated_time(Config) ->
     {ok, _} = run_traced(#{faults => Burst}, "burst", Config),
     ?assertEqual([<<"1500 layer 1 out">>],
                  [L || L <- trace_lines("burst", Config), binary:match(L, <<"layer 1 out">>) =/= nomatch]).
+
+devices_out_in_simulated_time() ->
+    [{doc, "The devices' restart intensity counts simulated time too: with 3 restarts in "
+      "10 s allowed, a device killed 4 s apart keeps coming back; four kills within "
+      "0.3 s take the devices out at the fourth, and the run is the same twice."}].
+devices_out_in_simulated_time(Config) ->
+    Old = application:get_env(toroco, device_restart_intensity),
+    ok = application:set_env(toroco, device_restart_intensity, {3, 10}),
+    try
+        Spread = [{at, 1000 + 4000 * I, {kill, bumper}} || I <- lists:seq(0, 7)],
+        Burst = [{at, 1000 + 100 * I, {kill, bumper}} || I <- lists:seq(0, 3)],
+        {ok, _} = run_traced(#{faults => Spread}, "dspread", Config),
+        Spreaded = trace_lines("dspread", Config),
+        ?assertEqual([], matching(<<"devices out">>, Spreaded)),
+        ?assertEqual(8, length(matching(<<"bumper restarted">>, Spreaded))),
+        {ok, #{sha256 := A}} = run_traced(#{faults => Burst}, "dburst", Config),
+        {ok, #{sha256 := B}} = run_traced(#{faults => Burst}, "dburst2", Config),
+        ?assertEqual(A, B),
+        ?assertEqual([<<"1300 devices out">>], matching(<<"devices out">>, trace_lines("dburst", Config)))
+    after
+        case Old of
+            {ok, V} -> application:set_env(toroco, device_restart_intensity, V);
+            undefined -> application:unset_env(toroco, device_restart_intensity)
+        end
+    end.
+
+matching(Pattern, Lines) ->
+    [L || L <- Lines, binary:match(L, Pattern) =/= nomatch].
 
 %%====================================================================
 %% Faults

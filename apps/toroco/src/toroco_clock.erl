@@ -148,13 +148,14 @@ mode() ->
 -spec lockstep(#{trace => boolean(), nodes => [node()]}) -> ok | {error, {atom(), term()}}.
 lockstep(Opts) ->
     ok = toroco_lockstep:start(maps:with([trace], Opts)),
+    ok = toroco_devices_sup:follow_clock(),
     case maps:get(nodes, Opts, []) -- [node()] of
         [] ->
             ok;
         Nodes ->
             case toroco_lockstep:join(Nodes) of
                 ok -> ok;
-                Error -> ok = toroco_lockstep:stop(), Error
+                Error -> ok = realtime(), Error
             end
     end.
 
@@ -169,7 +170,8 @@ cut(Node, Ms) ->
 %% @doc Back to the monotonic clock (speed 1).
 -spec realtime() -> ok.
 realtime() ->
-    toroco_lockstep:stop().
+    ok = toroco_lockstep:stop(),
+    toroco_devices_sup:follow_clock().
 
 %% @doc Moves simulated time to `T' ms, firing the timers due on the way at
 %% their deadlines, then hands over the stimuli (`{Device, Msg}', each a

@@ -132,7 +132,7 @@
 %% an exit settling: the restarts awaited (name -> supervisor), the layers
 %% being taken out (supervisor -> layer), the barrier's answers awaited
 -record(settle, {awaiting = #{} :: #{atom() => pid() | undefined},
-                 takeout = #{} :: #{pid() => non_neg_integer()},
+                 takeout = #{} :: #{pid() => non_neg_integer() | devices},
                  barrier = none :: none | {reference(), #{pid() => true}},
                  %% the DOWNs that consumers monitoring the dead will hand over
                  expect = #{} :: #{{pid(), pid()} => true},
@@ -152,6 +152,7 @@
             %% each layer supervisor's restarts, in simulated ms, newest first
             restarts = #{} :: #{pid() => [integer()]},
             intensity = {5, 10} :: {non_neg_integer(), pos_integer()},
+            device_intensity = {20, 10} :: {non_neg_integer(), pos_integer()},
             unsettled = 0 :: non_neg_integer(),
             timers = gb_trees:empty() :: gb_trees:tree({integer(), non_neg_integer()},
                                                        {pid(), term(), term()}),
@@ -344,7 +345,9 @@ handle_call({start, Trace}, _From, _S) ->
     persistent_term:put(?MODULE, self()),
     ok = toroco_clock:lockstep_cell(Cell),
     {reply, ok, #s{cell = Cell, trace = case Trace of true -> []; false -> off end,
-                   intensity = application:get_env(toroco, layer_restart_intensity, {5, 10})}};
+                   intensity = application:get_env(toroco, layer_restart_intensity, {5, 10}),
+                   device_intensity = application:get_env(toroco, device_restart_intensity,
+                                                          {20, 10})}};
 handle_call(stop, _From, S = #s{cell = undefined}) ->
     {reply, ok, S};
 handle_call(stop, _From, S) ->
@@ -445,7 +448,14 @@ handle_info({?TAG, ready, _Pid, Name}, S = #s{settle = St = #settle{awaiting = A
                 [L | _] -> L;
                 [] -> none
             end,
-    {noreply, run(progress(intensity(Sup, Layer, S1)))};
+    {noreply, run(progress(intensity(Sup, group(Sup, Layer), S1)))};
+handle_info({?TAG, devices_out, Sup}, S = #s{restarts = R}) ->
+    S1 = S#s{restarts = maps:remove(Sup, R)},
+    {noreply, run(progress(case S1#s.settle of
+                               none -> S1;
+                               St = #settle{takeout = Out} ->
+                                   S1#s{settle = St#settle{takeout = maps:remove(Sup, Out)}}
+                           end))};
 handle_info({?TAG, down, Pid, Down}, S = #s{cell = Cell, downs = Downs, arrival = A})
   when Cell =/= undefined ->
     S1 = settling(S#s{downs = [{A, Pid, Down} | Downs], arrival = A + 1}),
@@ -502,11 +512,25 @@ up(Pid, Name, Sup, Layer, S = #s{procs = Procs, sups = Sups}) ->
                                 mon => erlang:monitor(process, Pid)}},
         sups = Sups1, world = toroco_lockstep_nodes:remember(Pid, S#s.world)}.
 
-%% A restart in a layer: more than the intensity allows within its period
-%% of simulated time takes the layer out, as its supervisor would.
-intensity(Sup, Layer, S = #s{restarts = R, intensity = {Max, Period}, now = Now,
-                             settle = St = #settle{takeout = Out}})
-  when is_integer(Layer), is_pid(Sup) ->
+%% What a restart counts against: its layer, or the devices (their
+%% supervisor's intensity), or nothing (routers, consumers).
+group(Sup, none) ->
+    case whereis(toroco_devices_sup) of
+        Sup when is_pid(Sup) -> devices;
+        _ -> none
+    end;
+group(_Sup, Layer) ->
+    Layer.
+
+%% A restart in a layer or of a device: more than the intensity allows
+%% within its period of simulated time takes the layer (the devices) out,
+%% as its supervisor would.
+intensity(Sup, Group, S = #s{restarts = R, now = Now, settle = St = #settle{takeout = Out}})
+  when is_pid(Sup), is_integer(Group); is_pid(Sup), Group =:= devices ->
+    {Max, Period} = case Group of
+                        devices -> S#s.device_intensity;
+                        _ -> S#s.intensity
+                    end,
     %% as OTP's supervisor counts: restarts at or after Now - Period
     Recent = [T || T <- [Now | maps:get(Sup, R, [])], T >= Now - Period * 1000],
     S1 = S#s{restarts = R#{Sup => Recent}},
@@ -514,14 +538,26 @@ intensity(Sup, Layer, S = #s{restarts = R, intensity = {Max, Period}, now = Now,
         true ->
             S2 = lists:foldl(fun watch/2, S1, [P || {P, #{sup := PS}} <- maps:to_list(S1#s.procs),
                                                    PS =:= Sup]),
-            _ = spawn(fun() -> toroco_layers_sup:take_out(Layer) end),
-            note(io_lib:format("layer ~b out", [Layer]),
-                 S2#s{settle = St#settle{takeout = Out#{Sup => Layer}}});
+            take_out(Sup, Group),
+            note(case Group of
+                     devices -> "devices out";
+                     _ -> io_lib:format("layer ~b out", [Group])
+                 end, S2#s{settle = St#settle{takeout = Out#{Sup => Group}}});
         false ->
             S1
     end;
-intensity(_Sup, _Layer, S) ->
+intensity(_Sup, _Group, S) ->
     S.
+
+%% A layer goes with its supervisor (seen as that one's DOWN); the devices
+%% leave theirs running, and say when they are gone.
+take_out(Sup, devices) ->
+    Self = self(),
+    _ = spawn(fun() -> ok = toroco_devices_sup:take_out(), Self ! {?TAG, devices_out, Sup} end),
+    ok;
+take_out(_Sup, Layer) ->
+    _ = spawn(fun() -> toroco_layers_sup:take_out(Layer) end),
+    ok.
 
 %% A process of the path died: the exit is written down, its restart is
 %% awaited unless it ended for good (normal, shutdown) or its supervisor
