@@ -63,6 +63,11 @@
 %% canonical line with its simulated time (emissions, deliveries, acks,
 %% timers, stimuli); {@link tick/3} hands the lines over.
 %%
+%% This module is the clock's process and its stepping; its state
+%% (`toroco_lockstep.hrl') is shared with its parts: `toroco_lockstep_settle'
+%% (exits), `toroco_lockstep_timers', `toroco_lockstep_remote' (the clock's
+%% side of several nodes) and `toroco_lockstep_trace' (the lines).
+%%
 %% Messages (from processes of this node, or of the world's other nodes):
 %% <table>
 %% <tr><th>message</th><th>from</th><th>effect</th></tr>
@@ -95,6 +100,12 @@
 -behaviour(gen_server).
 
 -include("toroco_wire.hrl").
+-include("toroco_lockstep.hrl").
+
+-import(toroco_lockstep_settle, [progress/1, exited/3, hold/3, watch/2]).
+-import(toroco_lockstep_trace, [trace/4, note/2]).
+
+-define(CALL_MS, 60000).
 
 -export([start_link/0, send/3, timer/4, cancel/2, done/1, up/2, ready/1, down/1, synced/1]).
 -export([monitored/2, demonitored/1]).
@@ -113,62 +124,6 @@
 %% A step's token: its receiver says `done' with it; another node's agent
 %% relays its own (toroco_lockstep_nodes).
 -type token() :: reference() | {relay, pid(), reference()}.
-
--define(TAG, '$toroco_lockstep').
--define(CALL_MS, 60000).
--define(LOG, #{domain => [toroco, clock]}).
--define(SETTLE_GUARD_MS, 5000).
-
-%% a queued message: its address, the process it was sent to, the message
--type item() :: {term(), pid() | undefined | remote, term()}.
-
-%% what a process of the path said when it was up
--type proc() :: #{name := atom(), sup := pid() | undefined,
-                  layer := non_neg_integer() | none | consumer, mon := reference()}.
-%% a send, a timer or a cancel that arrived while an exit settled, with its sender
--type held() :: {send, term(), pid() | undefined | remote, term()}
-              | {timer, pid(), term(), integer(), term()}
-              | {cancel, pid(), term()}.
-%% an exit settling: the restarts awaited (name -> supervisor), the layers
-%% being taken out (supervisor -> layer), the barrier's answers awaited
--record(settle, {awaiting = #{} :: #{atom() => pid() | undefined},
-                 takeout = #{} :: #{pid() => non_neg_integer() | devices},
-                 barrier = none :: none | {reference(), #{pid() => true}},
-                 %% the DOWNs that consumers monitoring the dead will hand over
-                 expect = #{} :: #{{pid(), pid()} => true},
-                 guard :: reference()}).
-
--record(s, {queue = queue:new() :: queue:queue(item()),
-            inflight = none :: none | {reference() | none, reference(), pid() | {pending, node()}},
-            procs = #{} :: #{pid() => proc()},
-            %% the supervisors of the processes of the path, monitored
-            sups = #{} :: #{pid() => {reference(), non_neg_integer() | none | consumer}},
-            %% the consumers that monitor the process in flight (or killed)
-            watch = #{} :: #{pid() => [pid()]},
-            settle = none :: none | #settle{},
-            held = [] :: [{non_neg_integer(), pid(), held()}],
-            downs = [] :: [{non_neg_integer(), pid(), term()}],
-            arrival = 0 :: non_neg_integer(),
-            %% each layer supervisor's restarts, in simulated ms, newest first
-            restarts = #{} :: #{pid() => [integer()]},
-            intensity = {5, 10} :: {non_neg_integer(), pos_integer()},
-            device_intensity = {20, 10} :: {non_neg_integer(), pos_integer()},
-            unsettled = 0 :: non_neg_integer(),
-            timers = gb_trees:empty() :: gb_trees:tree({integer(), non_neg_integer()},
-                                                       {pid(), term(), term()}),
-            owned = #{} :: #{{pid(), term()} => {integer(), non_neg_integer()}},
-            seq = 0 :: non_neg_integer(),
-            now = 0 :: integer(),
-            target = 0 :: integer(),
-            cell :: atomics:atomics_ref() | undefined,
-            waiters = [] :: [gen_server:from()],
-            %% a tick's stimuli: they go once its time is reached
-            stimuli = [] :: [stimulus()],
-            trace = off :: off | [iodata()],
-            steps = 0 :: non_neg_integer(),
-            lost = 0 :: non_neg_integer(),
-            %% the other nodes of the world, their cuts (toroco_lockstep_nodes)
-            world = none :: none | toroco_lockstep_nodes:world()}).
 
 %%====================================================================
 %% The event path's side
@@ -351,7 +306,7 @@ handle_call({start, Trace}, _From, _S) ->
 handle_call(stop, _From, S = #s{cell = undefined}) ->
     {reply, ok, S};
 handle_call(stop, _From, S) ->
-    #s{queue = Q} = flush(S),
+    #s{queue = Q} = toroco_lockstep_settle:flush(S),
     _ = persistent_term:erase(?MODULE),
     ok = toroco_clock:lockstep_cell(undefined),
     _ = [forward(To, Pid, Msg) || {To, Pid, Msg} <- queue:to_list(Q)],
@@ -369,7 +324,8 @@ handle_call(info, _From, S = #s{steps = N, lost = L, timers = Ts, now = Now}) ->
     {reply, #{steps => N, lost => L, timers => gb_trees:size(Ts), now_ms => Now,
               processes => map_size(S#s.procs), unsettled => S#s.unsettled}, S};
 handle_call({up, Pid, Name, Sup, Layer}, _From, S = #s{cell = Cell}) when Cell =/= undefined ->
-    {reply, ok, run(progress(up(Pid, Name, Sup, Layer, predecessor(Name, S))))};
+    S1 = toroco_lockstep_settle:predecessor(Name, S),
+    {reply, ok, run(progress(toroco_lockstep_settle:up(Pid, Name, Sup, Layer, S1)))};
 handle_call({up, _, _, _, _}, _From, S) ->
     {reply, ok, S};
 handle_call({join, _}, _From, S = #s{cell = undefined}) ->
@@ -380,24 +336,9 @@ handle_call({join, Nodes}, _From, S) ->
         Error -> {reply, Error, S}
     end;
 handle_call({cut, Node, Ms}, _From, S) ->
-    cut_node(Node, Ms, S);
+    toroco_lockstep_remote:cut(Node, Ms, S);
 handle_call(_Req, _From, S) ->
     {reply, {error, unknown_call}, S}.
-
-%% A new incarnation of `Name' starts: its predecessor is dead (its
-%% supervisor saw it go), and its exit is settled first, so that nothing
-%% the new one sends comes before that exit's consequences.
-predecessor(Name, S = #s{procs = Procs}) ->
-    case [{P, M} || {P, #{name := N, mon := M}} <- maps:to_list(Procs), N =:= Name] of
-        [{Old, Mon} | _] ->
-            receive
-                {'DOWN', Mon, process, Old, Reason} -> exited(Old, Reason, S)
-            after ?SETTLE_GUARD_MS ->
-                    exited(Old, unknown, S)
-            end;
-        [] ->
-            S
-    end.
 
 -spec handle_cast(term(), #s{}) -> {noreply, #s{}}.
 handle_cast(_Msg, S) ->
@@ -419,13 +360,13 @@ handle_info({?TAG, send, To, Pid, Msg, From}, S = #s{queue = Q, settle = Settle}
 handle_info({?TAG, timer, Pid, Kind, Deadline, Msg}, S = #s{settle = #settle{}}) ->
     {noreply, hold(Pid, {timer, Pid, Kind, Deadline, Msg}, S)};
 handle_info({?TAG, timer, Pid, Kind, Deadline, Msg}, S = #s{world = none}) ->
-    {noreply, run(set_timer(Pid, Kind, Deadline, Msg, S))};
+    {noreply, run(toroco_lockstep_timers:set(Pid, Kind, Deadline, Msg, S))};
 handle_info({?TAG, timer, Pid, Kind, Deadline, Msg}, S) ->
-    {noreply, run(world_timer(Pid, Kind, Deadline, Msg, S))};
+    {noreply, run(toroco_lockstep_timers:world(Pid, Kind, Deadline, Msg, S))};
 handle_info({?TAG, at, Token, Pid, By}, S) ->
-    {noreply, run(at(Token, Pid, By, S))};
+    {noreply, run(toroco_lockstep_remote:at(Token, Pid, By, S))};
 handle_info({?TAG, batched, Token, Lost, Rest}, S) ->
-    {noreply, run(batched(Token, Lost, Rest, S))};
+    {noreply, run(toroco_lockstep_remote:batched(Token, Lost, Rest, S))};
 handle_info({?TAG, monitor, C, Pid, Ref}, S = #s{world = W}) when W =/= none ->
     {noreply, S#s{world = toroco_lockstep_nodes:monitor(C, Pid, Ref, W)}};
 handle_info({?TAG, demonitor, Ref}, S = #s{world = W}) when W =/= none ->
@@ -433,7 +374,7 @@ handle_info({?TAG, demonitor, Ref}, S = #s{world = W}) when W =/= none ->
 handle_info({?TAG, cancel, Pid, Kind}, S = #s{settle = #settle{}}) ->
     {noreply, hold(Pid, {cancel, Pid, Kind}, S)};
 handle_info({?TAG, cancel, Pid, Kind}, S) ->
-    {noreply, run(drop_timer(Pid, Kind, S))};
+    {noreply, run(toroco_lockstep_timers:drop(Pid, Kind, S))};
 handle_info({?TAG, done, Token}, S = #s{inflight = {Token, Mon, _}}) ->
     erlang:demonitor(Mon, [flush]),
     {noreply, run(S#s{inflight = none})};
@@ -448,7 +389,8 @@ handle_info({?TAG, ready, _Pid, Name}, S = #s{settle = St = #settle{awaiting = A
                 [L | _] -> L;
                 [] -> none
             end,
-    {noreply, run(progress(intensity(Sup, group(Sup, Layer), S1)))};
+    Group = toroco_lockstep_settle:group(Sup, Layer),
+    {noreply, run(progress(toroco_lockstep_settle:intensity(Sup, Group, S1)))};
 handle_info({?TAG, devices_out, Sup}, S = #s{restarts = R}) ->
     S1 = S#s{restarts = maps:remove(Sup, R)},
     {noreply, run(progress(case S1#s.settle of
@@ -458,7 +400,7 @@ handle_info({?TAG, devices_out, Sup}, S = #s{restarts = R}) ->
                            end))};
 handle_info({?TAG, down, Pid, Down}, S = #s{cell = Cell, downs = Downs, arrival = A})
   when Cell =/= undefined ->
-    S1 = settling(S#s{downs = [{A, Pid, Down} | Downs], arrival = A + 1}),
+    S1 = toroco_lockstep_settle:settling(S#s{downs = [{A, Pid, Down} | Downs], arrival = A + 1}),
     St = #settle{expect = E} = S1#s.settle,
     {noreply, run(progress(S1#s{settle = St#settle{expect = maps:remove({Pid, element(4, Down)},
                                                                         E)}}))};
@@ -469,7 +411,7 @@ handle_info({?TAG, settle_guard, Guard}, S = #s{settle = #settle{guard = Guard} 
                    "layers going out: ~0p); going on", [?SETTLE_GUARD_MS,
                                                         maps:keys(St#settle.awaiting),
                                                         maps:values(St#settle.takeout)], ?LOG),
-    {noreply, run(flush(S#s{unsettled = S#s.unsettled + 1}))};
+    {noreply, run(toroco_lockstep_settle:flush(S#s{unsettled = S#s.unsettled + 1}))};
 handle_info({'DOWN', Mon, process, Pid, Reason}, S = #s{procs = Procs}) ->
     case Procs of
         #{Pid := #{mon := Mon}} ->
@@ -483,209 +425,15 @@ handle_info({'DOWN', Mon, process, Pid, Reason}, S = #s{procs = Procs}) ->
                 {_, Mon, _} ->
                     {noreply, run(S#s{inflight = none})};
                 _ ->
-                    {noreply, run(progress(sup_down(Pid, S)))}
+                    {noreply, run(progress(toroco_lockstep_settle:sup_down(Pid, S)))}
             end
     end;
 handle_info(_Info, S) ->
     {noreply, S}.
 
-set_timer(Pid, Kind, Deadline, Msg, S) ->
-    #s{timers = Ts, owned = Owned, seq = Seq} = S1 = drop_timer(Pid, Kind, S),
-    Key = {Deadline, Seq},
-    S1#s{timers = gb_trees:insert(Key, {Pid, Kind, Msg}, Ts),
-         owned = Owned#{{Pid, Kind} => Key}, seq = Seq + 1}.
-
 %%====================================================================
 %% Exits
 %%====================================================================
-
-%% A process of the path starts: monitored, with its supervisor. Its
-%% restart, if awaited, is done when it is ready (counted against its
-%% layer's intensity in simulated time then).
-up(Pid, Name, Sup, Layer, S = #s{procs = Procs, sups = Sups}) ->
-    Sups1 = case Sup of
-                undefined -> Sups;
-                _ when is_map_key(Sup, Sups) -> Sups;
-                _ -> Sups#{Sup => {erlang:monitor(process, Sup), Layer}}
-            end,
-    S#s{procs = Procs#{Pid => #{name => Name, sup => Sup, layer => Layer,
-                                mon => erlang:monitor(process, Pid)}},
-        sups = Sups1, world = toroco_lockstep_nodes:remember(Pid, S#s.world)}.
-
-%% What a restart counts against: its layer, or the devices (their
-%% supervisor's intensity), or nothing (routers, consumers).
-group(Sup, none) ->
-    case whereis(toroco_devices_sup) of
-        Sup when is_pid(Sup) -> devices;
-        _ -> none
-    end;
-group(_Sup, Layer) ->
-    Layer.
-
-%% A restart in a layer or of a device: more than the intensity allows
-%% within its period of simulated time takes the layer (the devices) out,
-%% as its supervisor would.
-intensity(Sup, Group, S = #s{restarts = R, now = Now, settle = St = #settle{takeout = Out}})
-  when is_pid(Sup), is_integer(Group); is_pid(Sup), Group =:= devices ->
-    {Max, Period} = case Group of
-                        devices -> S#s.device_intensity;
-                        _ -> S#s.intensity
-                    end,
-    %% as OTP's supervisor counts: restarts at or after Now - Period
-    Recent = [T || T <- [Now | maps:get(Sup, R, [])], T >= Now - Period * 1000],
-    S1 = S#s{restarts = R#{Sup => Recent}},
-    case length(Recent) > Max andalso not is_map_key(Sup, Out) of
-        true ->
-            S2 = lists:foldl(fun watch/2, S1, [P || {P, #{sup := PS}} <- maps:to_list(S1#s.procs),
-                                                   PS =:= Sup]),
-            take_out(Sup, Group),
-            note(case Group of
-                     devices -> "devices out";
-                     _ -> io_lib:format("layer ~b out", [Group])
-                 end, S2#s{settle = St#settle{takeout = Out#{Sup => Group}}});
-        false ->
-            S1
-    end;
-intensity(_Sup, _Group, S) ->
-    S.
-
-%% A layer goes with its supervisor (seen as that one's DOWN); the devices
-%% leave theirs running, and say when they are gone.
-take_out(Sup, devices) ->
-    Self = self(),
-    _ = spawn(fun() -> ok = toroco_devices_sup:take_out(), Self ! {?TAG, devices_out, Sup} end),
-    ok;
-take_out(_Sup, Layer) ->
-    _ = spawn(fun() -> toroco_layers_sup:take_out(Layer) end),
-    ok.
-
-%% A process of the path died: the exit is written down, its restart is
-%% awaited unless it ended for good (normal, shutdown) or its supervisor
-%% is going, and the node settles.
-exited(Pid, Reason, S = #s{procs = Procs, inflight = Inflight}) ->
-    #{Pid := #{name := Name, sup := Sup}} = Procs,
-    S1 = case Inflight of
-             {_, Mon, Pid} -> erlang:demonitor(Mon, [flush]), S#s{inflight = none};
-             _ -> S
-         end,
-    S2 = settling(note(io_lib:format("~s exit ~ts", [Name, reason(Reason)]),
-                       S1#s{procs = maps:remove(Pid, Procs)})),
-    #settle{awaiting = Awaiting, takeout = Out, barrier = Barrier} = S2#s.settle,
-    Restarts = not final(Reason) andalso is_pid(Sup) andalso is_map_key(Sup, S2#s.sups)
-        andalso not is_map_key(Sup, Out),
-    Barrier1 = case Barrier of
-                   {Ref, Waiting} -> {Ref, maps:remove(Pid, Waiting)};
-                   none -> none
-               end,
-    %% the consumers that monitored it hand its DOWN over (those already
-    %% gone or that already did are not waited for), and it will hand none
-    Handed = [C || {_, C, {'DOWN', _, process, D, _}} <- S2#s.downs, D =:= Pid],
-    Expect0 = maps:filter(fun({C, _}, _) -> C =/= Pid end, (S2#s.settle)#settle.expect),
-    Expect = lists:foldl(fun(C, E) -> E#{{C, Pid} => true} end, Expect0,
-                         [C || C <- maps:get(Pid, S2#s.watch, []), is_map_key(C, S2#s.procs),
-                               not lists:member(C, Handed)]),
-    S2#s{watch = maps:remove(Pid, S2#s.watch),
-         settle = (S2#s.settle)#settle{barrier = Barrier1, expect = Expect,
-                            awaiting = case Restarts of
-                                           true -> Awaiting#{Name => Sup};
-                                           false -> Awaiting
-                                       end}}.
-
-final(normal) -> true;
-final(shutdown) -> true;
-final({shutdown, _}) -> true;
-final(_) -> false.
-
-%% A supervisor of the path died (a layer taken out): the restarts it
-%% would have made are not awaited.
-sup_down(Sup, S = #s{sups = Sups}) ->
-    case maps:take(Sup, Sups) of
-        {{_, Layer}, Sups1} ->
-            S1 = S#s{sups = Sups1, restarts = maps:remove(Sup, S#s.restarts)},
-            case S1#s.settle of
-                St = #settle{awaiting = Awaiting, takeout = Out} ->
-                    S2 = case is_map_key(Sup, Out) orelse not is_integer(Layer) of
-                             true -> S1;
-                             false -> note(io_lib:format("layer ~b out", [Layer]), S1)
-                         end,
-                    S2#s{settle = St#settle{awaiting = maps:filter(fun(_, P) -> P =/= Sup end,
-                                                                    Awaiting),
-                                            takeout = maps:remove(Sup, Out)}};
-                none ->
-                    settling(S1)
-            end;
-        error ->
-            S
-    end.
-
-settling(S = #s{settle = none}) ->
-    Guard = make_ref(),
-    erlang:send_after(?SETTLE_GUARD_MS, self(), {?TAG, settle_guard, Guard}),
-    S#s{settle = #settle{guard = Guard}};
-settling(S) ->
-    S.
-
-%% The settle moves on: once no restart nor layer is awaited, the barrier
-%% goes to every process of the path; once all have answered, what the
-%% settle gathered is queued.
-progress(S = #s{settle = none}) ->
-    S;
-progress(S = #s{settle = #settle{awaiting = A, takeout = O, expect = E}})
-  when map_size(A) > 0; map_size(O) > 0; map_size(E) > 0 ->
-    S;
-progress(S = #s{settle = St = #settle{barrier = none}, procs = Procs}) ->
-    Ref = make_ref(),
-    _ = [Pid ! ?WIRE_BARRIER(Ref) || Pid <- maps:keys(Procs)],
-    progress_barrier(S#s{settle = St#settle{barrier = {Ref, maps:map(fun(_, _) -> true end,
-                                                                     Procs)}}});
-progress(S) ->
-    progress_barrier(S).
-
-progress_barrier(S = #s{settle = #settle{barrier = {_, Waiting}}}) when map_size(Waiting) > 0 ->
-    S;
-progress_barrier(S) ->
-    flush(S).
-
-%% The settle's end: the DOWNs by receiver's name, then the sends, timers
-%% and cancels by sender's name (each sender's in the order it made them).
-flush(S = #s{downs = Downs, held = Held, queue = Q}) ->
-    Q1 = lists:foldl(fun({_, _, Pid, Down}, Acc) -> queue:in({Pid, Pid, Down}, Acc) end,
-                     Q, lists:sort([{pname(Pid), A, Pid, Down} || {A, Pid, Down} <- Downs])),
-    lists:foldl(fun({_, _, H}, Acc) -> apply_held(H, Acc) end,
-                S#s{queue = Q1, downs = [], held = [], settle = none},
-                lists:sort([{pname(From), A, H} || {A, From, H} <- Held])).
-
-apply_held({send, To, Pid, Msg}, S = #s{queue = Q}) ->
-    S#s{queue = queue:in({To, Pid, Msg}, Q)};
-apply_held({timer, Pid, Kind, Deadline, Msg}, S) ->
-    set_timer(Pid, Kind, Deadline, Msg, S);
-apply_held({cancel, Pid, Kind}, S) ->
-    drop_timer(Pid, Kind, S).
-
-hold(From, H, S = #s{held = Held, arrival = A}) ->
-    S#s{held = [{A, From, H} | Held], arrival = A + 1}.
-
-pname(Pid) when node(Pid) =/= node() ->
-    toroco_lockstep_nodes:regname(Pid);
-pname(Pid) ->
-    case erlang:process_info(Pid, registered_name) of
-        {registered_name, Reg} -> atom_to_list(Reg);
-        _ -> "~"
-    end.
-
-%% An exit's reason as the trace shows it: no pids, no stack.
-reason({Reason, Stack}) when is_list(Stack), Stack =/= [], is_tuple(hd(Stack)),
-                             tuple_size(hd(Stack)) =:= 4 ->
-    reason(Reason);
-reason(Reason) ->
-    io_lib:format("~0tp", [strip(Reason)]).
-
-note(_Line, S = #s{trace = off}) ->
-    S;
-note(Line, S = #s{trace = Lines, now = Now, world = none}) ->
-    S#s{trace = [io_lib:format("~b ~ts~n", [Now, Line]) | Lines]};
-note(Line, S = #s{trace = Lines, now = Now}) ->
-    S#s{trace = [io_lib:format("~b ~s ~ts~n", [Now, node(), Line]) | Lines]}.
 
 %%====================================================================
 %% Stepping
@@ -709,10 +457,10 @@ run(S = #s{queue = Q}) ->
     end.
 
 due(S = #s{world = W}) when W =/= none ->
-    case toroco_lockstep_nodes:due(next_deadline(S), W) of
+    case toroco_lockstep_nodes:due(toroco_lockstep_timers:next_deadline(S), W) of
         {Event, Node, At} ->
             S1 = set_now(max(S#s.now, At), S),
-            run(world_event(Event, Node, S1));
+            run(toroco_lockstep_remote:event(Event, Node, S1));
         none ->
             due_timer(S)
     end;
@@ -774,7 +522,7 @@ deliver({Reg, Node} = To, remote, Msg, S = #s{world = W}) when W =/= none, Node 
     deliver(To, whereis(Reg), Msg, S);
 deliver(To, Target, Msg, S = #s{world = W}) when W =/= none, Target =/= undefined,
                                               not is_pid(Target) orelse node(Target) =/= node() ->
-    deliver_node(To, Target, Msg, S);
+    toroco_lockstep_remote:deliver(To, Target, Msg, S);
 deliver(To, Target, Msg, S = #s{steps = N}) ->
     case Target of
         Pid when is_pid(Pid) ->
@@ -793,23 +541,6 @@ deliver(To, Target, Msg, S = #s{steps = N}) ->
         undefined ->
             trace(To, undefined, Msg, S#s{lost = S#s.lost + 1})
     end.
-
-%% Who will hand over `Pid''s DOWN should it die now: the consumers that
-%% monitor it (read as its step goes, when only it works, or before it is
-%% killed). Only processes of the path are looked at.
-watch(Pid, S = #s{procs = Procs, watch = W}) when is_map_key(Pid, Procs), node(Pid) =:= node() ->
-    case erlang:process_info(Pid, monitored_by) of
-        {monitored_by, By} ->
-            S#s{watch = W#{Pid => [C || C <- By, is_pid(C),
-                                        case Procs of
-                                            #{C := #{layer := consumer}} -> true;
-                                            #{} -> false
-                                        end]}};
-        undefined ->
-            S
-    end;
-watch(_Pid, S) ->
-    S.
 
 %% The messages that are steps: those of the event path, which every
 %% receiver of them (the engine, the consumer shell) hands back as done.
@@ -851,96 +582,10 @@ whereis_local({Reg, Node}) when Node =:= node() -> whereis(Reg);
 whereis_local({_, _}) -> remote;
 whereis_local(Reg) when is_atom(Reg) -> whereis(Reg).
 
-drop_timer(Pid, Kind, S = #s{owned = Owned, timers = Ts}) ->
-    case Owned of
-        #{{Pid, Kind} := Key} ->
-            S#s{owned = maps:remove({Pid, Kind}, Owned), timers = gb_trees:delete(Key, Ts)};
-        #{} ->
-            S
-    end.
-
-%%====================================================================
-%% The trace
-%%====================================================================
-
-trace(_To, _Pid, _Msg, S = #s{trace = off}) ->
-    S;
-trace(To, Pid, Msg, S = #s{trace = Lines, now = Now, world = none}) ->
-    %% as io_lib:format("~b ~ts ~ts~n") would write it, without its cost
-    %% (a run's steps are most of the lab's work)
-    S#s{trace = [[integer_to_list(Now), $\s, name(To, Pid), $\s, line(Msg), $\n] | Lines]};
-trace(To, Pid, Msg, S = #s{trace = Lines, now = Now}) ->
-    Node = toroco_lockstep_nodes:node_of(case Pid of
-                                             _ when is_pid(Pid) -> Pid;
-                                             _ -> To
-                                         end),
-    S#s{trace = [[integer_to_list(Now), $\s, text(Node), $\s, name(To, Pid), $\s, line(Msg), $\n]
-                 | Lines]}.
-
-name({Reg, _Node}, _Pid) -> atom_to_list(Reg);
-name(Reg, _Pid) when is_atom(Reg) -> atom_to_list(Reg);
-name(_To, Pid) when is_pid(Pid), node(Pid) =/= node() ->
-    pname(Pid);
-name(_To, Pid) when is_pid(Pid) ->
-    case erlang:process_info(Pid, registered_name) of
-        {registered_name, Reg} -> atom_to_list(Reg);
-        _ -> "-"
-    end;
-name(_To, _) ->
-    "-".
-
-line(?WIRE_EVENT({E, O}, Op)) -> ["emit ", text(E), $., text(O), $\s, op(Op)];
-line(?WIRE_GATED({E, O}, Op)) -> ["gated ", text(E), $., text(O), $\s, op(Op)];
-line(?WIRE_IN(I, V)) -> ["deliver ", text(I), $\s, term(V)];
-line(?WIRE_IN(I, V, _)) -> ["deliver ", text(I), $\s, term(V)];
-line(?WIRE_ACK(I)) -> ["ack ", text(I)];
-line(?WIRE_ALIVE(_, {E, O}, _)) -> ["alive ", text(E), $., text(O)];
-%% a link timer (toroco_clock:link_timer/3) shows as the timer it is
-line(?WIRE_TIMER(Kind, {'$toroco_link', Msg})) -> ["timer ", term(Kind), $\s, term(Msg)];
-line(?WIRE_TIMER(Kind, Msg)) -> ["timer ", term(Kind), $\s, term(Msg)];
-line({stimulus, Msg}) -> ["stimulus ", term(Msg)];
-line({notice, _, Shown}) -> ["notice ", term(strip(Shown))];
-line({exit, Reason}) -> ["fault exit ", term(strip(Reason))];
-line({'DOWN', _, process, _, Reason}) -> ["down ", reason(Reason)];
-line(Msg) -> term(strip(Msg)).
-
-op({send, V, Hold}) -> ["send ", term(V), $\s, term(Hold)];
-op({set, V}) -> ["set ", term(V)];
-op(unset) -> "unset".
-
-%% `~s' of a name
-text(A) when is_atom(A) -> atom_to_list(A);
-text(T) -> io_lib:format("~s", [T]).
-
-%% @private `~0tp' of a term, the common cases (integers, atoms, tuples
-%% of them) written directly: the same characters (toroco_lockstep_SUITE
-%% checks).
+%% @private `~0tp' of a term, written fast (`toroco_lockstep_trace').
 -spec term(term()) -> iolist().
-term(T) when is_integer(T) -> integer_to_list(T);
-term(T) when is_atom(T) -> atom(T);
-term({}) -> "{}";
-term(T) when is_tuple(T) -> [${, lists:join($,, [term(E) || E <- tuple_to_list(T)]), $}];
-term(T) -> io_lib:format("~0tp", [T]).
-
-%% An atom as ~0tp writes it (quoted where it must be), remembered: a run
-%% names the same few atoms thousands of times, and deciding on the
-%% quotes is most of writing one.
-atom(A) ->
-    case get({?MODULE, A}) of
-        undefined ->
-            Text = io_lib:write_atom(A),
-            _ = length(get()) < 4096 andalso put({?MODULE, A}, Text),
-            Text;
-        Text ->
-            Text
-    end.
-
-%% Pids are not the same from one run to the next: a line names none.
-strip(T) when is_pid(T) -> pid;
-strip(T) when is_reference(T) -> ref;
-strip(T) when is_tuple(T) -> list_to_tuple([strip(E) || E <- tuple_to_list(T)]);
-strip(T) when is_list(T) -> [strip(E) || E <- T];
-strip(T) -> T.
+term(T) ->
+    toroco_lockstep_trace:term(T).
 
 %%====================================================================
 %% Several nodes (the world's side is toroco_lockstep_nodes)
@@ -952,84 +597,4 @@ across(To, Pid, Msg, From, S = #s{world = W}) ->
         true -> S#s{lost = S#s.lost + 1};
         false when S#s.settle =/= none -> hold(From, {send, To, Pid, Msg}, S);
         false -> run(S#s{queue = queue:in({To, Pid, Msg}, S#s.queue)})
-    end.
-
-%% A timer set inside its owner's step is ordered as on one node; one set
-%% outside any step is ordered by its owner's name (toroco_lockstep_nodes).
-world_timer(Pid, Kind, Deadline, Msg, S = #s{inflight = {_, _, Pid}}) ->
-    set_timer(Pid, Kind, Deadline, Msg, S);
-world_timer(Pid, Kind, Deadline, Msg, S = #s{inflight = {_, _, {pending, Node}}})
-  when node(Pid) =:= Node ->
-    %% set by a step of the batch in flight there
-    set_timer(Pid, Kind, Deadline, Msg, S);
-world_timer(Pid, Kind, Deadline, Msg, S) ->
-    S1 = #s{timers = Ts, owned = Owned} = drop_timer(Pid, Kind, S),
-    Key = toroco_lockstep_nodes:timer_key(Deadline, {pname(Pid), Kind}, Ts),
-    S1#s{timers = gb_trees:insert(Key, {Pid, Kind, Msg}, Ts),
-         owned = Owned#{{Pid, Kind} => Key}}.
-
-%% A step for a process of another node, through its agent (which answers
-%% `at'); none goes to a node killed.
-deliver_node(To, Target, Msg, S = #s{steps = N, world = W, now = Now, queue = Q}) ->
-    {More, Q1} = toroco_lockstep_nodes:batch({To, Target, Msg}, Q, W),
-    case More of
-        [] ->
-            case toroco_lockstep_nodes:step(To, Target, Msg, Now, W) of
-                lost -> S#s{lost = S#s.lost + 1};
-                {sent, Token, Node} ->
-                    trace(To, Target, Msg, S#s{inflight = {Token, make_ref(), {pending, Node}},
-                                               steps = N + 1})
-            end;
-        _ ->
-            %% the steps for that node next in the queue go as one batch
-            Items = [{To, Target, Msg} | More],
-            {Token, Node} = toroco_lockstep_nodes:step_batch(Items, Now),
-            lists:foldl(fun({T, P, M}, Acc) -> trace(T, P, M, Acc) end,
-                        S#s{queue = Q1, inflight = {Token, make_ref(), {pending, Node}},
-                            steps = N + length(Items)}, Items)
-    end.
-
-%% A batch is done (`Rest': the steps not run, since one's receiver died:
-%% they go first again).
-batched(Token, Lost, Rest, S = #s{inflight = {Token, _, {pending, _}}, queue = Q}) ->
-    S#s{inflight = none, lost = S#s.lost + Lost,
-        queue = queue:join(queue:from_list(Rest), Q)};
-batched(_Token, _Lost, _Rest, S) ->
-    S.
-
-%% The agent found the step's receiver (`undefined': none had the name)
-%% and who monitors it; the step is in flight to it.
-at(Token, Pid, By, S = #s{inflight = {Token, _, {pending, _}}, procs = Procs, watch = W})
-  when is_pid(Pid) ->
-    Consumers = [C || C <- By, case Procs of
-                                   #{C := #{layer := consumer}} -> true;
-                                   #{} -> false
-                               end],
-    S#s{inflight = {Token, erlang:monitor(process, Pid), Pid},
-        watch = case Procs of
-                    #{Pid := _} -> W#{Pid => Consumers};
-                    #{} -> W
-                end};
-at(Token, _Pid, _By, S = #s{inflight = {Token, _, {pending, _}}}) ->
-    S#s{inflight = none, lost = S#s.lost + 1};
-at(_Token, _Pid, _By, S) ->
-    S.
-
-%% How far time may go before the next timer: a world's event due by
-%% then comes first.
-next_deadline(#s{timers = Ts, target = Target}) ->
-    case gb_trees:is_empty(Ts) of
-        true -> Target;
-        false -> min(Target, element(1, element(1, gb_trees:smallest(Ts))))
-    end.
-
-%% A heal, or the net kernel noticing a cut: its line, and what it sends.
-world_event(Event, Node, S = #s{world = W, queue = Q}) ->
-    {W1, Line, Steps} = toroco_lockstep_nodes:event(Event, Node, fun pname/1, W),
-    note(Line, S#s{world = W1, queue = lists:foldl(fun queue:in/2, Q, Steps)}).
-
-cut_node(Node, Ms, S = #s{world = W, now = Now}) ->
-    case toroco_lockstep_nodes:cut(Node, Ms, Now, W) of
-        {ok, W1, Line} -> {reply, ok, note(Line, S#s{world = W1})};
-        Error -> {reply, Error, S}
     end.
