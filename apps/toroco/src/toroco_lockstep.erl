@@ -380,38 +380,10 @@ handle_info({?TAG, done, Token}, S = #s{inflight = {Token, Mon, _}}) ->
     {noreply, run(S#s{inflight = none})};
 handle_info({?TAG, done, _Stale}, S) ->
     {noreply, S};
-handle_info({?TAG, ready, _Pid, Name}, S = #s{settle = St = #settle{awaiting = Awaiting}})
-  when is_map_key(Name, Awaiting) ->
-    Sup = maps:get(Name, Awaiting),
-    S1 = note(io_lib:format("~s restarted", [Name]),
-              S#s{settle = St#settle{awaiting = maps:remove(Name, Awaiting)}}),
-    Layer = case [L || #{name := N, layer := L} <- maps:values(S1#s.procs), N =:= Name] of
-                [L | _] -> L;
-                [] -> none
-            end,
-    Group = toroco_lockstep_settle:group(Sup, Layer),
-    {noreply, run(progress(toroco_lockstep_settle:intensity(Sup, Group, S1)))};
-handle_info({?TAG, devices_out, Sup}, S = #s{restarts = R}) ->
-    S1 = S#s{restarts = maps:remove(Sup, R)},
-    {noreply, run(progress(case S1#s.settle of
-                               none -> S1;
-                               St = #settle{takeout = Out} ->
-                                   S1#s{settle = St#settle{takeout = maps:remove(Sup, Out)}}
-                           end))};
-handle_info({?TAG, down, Pid, Down}, S = #s{cell = Cell, downs = Downs, arrival = A})
-  when Cell =/= undefined ->
-    S1 = toroco_lockstep_settle:settling(S#s{downs = [{A, Pid, Down} | Downs], arrival = A + 1}),
-    St = #settle{expect = E} = S1#s.settle,
-    {noreply, run(progress(S1#s{settle = St#settle{expect = maps:remove({Pid, element(4, Down)},
-                                                                        E)}}))};
-handle_info({?TAG, synced, Ref, Pid}, S = #s{settle = St = #settle{barrier = {Ref, Waiting}}}) ->
-    {noreply, run(progress(S#s{settle = St#settle{barrier = {Ref, maps:remove(Pid, Waiting)}}}))};
-handle_info({?TAG, settle_guard, Guard}, S = #s{settle = #settle{guard = Guard} = St}) ->
-    logger:warning("toroco_lockstep: an exit did not settle within ~b ms (restarts awaited: ~0p, "
-                   "layers going out: ~0p); going on", [?SETTLE_GUARD_MS,
-                                                        maps:keys(St#settle.awaiting),
-                                                        maps:values(St#settle.takeout)], ?LOG),
-    {noreply, run(toroco_lockstep_settle:flush(S#s{unsettled = S#s.unsettled + 1}))};
+handle_info({?TAG, Kind, _} = Msg, S) when Kind =:= devices_out; Kind =:= settle_guard ->
+    settled(toroco_lockstep_settle:info(Msg, S), S);
+handle_info({?TAG, Kind, _, _} = Msg, S) when Kind =:= ready; Kind =:= down; Kind =:= synced ->
+    settled(toroco_lockstep_settle:info(Msg, S), S);
 handle_info({'DOWN', Mon, process, Pid, Reason}, S = #s{procs = Procs}) ->
     case Procs of
         #{Pid := #{mon := Mon}} ->
@@ -430,6 +402,10 @@ handle_info({'DOWN', Mon, process, Pid, Reason}, S = #s{procs = Procs}) ->
     end;
 handle_info(_Info, S) ->
     {noreply, S}.
+
+%% What an exit's settle made of a message: the node steps on from there.
+settled(unchanged, S) -> {noreply, S};
+settled(S1, _S) -> {noreply, run(S1)}.
 
 %%====================================================================
 %% Exits

@@ -10,8 +10,44 @@
 
 -import(toroco_lockstep_trace, [note/2, reason/1, pname/1]).
 
--export([predecessor/2, up/5, group/2, intensity/3, exited/3, sup_down/2, settling/1, progress/1,
+-export([info/2, predecessor/2, up/5, group/2, intensity/3, exited/3, sup_down/2, settling/1, progress/1,
          flush/1, hold/3, watch/2]).
+
+%% The messages of an exit's settle (`toroco_lockstep''s table): the
+%% state they leave, `unchanged' for one that comes too late to matter.
+-spec info(tuple(), #s{}) -> #s{} | unchanged.
+info({?TAG, ready, _Pid, Name}, S = #s{settle = St = #settle{awaiting = Awaiting}})
+  when is_map_key(Name, Awaiting) ->
+    Sup = maps:get(Name, Awaiting),
+    S1 = note(io_lib:format("~s restarted", [Name]),
+              S#s{settle = St#settle{awaiting = maps:remove(Name, Awaiting)}}),
+    Layer = case [L || #{name := N, layer := L} <- maps:values(S1#s.procs), N =:= Name] of
+                [L | _] -> L;
+                [] -> none
+            end,
+    progress(intensity(Sup, group(Sup, Layer), S1));
+info({?TAG, devices_out, Sup}, S = #s{restarts = R}) ->
+    S1 = S#s{restarts = maps:remove(Sup, R)},
+    progress(case S1#s.settle of
+                 none -> S1;
+                 St = #settle{takeout = Out} ->
+                     S1#s{settle = St#settle{takeout = maps:remove(Sup, Out)}}
+             end);
+info({?TAG, down, Pid, Down}, S = #s{cell = Cell, downs = Downs, arrival = A})
+  when Cell =/= undefined ->
+    S1 = settling(S#s{downs = [{A, Pid, Down} | Downs], arrival = A + 1}),
+    St = #settle{expect = E} = S1#s.settle,
+    progress(S1#s{settle = St#settle{expect = maps:remove({Pid, element(4, Down)}, E)}});
+info({?TAG, synced, Ref, Pid}, S = #s{settle = St = #settle{barrier = {Ref, Waiting}}}) ->
+    progress(S#s{settle = St#settle{barrier = {Ref, maps:remove(Pid, Waiting)}}});
+info({?TAG, settle_guard, Guard}, S = #s{settle = #settle{guard = Guard} = St}) ->
+    logger:warning("toroco_lockstep: an exit did not settle within ~b ms (restarts awaited: ~0p, "
+                   "layers going out: ~0p); going on", [?SETTLE_GUARD_MS,
+                                                        maps:keys(St#settle.awaiting),
+                                                        maps:values(St#settle.takeout)], ?LOG),
+    flush(S#s{unsettled = S#s.unsettled + 1});
+info(_Msg, _S) ->
+    unchanged.
 
 %% A new incarnation of `Name' starts: its predecessor is dead (its
 %% supervisor saw it go), and its exit is settled first, so that nothing
