@@ -91,7 +91,7 @@ observed(dashboard, _File, Fun) ->
 observed(flight, _File, Fun) ->
     live(),
     R = Fun(),
-    #{dropped := Dropped} = toroco_live_flight:window(),
+    #{dropped := Dropped} = toroco_rec:window(),
     _ = application:stop(toroco_live),
     {R, Dropped};
 observed(recording, File, Fun) ->
