@@ -1,5 +1,7 @@
-%% Recording, the flight recorder and replay (SPEC §12), read back with the
-%% format's reference reader (@mcap/core's indexed reader, in Node).
+%% Recording, the flight recorder and replay (SPEC §12, the application
+%% toroco_rec), through the names SPEC §12 gives them (toroco_live's), read
+%% back with the format's reference reader (@mcap/core's indexed reader, in
+%% Node).
 -module(toroco_rec_SUITE).
 -include_lib("common_test/include/ct.hrl").
 -include_lib("stdlib/include/assert.hrl").
@@ -15,7 +17,7 @@ all() ->
      foreign_files_refused,
      simulated_run_replays,
      recording_in_lockstep_has_simulated_time, lockstep_run_recorded_every_tick,
-     other_profiles_refused].
+     other_profiles_refused, runs_with_the_dashboard].
 
 suite() -> [{timetrap, {seconds, 90}}].
 
@@ -41,6 +43,16 @@ end_per_testcase(_Case, _Config) ->
 %%====================================================================
 %% Cases
 %%====================================================================
+
+runs_with_the_dashboard() ->
+    [{doc, "Starting toroco_live starts toroco_rec first (its flight recorder runs), and "
+      "toroco_live_world is the source of the world's snapshots it reads"}].
+runs_with_the_dashboard(_Config) ->
+    Apps = [A || {A, _, _} <- application:which_applications()],
+    ?assert(lists:member(toroco_rec, Apps)),
+    ?assert(is_pid(whereis(toroco_rec_flight))),
+    ?assertEqual(toroco_live_world, toroco_rec_world:source()),
+    #{events := _, dropped := 0} = toroco_rec:window().
 
 recording_in_lockstep_has_simulated_time() ->
     [{doc, "A recording made while a world is the clock (lockstep, SPEC §14) stamps its "
