@@ -65,11 +65,13 @@ label(true, What) -> What ++ ", recording".
 
 with_recording(false, _File, _Label, Run) ->
     _ = application:stop(toroco_live),
+    _ = application:stop(toroco_rec),
     {Run(), none};
 with_recording(flight, _File, _Label, Run) ->
     start_live(),
     Row = Run(),
     _ = application:stop(toroco_live),
+    _ = application:stop(toroco_rec),
     {Row, none};
 with_recording(true, File, Label, Run) ->
     start_live(),
@@ -77,6 +79,7 @@ with_recording(true, File, Label, Run) ->
     Row = Run(),
     {ok, #{messages := M, dropped := D}} = toroco_live:stop_recording(),
     _ = application:stop(toroco_live),
+    _ = application:stop(toroco_rec),
     {Row#{lost => maps:get(lost, Row) + D},
      #{label => Label, messages => M, dropped => D, bytes => filelib:file_size(File)}}.
 

@@ -87,12 +87,14 @@ observed(dashboard, _File, Fun) ->
     toroco_live_test_client:ws_close(Client),
     ok = toroco_live:stop(),
     _ = application:stop(toroco_live),
+    _ = application:stop(toroco_rec),
     {R, Dropped};
 observed(flight, _File, Fun) ->
     live(),
     R = Fun(),
-    #{dropped := Dropped} = toroco_live_flight:window(),
+    #{dropped := Dropped} = toroco_rec:window(),
     _ = application:stop(toroco_live),
+    _ = application:stop(toroco_rec),
     {R, Dropped};
 observed(recording, File, Fun) ->
     live(),
@@ -100,6 +102,7 @@ observed(recording, File, Fun) ->
     R = Fun(),
     {ok, #{dropped := Dropped}} = toroco_live:stop_recording(),
     _ = application:stop(toroco_live),
+    _ = application:stop(toroco_rec),
     {R, Dropped}.
 
 %% The recorders only: no dashboard or bridge listening.
@@ -146,6 +149,7 @@ page_at_1khz(Secs) ->
     toroco_live_test_client:ws_close(Client),
     ok = toroco_live:stop(),
     _ = application:stop(toroco_live),
+    _ = application:stop(toroco_rec),
     Frames / Secs.
 
 feed(T0, K) ->

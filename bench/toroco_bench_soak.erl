@@ -57,7 +57,7 @@ main([Dir]) ->
     Frames = stop_reader(Page),
     Fx = stop_reader(Foxglove),
     #{tap_dropped := HubDropped} = toroco_live_hub:stats(),
-    #{dropped := FlightDropped} = toroco_live_flight:window(),
+    #{dropped := FlightDropped} = toroco_rec:window(),
     {ok, #{messages := Recorded, dropped := RecDropped}} = toroco_live:stop_recording(),
     ok = toroco_live:stop(),
     table(#{secs => Secs, samples => lists:reverse(Samples), injected => Injected,

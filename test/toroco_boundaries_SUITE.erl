@@ -14,18 +14,23 @@
 -compile([export_all, nowarn_export_all]).
 
 -define(API, [toroco, toroco_clock, toroco_behavior, toroco_device, toroco_slots]).
--define(OTHERS, [toroco_hw, torobot, toroco_lib, toroco_live, toroco_lua, toroco_ros]).
+-define(OTHERS, [toroco_hw, torobot, toroco_lib, toroco_rec, toroco_live, toroco_lua,
+                 toroco_ros]).
 %% What toroco_live documents as its API for the applications built on it
 %% (toroco_live's module doc, doc/dashboard.md "Built on toroco_live").
 -define(LIVE_API, [toroco_live, toroco_live_listener, toroco_live_ws_conn,
-                   toroco_live_ws_frame, toroco_live_clients, toroco_live_tap, toroco_live_bridge,
-                   toroco_live_profile, toroco_live_extensions, toroco_live_metrics,
-                   toroco_live_json, toroco_live_world, toroco_live_channels, toroco_live_http,
-                   toroco_live_auth]).
+                   toroco_live_ws_frame, toroco_live_clients, toroco_live_bridge,
+                   toroco_live_extensions, toroco_live_metrics, toroco_live_world,
+                   toroco_live_http, toroco_live_auth]).
+%% What toroco_rec documents as its API for the applications built on it
+%% (toroco_rec's module doc, doc/recording.md "Built on toroco_rec").
+-define(REC_API, [toroco_rec, toroco_rec_json, toroco_rec_channels, toroco_rec_tap,
+                  toroco_rec_mcap, toroco_rec_profile, toroco_rec_world]).
 
 all() ->
     [no_call_into_the_runtimes_insides, no_include_of_the_runtimes_headers,
-     suites_use_the_api_only, ros_uses_the_dashboards_api_only, dashboard_never_calls_ros].
+     suites_use_the_api_only, ros_uses_the_dashboards_api_only, dashboard_never_calls_ros,
+     live_and_ros_use_the_records_api_only, records_never_call_live_nor_ros].
 
 no_call_into_the_runtimes_insides() ->
     [{doc, "No call from toroco_hw, torobot, toroco_lib, toroco_live or toroco_lua reaches a module of "
@@ -59,6 +64,22 @@ dashboard_never_calls_ros() ->
 dashboard_never_calls_ros(_Config) ->
     ?assertEqual([], xref_query([toroco_live, toroco_ros],
                                 "(E | toroco_live : App) || toroco_ros : App")).
+
+live_and_ros_use_the_records_api_only() ->
+    [{doc, "toroco_live and toroco_ros call toroco_rec only through the modules toroco_rec "
+      "documents as its API"}].
+live_and_ros_use_the_records_api_only(_Config) ->
+    Query = lists:flatten(
+              io_lib:format("(E | [toroco_live, toroco_ros] : App) || (toroco_rec : App - ~w : Mod)",
+                            [?REC_API])),
+    ?assertEqual([], xref_query([toroco_rec, toroco_live, toroco_ros], Query)).
+
+records_never_call_live_nor_ros() ->
+    [{doc, "No call from toroco_rec reaches toroco_live or toroco_ros (they are built on it, "
+      "the dependency goes one way)"}].
+records_never_call_live_nor_ros(_Config) ->
+    ?assertEqual([], xref_query([toroco_rec, toroco_live, toroco_ros],
+                                "(E | toroco_rec : App) || [toroco_live, toroco_ros] : App")).
 
 xref_query(Apps, Query) ->
     {ok, X} = xref:start([{xref_mode, functions}]),

@@ -19,7 +19,7 @@
 %% <h3>JSON</h3>
 %% The datagrams are written with `jiffy', the project's JSON encoder
 %% (`toroco_net' and `toroco_udp_camera' decode them with it; the dashboard
-%% uses it through `toroco_live_json', and `toroco_live_json_text' is the
+%% uses it through `toroco_rec_json', and `toroco_rec_json_text' is the
 %% one plain-Erlang writer, for the event path's small messages where a NIF
 %% call's fixed cost would dominate).
 -module(torobot_world_sensing).

@@ -14,12 +14,12 @@
 %% port), `toroco_live_ws_conn' (a WebSocket connection, a behaviour),
 %% `toroco_live_ws_frame' (frames, server
 %% and client side), `toroco_live_clients' (a hub's clients, per-client
-%% bounds and the tap), `toroco_live_tap' (the tap's client),
-%% `toroco_live_bridge', `toroco_live_profile', `toroco_live_extensions',
-%% `toroco_live_metrics:family/4', and the helpers `toroco_live_json',
-%% `toroco_live_channels', `toroco_live_world', `toroco_live_auth' and
-%% `toroco_live_http:peer/1', `token/1' (doc/dashboard.md, "Built on
-%% toroco_live").
+%% bounds and the tap), `toroco_live_bridge', `toroco_live_extensions',
+%% `toroco_live_metrics:family/4', and the helpers `toroco_live_world',
+%% `toroco_live_auth' and `toroco_live_http:peer/1', `token/1'
+%% (doc/dashboard.md, "Built on toroco_live"). The JSON of terms, the
+%% channels, the tap's client and recordings are the application
+%% `toroco_rec''s, which this one is built on (`toroco_rec').
 %%
 %% <b>ROS 2</b> (SPEC §15) is the application `toroco_ros', built on this
 %% one: its rosbridge server is a bridge (`toroco_live_bridge') that listens
@@ -27,11 +27,12 @@
 %% ({@link rosbridge_connect/2}, {@link rosbridge_disconnect/1}, {@link
 %% rosbridge_clients/0}, which call what it added with
 %% `toroco_live_extensions'), and its recording profile `ros2' is a
-%% `toroco_live_profile'.
+%% `toroco_rec_profile'.
 %%
-%% <b>Recordings</b> (SPEC §12): {@link record/2}, {@link stop_recording/0}
-%% (MCAP files, `toroco_live_recorder'), {@link dump/1} (the flight
-%% recorder, `toroco_live_flight'), {@link replay/2} (`toroco_live_replay').
+%% <b>Recordings</b> (SPEC §12) are the application `toroco_rec''s, which
+%% `toroco_live' depends on (so it runs whenever this one does): {@link
+%% record/2}, {@link stop_recording/0}, {@link dump/1} and {@link replay/2}
+%% call `toroco_rec''s functions of the same names.
 %%
 %% Options (SPEC §11): `ip' (default `{127,0,0,1}'), `http' (default 8080,
 %% 0 = any free port), `foxglove' (default 8765, 0 = any free port, or
@@ -166,39 +167,39 @@ base_url(#{ip := Ip, http := Port} = Config) ->
 %%====================================================================
 
 %% @doc Records the events of `kinds' (default all) about `names' (default
-%% all) to an MCAP file. `profile' `foxglove' (the default): the Foxglove
-%% bridge's channels and JSON Schemas; `ros2' (SPEC §15): the MCAP profile
-%% `ros2', the robot's ROS 2 topics with `ros2msg' schemas and `cdr'
-%% messages, `std_msgs/msg/String' for the rest (`toroco_live_recorder').
-%% Writing never holds up the robot: past a bounded buffer events are
-%% dropped and counted. `{error, {bad_option, {profile, V}}}' for another
-%% profile.
+%% all) to an MCAP file: `toroco_rec:record/2'. `profile' `foxglove' (the
+%% default): the Foxglove bridge's channels and JSON Schemas; `ros2' (SPEC
+%% §15, while `toroco_ros' runs): the MCAP profile `ros2', the robot's ROS
+%% 2 topics with `ros2msg' schemas and `cdr' messages, `std_msgs/msg/String'
+%% for the rest. `{error, {bad_option, {profile, V}}}' for another profile.
 -spec record(file:filename_all(), #{kinds => [emit | deliver | router | lifecycle],
                                     names => all | [atom()],
                                     profile => foxglove | ros2}) -> ok | {error, term()}.
 record(Path, Opts) ->
-    toroco_live_flight:record(Path, Opts).
+    toroco_rec:record(Path, Opts).
 
-%% @doc Ends the recording and completes the file.
+%% @doc Ends the recording and completes the file: `toroco_rec:stop_recording/0'.
 -spec stop_recording() -> {ok, #{path := file:filename_all(), messages := non_neg_integer(),
                                  dropped := non_neg_integer(),
                                  unencodable => non_neg_integer()}} | {error, term()}.
 stop_recording() ->
-    toroco_live_flight:stop_recording().
+    toroco_rec:stop_recording().
 
-%% @doc Writes the flight recorder's last `flight_seconds' to `Path'.
--spec dump(file:filename_all()) -> {ok, #{messages := non_neg_integer(), path := file:filename_all()}}
-                                       | {error, term()}.
+%% @doc Writes the flight recorder's last `flight_seconds' to `Path':
+%% `toroco_rec:dump/1'.
+-spec dump(file:filename_all()) ->
+          {ok, #{messages := non_neg_integer(), path := file:filename_all()}} | {error, term()}.
 dump(Path) ->
-    toroco_live_flight:dump(Path).
+    toroco_rec:dump(Path).
 
 %% @doc Re-emits a recording's events of `sources' into the running wiring
-%% at their recorded pace and compares the actuators' deliveries.
+%% at their recorded pace and compares the actuators' deliveries:
+%% `toroco_rec:replay/2'.
 -spec replay(file:filename_all(), #{sources := [atom()]}) ->
           {ok, #{replayed := non_neg_integer(), matched := non_neg_integer(),
                  differed := [map()]}} | {error, term()}.
 replay(Path, Opts) ->
-    toroco_live_replay:replay(Path, Opts).
+    toroco_rec:replay(Path, Opts).
 
 %%====================================================================
 %% Client mode

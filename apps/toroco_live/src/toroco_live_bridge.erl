@@ -54,10 +54,10 @@
 
 -type bridge() :: #{supervisor := atom(), id := module(), listener := atom()}.
 %% What a hub listens with: its listener's name, the mochiweb loop of a
-%% connection, the tap's options (`toroco_live_tap:new/1'), the most
+%% connection, the tap's options (`toroco_rec_tap:new/1'), the most
 %% messages a connection may have waiting.
 -type spec() :: #{listener := atom(), serve := fun((term()) -> term()),
-                  tap := toroco_live_tap:opts(), conn_queue := pos_integer()}.
+                  tap := toroco_rec_tap:opts(), conn_queue := pos_integer()}.
 
 -record(hub, {module :: module(),
               listener :: pid(),

@@ -19,13 +19,13 @@
 -record(clients, {conns = #{} :: #{pid() => reference()},
                   subs = #{} :: #{term() => [pid()]},
                   dropped = #{} :: #{pid() => pos_integer()},
-                  tap :: toroco_live_tap:tap()}).
+                  tap :: toroco_rec_tap:tap()}).
 -opaque clients() :: #clients{}.
 
-%% @doc Nobody connected; `TapOpts' as `toroco_live_tap:new/1''s.
--spec new(toroco_live_tap:opts()) -> clients().
+%% @doc Nobody connected; `TapOpts' as `toroco_rec_tap:new/1''s.
+-spec new(toroco_rec_tap:opts()) -> clients().
 new(TapOpts) ->
-    #clients{tap = toroco_live_tap:new(TapOpts)}.
+    #clients{tap = toroco_rec_tap:new(TapOpts)}.
 
 %% @doc `Conn' joined: it is monitored and the tap is taken.
 -spec join(pid(), clients()) -> clients().
@@ -34,7 +34,7 @@ join(Conn, Cl = #clients{conns = Conns, tap = Tap}) ->
                  #{Conn := _} -> Conns;
                  #{} -> Conns#{Conn => monitor(process, Conn)}
              end,
-    Cl#clients{conns = Conns1, tap = toroco_live_tap:ensure_on(Tap)}.
+    Cl#clients{conns = Conns1, tap = toroco_rec_tap:ensure_on(Tap)}.
 
 %% A client gone: it is forgotten with its subscriptions, and the tap is
 %% let go when it was the last.
@@ -43,7 +43,7 @@ down(Conn, Cl = #clients{conns = Conns}) ->
                       Cl#clients{conns = maps:remove(Conn, Conns),
                                  dropped = maps:remove(Conn, Cl#clients.dropped)}),
     case map_size(Cl1#clients.conns) of
-        0 -> Cl1#clients{tap = toroco_live_tap:off(Cl1#clients.tap), subs = #{}};
+        0 -> Cl1#clients{tap = toroco_rec_tap:off(Cl1#clients.tap), subs = #{}};
         _ -> Cl1
     end.
 
@@ -51,7 +51,7 @@ down(Conn, Cl = #clients{conns = Conns}) ->
 %% still on their way, are returned for the hub to pass on.
 -spec stop(clients()) -> [term()].
 stop(#clients{tap = Tap}) ->
-    {Events, _} = toroco_live_tap:close(Tap),
+    {Events, _} = toroco_rec_tap:close(Tap),
     Events.
 
 -spec member(pid(), clients()) -> boolean().
@@ -123,11 +123,11 @@ broadcast(Msg, #clients{conns = Conns}) ->
 handle({'DOWN', _, process, Conn, _}, Cl = #clients{conns = Conns}) when is_map_key(Conn, Conns) ->
     {down, Conn, down(Conn, Cl)};
 handle(Info, Cl = #clients{tap = Tap, conns = Conns}) ->
-    case toroco_live_tap:handle(Info, Tap) of
+    case toroco_rec_tap:handle(Info, Tap) of
         {events, Events} -> {events, Events};
         {down, Tap1} -> {ok, Cl#clients{tap = Tap1}};
         {retry, Tap1} when map_size(Conns) > 0 ->
-            {retapped, Cl#clients{tap = toroco_live_tap:ensure_on(Tap1)}};
+            {retapped, Cl#clients{tap = toroco_rec_tap:ensure_on(Tap1)}};
         {retry, Tap1} -> {ok, Cl#clients{tap = Tap1}};
         _ -> ignore
     end.

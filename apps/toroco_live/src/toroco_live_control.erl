@@ -78,7 +78,7 @@ action(A, #{<<"name">> := Name}) when A =:= <<"suspend">>; A =:= <<"resume">>;
          end);
 action(<<"inject">>, #{<<"source">> := [E, O], <<"term">> := Text} = Req) ->
     Src = {known(E, emitter), known(O, output)},
-    Value = case toroco_live_json:parse_term(Text) of
+    Value = case toroco_rec_json:parse_term(Text) of
                 {ok, V} -> V;
                 {error, {bad_term, Why}} ->
                     refuse(400, bad_term, "\"term\" must be an Erlang literal: ~ts", [Why])
@@ -98,7 +98,7 @@ action(<<"load_wiring">>, _Req) ->
     refuse(400, bad_request, "load_wiring needs \"file\", a path on the node", []);
 action(A, _Req) ->
     refuse(400, unknown_action, "unknown action ~ts; one of suspend, resume, reset, restart, "
-           "inject, load_wiring", [toroco_live_json:term_text(A)]).
+           "inject, load_wiring", [toroco_rec_json:term_text(A)]).
 
 inject_opts(#{<<"latch">> := true}) -> #{latch => true};
 inject_opts(#{<<"hold">> := <<"infinity">>}) -> #{hold => infinity};
@@ -123,7 +123,7 @@ known(Other, What) ->
     refuse(400, bad_request, "~s must be a string, not ~ts", [What, printable(Other)]).
 
 printable(B) when is_binary(B) -> [$", B, $"];
-printable(T) -> toroco_live_json:term_text(T).
+printable(T) -> toroco_rec_json:term_text(T).
 
 %% Brooks' reset (SPEC §4) and a restart through the layer's supervisor,
 %% wherever the behavior runs.

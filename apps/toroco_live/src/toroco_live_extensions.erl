@@ -6,9 +6,6 @@
 %%
 %% <table>
 %% <tr><th>kind</th><th>name</th><th>value</th><th>used by</th></tr>
-%% <tr><td>`profile'</td><td>a recording profile (`ros2')</td><td>a module of the
-%%   `toroco_live_profile' behaviour</td><td>`toroco_live:record/2' (`profile => Name')
-%%   and `toroco_live:replay/2'</td></tr>
 %% <tr><td>`metrics'</td><td>any atom</td><td>`{M, F}': `M:F()' returns the
 %%   families it adds to `/metrics' (`toroco_live_metrics:family/4')</td><td>`GET /metrics'</td></tr>
 %% <tr><td>`bridge'</td><td>its option key (`rosbridge')</td><td>`#{supervisor => Sup, id =>
@@ -29,7 +26,7 @@
 
 -export_type([kind/0]).
 
--type kind() :: profile | metrics | bridge | client.
+-type kind() :: metrics | bridge | client.
 
 %% @doc Adds (or replaces) extension `Name' of `Kind'.
 -spec add(kind(), atom(), term()) -> ok.

@@ -14,7 +14,7 @@
 %% the upgrade), so a slow or hostile client stalls only itself.
 %%
 %% Channels follow the running wiring: they are re-read
-%% (`toroco_live_channels:from_wiring/0') on every lifecycle event, when
+%% (`toroco_rec_channels:from_wiring/0') on every lifecycle event, when
 %% an event names a channel not yet known, and every
 %% `?REFRESH_MS' (wiring changes make no event of their own), and the
 %% difference is advertised and unadvertised to every client.
@@ -52,17 +52,17 @@
 %% tap drops (and counts) rather than let clients, joins among them, wait.
 -define(TAP_BUFFER, 1000).
 
--type channel() :: #{id := pos_integer(), key := toroco_live_channels:key(), topic := binary(),
+-type channel() :: #{id := pos_integer(), key := toroco_rec_channels:key(), topic := binary(),
                      schema_name := binary(), schema := binary()}.
 -type fox() :: {advertise, [channel()]} | {unadvertise, [pos_integer()]}
              | {graph, {list(), list()}} | {message, pos_integer(), integer(), binary()}
              | {dropped, pos_integer()}.
 
--record(fox, {ids = #{} :: #{toroco_live_channels:key() => pos_integer()},
+-record(fox, {ids = #{} :: #{toroco_rec_channels:key() => pos_integer()},
               next_id = 1 :: pos_integer(),
-              wiring = #{keys => [], receivers => #{}} :: toroco_live_channels:wiring(),
-              world = [] :: [toroco_live_channels:key()],
-              scene = none :: toroco_live_channels:scene_sent()}).
+              wiring = #{keys => [], receivers => #{}} :: toroco_rec_channels:wiring(),
+              world = [] :: [toroco_rec_channels:key()],
+              scene = none :: toroco_rec_channels:scene_sent()}).
 
 %%====================================================================
 %% API
@@ -130,12 +130,12 @@ handle_join(_Conn, H0) ->
     %% read before it joins: the reply carries every channel
     H = refresh(H0, true),
     F = toroco_live_bridge:state(H),
-    {{ok, channels(F, all_keys(F)), toroco_live_channels:graph(F#fox.wiring)}, H}.
+    {{ok, channels(F, all_keys(F)), toroco_rec_channels:graph(F#fox.wiring)}, H}.
 
 -spec handle_world(map() | none, toroco_live_bridge:hub()) -> toroco_live_bridge:hub().
 handle_world(Snapshot, H) ->
     F = toroco_live_bridge:state(H),
-    {Msgs, Scene} = toroco_live_channels:world(Snapshot, erlang:system_time(nanosecond),
+    {Msgs, Scene} = toroco_rec_channels:world(Snapshot, erlang:system_time(nanosecond),
                                                F#fox.scene),
     Keys = [K || {K, _, _} <- Msgs],
     H1 = case F#fox.world of
@@ -186,7 +186,7 @@ set(F, H) -> toroco_live_bridge:set_state(F, H).
 
 %% An event's JSON is made only when a client subscribed to its channel.
 send_event(Event, H) ->
-    case toroco_live_channels:event_key(Event) of
+    case toroco_rec_channels:event_key(Event) of
         none -> H;
         Key ->
             H1 = case maps:is_key(Key, (toroco_live_bridge:state(H))#fox.ids) of
@@ -196,7 +196,7 @@ send_event(Event, H) ->
             Id = maps:get(Key, (toroco_live_bridge:state(H1))#fox.ids, none),
             case toroco_live_bridge:subscribed(Id, H1) of
                 false -> H1;
-                true -> deliver(toroco_live_channels:of_event(Event), H1)
+                true -> deliver(toroco_rec_channels:of_event(Event), H1)
             end
     end.
 
@@ -220,7 +220,7 @@ refresh(H, Joining) ->
     end.
 
 refresh(H, F = #fox{wiring = Old}, Conns) ->
-    New = try toroco_live_channels:from_wiring()
+    New = try toroco_rec_channels:from_wiring()
           catch _:_ -> Old
           end,
     #{keys := OldKeys} = Old,
@@ -230,7 +230,7 @@ refresh(H, F = #fox{wiring = Old}, Conns) ->
     GoneIds = [maps:get(K, (toroco_live_bridge:state(H1))#fox.ids) || K <- Gone],
     _ = [C ! {fox, unadvertise, GoneIds} || GoneIds =/= [], C <- Conns],
     New =:= Old orelse
-        [C ! {fox, graph, toroco_live_channels:graph(New)} || C <- Conns],
+        [C ! {fox, graph, toroco_rec_channels:graph(New)} || C <- Conns],
     Cl = toroco_live_clients:forget(GoneIds, toroco_live_bridge:clients(H1)),
     toroco_live_bridge:set_clients(Cl, H1).
 
@@ -249,7 +249,7 @@ all_keys(#fox{wiring = #{keys := Keys}, world = World}) -> Keys ++ World.
 
 channels(#fox{ids = Ids}, Keys) ->
     [begin
-         {Name, Schema} = toroco_live_channels:schema(K),
-         #{id => maps:get(K, Ids), key => K, topic => toroco_live_channels:topic(K),
+         {Name, Schema} = toroco_rec_channels:schema(K),
+         #{id => maps:get(K, Ids), key => K, topic => toroco_rec_channels:topic(K),
            schema_name => Name, schema => Schema}
      end || K <- Keys, maps:is_key(K, Ids)].

@@ -17,7 +17,7 @@
 %% <li>with `clientPublish': client `advertise'/`unadvertise' of
 %%     `/toroco/out/E/O' or `/toroco/in/R/I' topics, and binary Client
 %%     Message Data frames carrying `{"term": "..."}', read by
-%%     `toroco_live_json:parse_term/1' (never evaluated) and injected with
+%%     `toroco_rec_json:parse_term/1' (never evaluated) and injected with
 %%     `toroco:inject/2': on an output as that output, on an input as the
 %%     input's highest-priority source (what would win it).</li>
 %% </ul>
@@ -39,7 +39,7 @@
                channels = #{} :: #{pos_integer() => toroco_live_foxglove:channel()},
                subs = #{} :: #{non_neg_integer() => pos_integer()},      % sub id => channel
                by_channel = #{} :: #{pos_integer() => non_neg_integer()},
-               client_channels = #{} :: #{non_neg_integer() => toroco_live_channels:key()},
+               client_channels = #{} :: #{non_neg_integer() => toroco_rec_channels:key()},
                graph = none :: none | {list(), list()},
                graph_subscribed = false :: boolean(),
                faults = 0 :: non_neg_integer()}).
@@ -200,7 +200,7 @@ unsubscribe(Sub, C = #conn{subs = Subs, by_channel = By}) ->
 
 client_advertise(#{<<"id">> := Id, <<"topic">> := Topic} = Ch, C = #conn{client_channels = CC})
   when is_integer(Id), is_binary(Topic) ->
-    case {maps:get(<<"encoding">>, Ch, <<"json">>), toroco_live_channels:key(Topic)} of
+    case {maps:get(<<"encoding">>, Ch, <<"json">>), toroco_rec_channels:key(Topic)} of
         {<<"json">>, {ok, {Kind, _, _} = Key}} when Kind =:= out; Kind =:= in ->
             {ok, C#conn{client_channels = CC#{Id => Key}}};
         {<<"json">>, _} ->
@@ -228,7 +228,7 @@ publish(Id, Payload, C = #conn{client_channels = CC}) ->
 inject(Key, Payload) ->
     try jiffy:decode(Payload, [return_maps]) of
         #{<<"term">> := Text} when is_binary(Text) ->
-            case toroco_live_json:parse_term(Text) of
+            case toroco_rec_json:parse_term(Text) of
                 {ok, Term} ->
                     case source(Key) of
                         {ok, Src} -> toroco:inject(Src, Term);

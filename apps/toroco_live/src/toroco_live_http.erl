@@ -207,7 +207,7 @@ too_many_failures(Req, Ms) ->
     Seconds = (Ms + 999) div 1000,
     mochiweb_request:respond(
       {429, [{"Content-Type", "application/json"}, {"Retry-After", integer_to_list(Seconds)}],
-       toroco_live_json:encode(
+       toroco_rec_json:encode(
          error_json(too_many_failures,
                     iolist_to_binary(io_lib:format("too many wrong tokens from this address: "
                                                    "refused for ~b s more", [Seconds]))))},
@@ -260,12 +260,12 @@ www() ->
     filename:join(code:priv_dir(toroco_live), "www").
 
 printable(Path) ->
-    toroco_live_json:value(unicode:characters_to_binary(Path)).
+    toroco_rec_json:value(unicode:characters_to_binary(Path)).
 
 error_json(Reason, Message) ->
-    #{<<"error">> => toroco_live_json:value(Reason), <<"message">> => Message}.
+    #{<<"error">> => toroco_rec_json:value(Reason), <<"message">> => Message}.
 
 json(Req, Status, Json) ->
     mochiweb_request:respond({Status, [{"Content-Type", "application/json"},
                                        {"Cache-Control", "no-cache"}],
-                              toroco_live_json:encode(Json)}, Req).
+                              toroco_rec_json:encode(Json)}, Req).

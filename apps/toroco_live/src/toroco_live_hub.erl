@@ -51,7 +51,7 @@
 -record(h, {max_clients :: pos_integer(),
             clients = #{} :: #{pid() => #client{}},
             %% when the runtime restarts, the hub subscribes again
-            tap :: toroco_live_tap:tap(),
+            tap :: toroco_rec_tap:tap(),
             emits = #{} :: #{{atom(), atom()} => non_neg_integer()},
             delivers = #{} :: #{{atom(), atom()} => non_neg_integer()},
             window = {#{}, #{}} :: {map(), map()},
@@ -120,7 +120,7 @@ init(Config) ->
     ok = toroco_live_world:subscribe(),
     erlang:send_after(?TICK_MS, self(), tick),
     Now = erlang:monotonic_time(millisecond),
-    {_, Tap} = toroco_live_tap:on(toroco_live_tap:new(#{buffer => ?TAP_BUFFER, retry_ms => ?TICK_MS})),
+    {_, Tap} = toroco_rec_tap:on(toroco_rec_tap:new(#{buffer => ?TAP_BUFFER, retry_ms => ?TICK_MS})),
     {ok, #h{max_clients = maps:get(max_clients, Config, 64), tap = Tap,
             last_rate = Now, last_world = Now - ?WORLD_MS}}.
 
@@ -131,8 +131,8 @@ handle_call({join, Pid}, _From, H = #h{clients = Cs, max_clients = Max}) ->
             {reply, {error, too_many_clients}, H};
         false ->
             C = #client{mref = monitor(process, Pid)},
-            Hello = toroco_live_json:encode(#{<<"type">> => <<"hello">>,
-                                              <<"node">> => toroco_live_json:value(node()),
+            Hello = toroco_rec_json:encode(#{<<"type">> => <<"hello">>,
+                                              <<"node">> => toroco_rec_json:value(node()),
                                               <<"clients">> => map_size(Cs) + 1}),
             %% The newcomer gets the latest state at once, not at the next change.
             H1 = H#h{clients = Cs#{Pid => C}, dirty = true, world_dirty = true},
@@ -142,7 +142,7 @@ handle_call(stats, _From, H) ->
     {reply, #{emits => H#h.emits, delivers => H#h.delivers, clients => map_size(H#h.clients),
               skipped => H#h.skipped + lists:sum([C#client.skipped || C <- maps:values(H#h.clients)]),
               pushed => H#h.pushed, tap_dropped => H#h.tap_dropped,
-              tap => toroco_live_tap:subscribed(H#h.tap)}, H};
+              tap => toroco_rec_tap:subscribed(H#h.tap)}, H};
 handle_call(_Request, _From, H) ->
     {reply, {error, unknown_call}, H}.
 
@@ -176,16 +176,16 @@ handle_info(Info, H) ->
     handle_info_tap(Info, H).
 
 handle_info_tap(Info, H = #h{tap = Tap}) ->
-    case toroco_live_tap:handle(Info, Tap) of
+    case toroco_rec_tap:handle(Info, Tap) of
         {events, Events} -> {noreply, lists:foldl(fun event/2, H, Events)};
         {down, Tap1} -> {noreply, H#h{tap = Tap1, dirty = true}};
-        {retry, Tap1} -> {_, Tap2} = toroco_live_tap:on(Tap1), {noreply, H#h{tap = Tap2}};
+        {retry, Tap1} -> {_, Tap2} = toroco_rec_tap:on(Tap1), {noreply, H#h{tap = Tap2}};
         _ -> {noreply, H}
     end.
 
 -spec terminate(term(), #h{}) -> ok.
 terminate(_Reason, #h{tap = Tap}) ->
-    _ = toroco_live_tap:off(Tap),
+    _ = toroco_rec_tap:off(Tap),
     ok.
 
 %%====================================================================
@@ -225,7 +225,7 @@ tick(H0) ->
             H#h{reading = none, latest = #{}, lifecycle = []};
         _ ->
             {Vs, Vw} = H#h.versions,
-            H1 = case H#h.dirty orelse not toroco_live_tap:subscribed(H#h.tap) of
+            H1 = case H#h.dirty orelse not toroco_rec_tap:subscribed(H#h.tap) of
                      true ->
                          Hr = patched(read(H)),
                          Hr#h{state = state_frame(Hr), dirty = false, versions = {Vs + 1, Vw}};
@@ -272,7 +272,7 @@ patched(H = #h{reading = R, latest = M, lifecycle = L}) ->
 %% or no tap keeps it up to date); the events kept so far are in it.
 read(H = #h{reading = R, read_at = At, tap = Tap}) ->
     Now = erlang:monotonic_time(millisecond),
-    case R =:= none orelse Now - At >= ?READ_MS orelse not toroco_live_tap:subscribed(Tap) of
+    case R =:= none orelse Now - At >= ?READ_MS orelse not toroco_rec_tap:subscribed(Tap) of
         true ->
             try toroco_live_state:readings() of
                 R1 -> H#h{reading = R1, read_at = Now, latest = #{}, lifecycle = []}
@@ -290,10 +290,10 @@ state_frame(#h{rates = Rates, clients = Cs, skipped = S, tap_dropped = Dropped, 
     try toroco_live_state:page(Rates, R) of
         Page ->
             Skipped = S + lists:sum([C#client.skipped || C <- maps:values(Cs)]),
-            toroco_live_json:encode(Page#{<<"dashboard">> =>
+            toroco_rec_json:encode(Page#{<<"dashboard">> =>
                                               #{<<"clients">> => map_size(Cs),
                                                 <<"skipped">> => Skipped,
-                                                <<"tap">> => toroco_live_tap:subscribed(Tap),
+                                                <<"tap">> => toroco_rec_tap:subscribed(Tap),
                                                 <<"tap_dropped">> => Dropped}})
     catch
         exit:Why -> not_running(Why)
@@ -301,13 +301,13 @@ state_frame(#h{rates = Rates, clients = Cs, skipped = S, tap_dropped = Dropped, 
 
 %% The runtime is not running (or restarting): say so.
 not_running(Why) ->
-    toroco_live_json:encode(#{<<"type">> => <<"state">>, <<"nodes">> => [], <<"layers">> => [],
-                              <<"error">> => toroco_live_json:term_text(Why)}).
+    toroco_rec_json:encode(#{<<"type">> => <<"state">>, <<"nodes">> => [], <<"layers">> => [],
+                              <<"error">> => toroco_rec_json:term_text(Why)}).
 
 world_frame() ->
     case toroco_live_world:latest() of
         none -> none;
-        Snapshot -> toroco_live_json:encode(toroco_live_world_json:frame(Snapshot))
+        Snapshot -> toroco_rec_json:encode(toroco_live_world_json:frame(Snapshot))
     end.
 
 push_all(H = #h{clients = Cs}) ->

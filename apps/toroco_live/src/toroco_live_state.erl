@@ -1,6 +1,6 @@
 %% @doc What the dashboard shows, read from the runtime: `toroco:inspect/0,1'
 %% for every name, plus each process's restarts, mailbox and state. Every
-%% term becomes JSON through `toroco_live_json', and every value a person
+%% term becomes JSON through `toroco_rec_json', and every value a person
 %% may want back carries both `value' and `term'.
 %%
 %% {@link api/0} is the body of `GET /api/state' (inspect/0 and inspect/1
@@ -40,9 +40,9 @@ api() ->
     Overview = toroco:inspect(),
     Names = names(Overview),
     Nodes = [{N, toroco:inspect(N)} || N <- Names],
-    Clients = [C#{last_error := toroco_live_json:term_text(E)}
+    Clients = [C#{last_error := toroco_rec_json:term_text(E)}
                || #{last_error := E} = C <- toroco_live:rosbridge_clients()],
-    toroco_live_json:value(#{inspect => Overview,
+    toroco_rec_json:value(#{inspect => Overview,
                              nodes => maps:from_list([{N, I} || {N, I} <- Nodes, is_map(I)]),
                              rosbridge_clients => Clients}).
 
@@ -77,22 +77,22 @@ page(Rates) ->
 -spec page(rates(), reading()) -> jiffy:json_value().
 page(Rates, {Overview, Readings}) ->
     #{<<"type">> => <<"state">>,
-      <<"node">> => toroco_live_json:value(node()),
+      <<"node">> => toroco_rec_json:value(node()),
       <<"t">> => erlang:system_time(millisecond),
       <<"layers">> => layers(Overview),
-      <<"removed_layers">> => toroco_live_json:value(maps:get(removed_layers, Overview, [])),
+      <<"removed_layers">> => toroco_rec_json:value(maps:get(removed_layers, Overview, [])),
       <<"nodes">> => [node_json(R, Rates) || R <- Readings]}.
 
 layers(#{layers := Layers}) ->
-    [#{<<"layer">> => L, <<"names">> => toroco_live_json:value(Ns)}
+    [#{<<"layer">> => L, <<"names">> => toroco_rec_json:value(Ns)}
      || {L, Ns} <- lists:reverse(lists:sort(maps:to_list(Layers)))].
 
 node_json(#{name := N, info := Info, restarts := R, mailbox := Q, state := S}, Rates) ->
-    Base = #{<<"name">> => toroco_live_json:value(N),
-             <<"kind">> => toroco_live_json:value(maps:get(kind, Info, unknown)),
-             <<"module">> => toroco_live_json:value(maps:get(module, Info, unknown)),
-             <<"layer">> => toroco_live_json:value(maps:get(layer, Info, 0)),
-             <<"status">> => toroco_live_json:value(maps:get(status, Info, down)),
+    Base = #{<<"name">> => toroco_rec_json:value(N),
+             <<"kind">> => toroco_rec_json:value(maps:get(kind, Info, unknown)),
+             <<"module">> => toroco_rec_json:value(maps:get(module, Info, unknown)),
+             <<"layer">> => toroco_rec_json:value(maps:get(layer, Info, 0)),
+             <<"status">> => toroco_rec_json:value(maps:get(status, Info, down)),
              <<"restarts">> => R,
              <<"mailbox">> => Q,
              <<"state">> => state_json(S),
@@ -102,48 +102,48 @@ node_json(#{name := N, info := Info, restarts := R, mailbox := Q, state := S}, R
                                || {O, Out} <- lists:sort(maps:to_list(maps:get(outputs, Info, #{})))],
              <<"reset">> => [src(Src) || Src <- maps:get(reset, Info, [])]},
     case Info of
-        #{device := Counters} -> Base#{<<"device">> => toroco_live_json:value(texts(Counters))};
+        #{device := Counters} -> Base#{<<"device">> => toroco_rec_json:value(texts(Counters))};
         #{} -> Base
     end.
 
 state_json({value, S}) ->
-    Text = toroco_live_json:term_text(S),
+    Text = toroco_rec_json:term_text(S),
     #{<<"term">> => case byte_size(Text) > ?STATE_TEXT of
                         true -> <<(binary:part(Text, 0, ?STATE_TEXT))/binary, "...">>;
                         false -> Text
                     end};
 state_json(Other) ->
-    #{<<"term">> => null, <<"note">> => toroco_live_json:value(Other)}.
+    #{<<"term">> => null, <<"note">> => toroco_rec_json:value(Other)}.
 
 input_json(N, I, In, #{emits := Emits, delivers := Delivers}) ->
     Sources = maps:get(sources, In, []),
-    #{<<"input">> => toroco_live_json:value(I),
+    #{<<"input">> => toroco_rec_json:value(I),
       <<"sources">> => [#{<<"source">> => src(S), <<"priority">> => P,
                           <<"rate">> => maps:get(S, Emits, 0)}
                         || {P, S} <- lists:zip(lists:seq(1, length(Sources)), Sources)],
       <<"winner">> => src(maps:get(winner, In, none)),
-      <<"holds">> => [#{<<"source">> => src(S), <<"ms">> => toroco_live_json:value(Ms)}
+      <<"holds">> => [#{<<"source">> => src(S), <<"ms">> => toroco_rec_json:value(Ms)}
                       || {S, Ms} <- maps:get(holds, In, [])],
-      <<"latches">> => [(toroco_live_json:carry(V))#{<<"source">> => src(S)}
+      <<"latches">> => [(toroco_rec_json:carry(V))#{<<"source">> => src(S)}
                         || {S, V} <- maps:get(latches, In, [])],
       <<"last">> => case maps:get(last, In, none) of
-                        {value, V} -> toroco_live_json:carry(V);
+                        {value, V} -> toroco_rec_json:carry(V);
                         none -> null
                     end,
       <<"rate">> => maps:get({N, I}, Delivers, 0)}.
 
 output_json(N, O, Out, #{emits := Emits}) ->
-    #{<<"output">> => toroco_live_json:value(O),
+    #{<<"output">> => toroco_rec_json:value(O),
       <<"inhibited">> => maps:get(inhibited, Out, false),
       <<"inhibitors">> => [src(S) || S <- maps:get(inhibitors, Out, [])],
       <<"latch">> => case maps:get(latch, Out, none) of
-                         {value, V} -> toroco_live_json:carry(V);
+                         {value, V} -> toroco_rec_json:carry(V);
                          none -> null
                      end,
       <<"rate">> => maps:get({N, O}, Emits, 0)}.
 
 src(none) -> null;
-src({E, O}) -> [toroco_live_json:value(E), toroco_live_json:value(O)].
+src({E, O}) -> [toroco_rec_json:value(E), toroco_rec_json:value(O)].
 
 %% @doc A reading brought up to date with one event of the observer tap
 %% (SPEC §10). Events about names the reading does not have change nothing:

@@ -3,7 +3,6 @@
 %% ```
 %% toroco_live_sup (one_for_one)
 %%   toroco_live_world            the simulated world's latest snapshot (always there)
-%%   toroco_live_flight           the flight recorder (always on) and the recording
 %%   toroco_live_dashboard_sup    the dashboard, while it runs (toroco_live:start/1)
 %%   toroco_live_foxglove         the Foxglove bridge, while the dashboard runs and
 %%                                its option `foxglove' is a port
@@ -14,10 +13,11 @@
 %% (`toroco_live_config', set by `toroco_live:start/1') does not ask for
 %% them, and `toroco_live:start/1' and `stop/0' restart and terminate them
 %% (`toroco_live_bridge'). Other applications' bridges (the rosbridge
-%% server, `toroco_ros') are children of their own supervisors.
+%% server, `toroco_ros') are children of their own supervisors, and so is
+%% the flight recorder (`toroco_rec_sup', started before this application).
 %%
-%% one_for_one: the dashboard, the bridge and the recorders are independent
-%% views of the robot; one crashing takes none of the others with it.
+%% one_for_one: the dashboard and the bridge are independent views of the
+%% robot; one crashing takes none of the others with it.
 -module(toroco_live_sup).
 -behaviour(supervisor).
 
@@ -31,9 +31,7 @@ start_link() ->
 init([]) ->
     Flags = #{strategy => one_for_one, intensity => 5, period => 10},
     World = #{id => toroco_live_world, start => {toroco_live_world, start_link, []}},
-    Flight = #{id => toroco_live_flight, start => {toroco_live_flight, start_link, []},
-               shutdown => 30000},
     Dashboard = #{id => toroco_live_dashboard_sup, start => {toroco_live_dashboard_sup, start_link, []},
                   type => supervisor},
     Foxglove = toroco_live_bridge:child_spec(foxglove, toroco_live_foxglove),
-    {ok, {Flags, [World, Flight, Dashboard, Foxglove]}}.
+    {ok, {Flags, [World, Dashboard, Foxglove]}}.

@@ -1,7 +1,9 @@
 %% @doc (API) The simulated world as the dashboard and the bridges see it:
 %% a registered process (`toroco_live_world') that a simulator tells about
 %% each step of its world, and that keeps the latest snapshot and each
-%% robot's trajectory for whoever draws them.
+%% robot's trajectory for whoever draws them. It is the source of
+%% `toroco_rec_world' (the flight recorder's and the taps' world): it sets
+%% itself there as it starts.
 %%
 %% A simulator does not depend on `toroco_live': it sends a plain message
 %% to the registered name when the name exists (`whereis/1'), and nothing
@@ -55,6 +57,7 @@
 %% #{Name => [{X, Y, Winner}]}' (oldest first) added.
 -module(toroco_live_world).
 -behaviour(gen_server).
+-behaviour(toroco_rec_world).
 
 -export([start_link/0, latest/0, subscribe/0, subscribe_all/0, unsubscribe/0]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
@@ -103,6 +106,8 @@ unsubscribe() ->
 
 -spec init([]) -> {ok, #w{}}.
 init([]) ->
+    %% The flight recorder and the taps that ask for the world read it here.
+    ok = toroco_rec_world:set(?MODULE),
     {ok, #w{}}.
 
 -spec handle_call(term(), gen_server:from(), #w{}) -> {reply, term(), #w{}}.

@@ -1,6 +1,6 @@
 %% @doc The arena frame the page draws: a `toroco_live_world' snapshot
 %% (walls, objects, robots with IR rays and camera, trajectories) as JSON
-%% through `toroco_live_json', points as `[X, Y]' arrays.
+%% through `toroco_rec_json', points as `[X, Y]' arrays.
 -module(toroco_live_world_json).
 
 -export([frame/1]).
@@ -13,7 +13,7 @@ frame(Snap = #{arena := {W, H}, walls := Walls, objects := Objects, robots := Ro
       <<"t_ms">> => maps:get(t_ms, Snap, 0),
       <<"arena">> => [W, H],
       <<"walls">> => [[pt(A), pt(B)] || {A, B} <- Walls],
-      <<"objects">> => [#{<<"color">> => toroco_live_json:value(C), <<"at">> => pt(P),
+      <<"objects">> => [#{<<"color">> => toroco_rec_json:value(C), <<"at">> => pt(P),
                           <<"r">> => R} || {C, P, R} <- Objects],
       <<"robots">> => [robot(Rb, Trajectories) || Rb <- Robots],
       <<"timeline">> => timeline(maps:get(timeline, Snap, none))}.
@@ -22,23 +22,23 @@ frame(Snap = #{arena := {W, H}, walls := Walls, objects := Objects, robots := Ro
 %% simulator says.
 timeline(#{duration_ms := D, marks := Marks}) ->
     #{<<"duration_ms">> => D,
-      <<"marks">> => [#{<<"t_ms">> => T, <<"kind">> => toroco_live_json:value(K),
-                        <<"text">> => toroco_live_json:value(Text)}
+      <<"marks">> => [#{<<"t_ms">> => T, <<"kind">> => toroco_rec_json:value(K),
+                        <<"text">> => toroco_rec_json:value(Text)}
                       || #{t_ms := T, kind := K, text := Text} <- Marks]};
 timeline(_) ->
     null.
 
 robot(Rb = #{name := Name, pose := {X, Y, Heading}}, Trajectories) ->
-    #{<<"name">> => toroco_live_json:value(Name),
+    #{<<"name">> => toroco_rec_json:value(Name),
       <<"pose">> => [X, Y, Heading],
       <<"radius">> => maps:get(radius, Rb, 0.12),
-      <<"winner">> => toroco_live_json:value(maps:get(winner, Rb, none)),
-      <<"ir">> => [#{<<"side">> => toroco_live_json:value(maps:get(side, Ray, unknown)),
+      <<"winner">> => toroco_rec_json:value(maps:get(winner, Rb, none)),
+      <<"ir">> => [#{<<"side">> => toroco_rec_json:value(maps:get(side, Ray, unknown)),
                      <<"from">> => pt(maps:get(from, Ray)), <<"to">> => pt(maps:get(to, Ray)),
                      <<"adc">> => maps:get(adc, Ray, null)}
                    || Ray <- maps:get(ir, Rb, [])],
-      <<"camera">> => toroco_live_json:value(maps:get(camera, Rb, #{})),
-      <<"trajectory">> => [[Px, Py, toroco_live_json:value(Tag)]
+      <<"camera">> => toroco_rec_json:value(maps:get(camera, Rb, #{})),
+      <<"trajectory">> => [[Px, Py, toroco_rec_json:value(Tag)]
                            || {Px, Py, Tag} <- maps:get(Name, Trajectories, [])]}.
 
 pt({X, Y}) -> [X, Y].

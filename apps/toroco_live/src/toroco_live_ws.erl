@@ -62,7 +62,7 @@ join_hub(Req, Authorized) ->
 
 refuse(Req, Status, Reason, Message) ->
     mochiweb_request:respond({Status, [{"Content-Type", "application/json"}],
-                              toroco_live_json:encode(#{<<"error">> => toroco_live_json:value(Reason),
+                              toroco_rec_json:encode(#{<<"error">> => toroco_rec_json:value(Reason),
                                                         <<"message">> => Message})}, Req).
 
 %%====================================================================
@@ -71,7 +71,7 @@ refuse(Req, Status, Reason, Message) ->
 
 -spec join(toroco_live_ws_conn:socket(), {binary(), map()}) -> {ok, map()}.
 join(Socket, {Hello, State = #{authorized := Auth}}) ->
-    write(Socket, [Hello, toroco_live_json:encode(#{<<"type">> => <<"session">>,
+    write(Socket, [Hello, toroco_rec_json:encode(#{<<"type">> => <<"session">>,
                                                     <<"controls">> => Auth})]),
     {ok, State#{socket => Socket}}.
 
@@ -87,9 +87,9 @@ handle_frame({_, Payload}, State = #{authorized := Auth, max := Max, socket := S
                {ok, Ok} -> Ok#{<<"type">> => <<"reply">>, <<"id">> => Id};
                {error, _Status, Reason, Message} ->
                    #{<<"type">> => <<"error">>, <<"id">> => Id,
-                     <<"error">> => toroco_live_json:value(Reason), <<"message">> => Message}
+                     <<"error">> => toroco_rec_json:value(Reason), <<"message">> => Message}
            end,
-    write(S, [toroco_live_json:encode(Json)]),
+    write(S, [toroco_rec_json:encode(Json)]),
     {ok, State}.
 
 -spec handle_info(term(), map()) -> toroco_live_ws_conn:result(map()).

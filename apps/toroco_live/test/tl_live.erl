@@ -29,10 +29,12 @@ start_live(Env) ->
     {ok, _} = application:ensure_all_started(toroco_live),
     Saved.
 
-%% Stops toroco_live and puts the app env back, for the suites after.
+%% Stops toroco_live and toroco_rec (the flight recorder with it) and puts
+%% the app env back, for the suites after.
 stop(Saved) ->
     application:stop(toroco_ros),
     application:stop(toroco_live),
+    application:stop(toroco_rec),
     [case V of
          {ok, Value} -> application:set_env(toroco_live, K, Value);
          undefined -> application:unset_env(toroco_live, K)

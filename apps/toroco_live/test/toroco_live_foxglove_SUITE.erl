@@ -55,13 +55,13 @@ end_per_testcase(_Case, _Config) ->
 %%====================================================================
 
 tap_closed_with_every_event() ->
-    [{doc, "A bridge's tap closed at its shutdown (toroco_live_tap:close/1) hands over every "
+    [{doc, "A bridge's tap closed at its shutdown (toroco_rec_tap:close/1) hands over every "
       "event emitted before, in order, to be passed on before the bridge closes."}].
 tap_closed_with_every_event(_Config) ->
-    {ok, Tap} = toroco_live_tap:on(toroco_live_tap:new(#{kinds => [emit], names => [s]})),
+    {ok, Tap} = toroco_rec_tap:on(toroco_rec_tap:new(#{kinds => [emit], names => [s]})),
     [ok = toroco:inject({s, dist}, I) || I <- lists:seq(1, 200)],
-    {Events, Closed} = toroco_live_tap:close(Tap),
-    false = toroco_live_tap:subscribed(Closed),
+    {Events, Closed} = toroco_rec_tap:close(Tap),
+    false = toroco_rec_tap:subscribed(Closed),
     Values = [V || {emit, _, {s, dist}, send, V} <- Events],
     Values = lists:seq(1, 200).
 
@@ -94,7 +94,7 @@ values_in_order(Config) ->
     [ok = toroco:inject({s, dist}, V) || V <- Values],
     All = messages(C, [<<"/toroco/out/s/dist">>, <<"/toroco/in/a/d">>], 2 * N),
     Out = [M || M = #{<<"topic">> := <<"/toroco/out/s/dist">>} <- All],
-    Terms = [toroco_live_json:term_text(V) || V <- Values],
+    Terms = [toroco_rec_json:term_text(V) || V <- Values],
     Terms = [T || #{<<"data">> := #{<<"term">> := T}} <- Out],
     [#{<<"data">> := #{<<"kind">> := <<"send">>, <<"value">> := [1, <<"cm">>, [<<"near">>, 1.5]]}} | _] = Out,
     Stamps = [binary_to_integer(S) || #{<<"timestamp">> := S} <- Out],

@@ -1,8 +1,9 @@
 %% @doc The `toroco_ros' application. It depends on `toroco_live' (and
 %% through it on the runtime); neither depends on it. Started, it adds to
 %% `toroco_live' (`toroco_live_extensions'): the rosbridge server as the
-%% bridge of the option `rosbridge', the client mode, the recording profile
-%% `ros2' and its `/metrics' families; stopped, it takes them away.
+%% bridge of the option `rosbridge', the client mode and its `/metrics'
+%% families; and to `toroco_rec' the recording profile `ros2'
+%% (`toroco_rec:add_profile/2'); stopped, it takes them away.
 -module(toroco_ros_app).
 -behaviour(application).
 
@@ -15,7 +16,7 @@
 start(_Type, _Args) ->
     case toroco_ros_sup:start_link() of
         {ok, Sup} ->
-            ok = toroco_live_extensions:add(profile, ros2, toroco_ros_profile),
+            ok = toroco_rec:add_profile(ros2, toroco_ros_profile),
             ok = toroco_live_extensions:add(metrics, toroco_ros, {toroco_ros_metrics, families}),
             ok = toroco_live_extensions:add(client, rosbridge, toroco_ros),
             ok = toroco_live_extensions:add(bridge, rosbridge, ?BRIDGE),
@@ -72,8 +73,8 @@ dial(Other) ->
 -spec prep_stop(term()) -> term().
 prep_stop(State) ->
     _ = [toroco_live_extensions:remove(Kind, Name)
-         || {Kind, Name} <- [{bridge, rosbridge}, {client, rosbridge}, {metrics, toroco_ros},
-                             {profile, ros2}]],
+         || {Kind, Name} <- [{bridge, rosbridge}, {client, rosbridge}, {metrics, toroco_ros}]],
+    ok = toroco_rec:remove_profile(ros2),
     State.
 
 -spec stop(term()) -> ok.

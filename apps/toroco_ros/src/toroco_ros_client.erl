@@ -91,7 +91,7 @@
                key = <<>> :: binary(),
                head = <<>> :: binary(),
                decoder = none :: toroco_live_ws_frame:decoder() | none,
-               tap :: toroco_live_tap:tap(),
+               tap :: toroco_rec_tap:tap(),
                %% topic => type, as advertised or subscribed on this connection
                advertised = #{} :: #{binary() => binary()},
                subscribed = #{} :: #{binary() => binary()},
@@ -152,7 +152,7 @@ init({Url, Opts}) ->
         {ok, {U, Host, Port, Resource}, Options} ->
             logger:notice("rosbridge client: connecting to ~ts", [U], ?LOG),
             %% one event at a time: each is a message to the remote end
-            Tap = toroco_live_tap:new(#{kinds => [emit, lifecycle], delivery => event,
+            Tap = toroco_rec_tap:new(#{kinds => [emit, lifecycle], delivery => event,
                                         buffer => maps:get(max_queue, Options),
                                         retry_ms => ?REFRESH_MS, world => true,
                                         who => <<"rosbridge client">>}),
@@ -224,7 +224,7 @@ connected(info, {toroco_live_world, changed}, D) ->
 connected({timeout, refresh}, refresh, D) ->
     with_socket(refresh(tap_on(D)), [{{timeout, refresh}, ?REFRESH_MS, refresh}]);
 connected(info, Msg, D = #data{tap = Tap}) ->
-    case toroco_live_tap:handle(Msg, Tap) of
+    case toroco_rec_tap:handle(Msg, Tap) of
         {event, Event} -> send_event(Event, D);
         {down, Tap1} -> {keep_state, D#data{tap = Tap1}};
         {retry, Tap1} -> {keep_state, tap_on(D#data{tap = Tap1})};
@@ -442,10 +442,10 @@ fail(Why, D = #data{attempts = A, url = Url, socket = S, connector = C}) ->
 %%====================================================================
 
 tap_on(D = #data{tap = Tap}) ->
-    D#data{tap = toroco_live_tap:ensure_on(Tap)}.
+    D#data{tap = toroco_rec_tap:ensure_on(Tap)}.
 
 tap_off(D = #data{tap = Tap}) ->
-    D#data{tap = toroco_live_tap:off(Tap)}.
+    D#data{tap = toroco_rec_tap:off(Tap)}.
 
 %% Advertise what appeared, unadvertise what went, subscribe to the inbound.
 refresh(D = #data{advertised = Adv, subscribed = Sub, refused_topics = Refused}) ->

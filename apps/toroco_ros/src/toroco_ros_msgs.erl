@@ -2,7 +2,7 @@
 %% code: each type's `.msg' definition with its dependencies, the way ROS 2
 %% tooling stores it in a bag (MCAP schema encoding `ros2msg'), and the
 %% CDR bytes of a message (MCAP message encoding `cdr'). The ros2 profile
-%% of a recording (`toroco_live_recorder') writes both; this module does
+%% of a recording (`toroco_rec_recorder') writes both; this module does
 %% no I/O.
 %%
 %% Types: `geometry_msgs/msg/Twist', `nav_msgs/msg/Odometry',

@@ -42,12 +42,12 @@ call(<<"/rosapi/get_ros_version">>, _) ->
 call(<<"/rosapi/services">>, _) ->
     {ok, #{services => ?SERVICES}};
 call(<<"/toroco/inspect">>, Args) when Args =:= #{}; Args =:= null; Args =:= [] ->
-    {ok, toroco_live_json:value(toroco:inspect())};
+    {ok, toroco_rec_json:value(toroco:inspect())};
 call(<<"/toroco/inspect">>, #{<<"name">> := N}) when is_binary(N) ->
     try binary_to_existing_atom(N) of
         Name ->
             case toroco:inspect(Name) of
-                #{} = Info -> {ok, toroco_live_json:value(Info)};
+                #{} = Info -> {ok, toroco_rec_json:value(Info)};
                 {error, _} -> {error, [<<"/toroco/inspect: no behavior or device ">>, N]}
             end
     catch error:badarg -> {error, [<<"/toroco/inspect: no behavior or device ">>, N]}

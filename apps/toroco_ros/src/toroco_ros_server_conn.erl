@@ -220,7 +220,7 @@ publish_out(Topic, {Type, Json, Msg}, C = #conn{subs = Subs}) ->
                 {error, Why} ->
                     %% A relayed topic of a type this server cannot encode.
                     status(C, warning, null, [<<"cannot send ">>, Topic, <<" as cbor-raw: ">>,
-                                              toroco_live_json:term_text(Why)])
+                                              toroco_rec_json:term_text(Why)])
             end
     end.
 
@@ -563,7 +563,7 @@ drop_fragments(Id, C = #conn{fragments = F}) ->
 %%====================================================================
 
 text(B) when is_binary(B) -> binary:part(B, 0, min(200, byte_size(B)));
-text(Other) -> toroco_live_json:encode(toroco_live_json:value(Other)).
+text(Other) -> toroco_rec_json:encode(toroco_rec_json:value(Other)).
 
 fault(C = #conn{faults = N}, _Id, Msg) when N >= ?MAX_FAULTS ->
     toroco_ros_server:count(faults),

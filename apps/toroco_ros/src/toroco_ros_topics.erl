@@ -187,7 +187,7 @@ lookup(N, Msg) ->
 
 key_text(K) when is_atom(K) -> atom_to_binary(K);
 key_text(K) when is_binary(K) -> K;
-key_text(K) -> toroco_live_json:term_text(K).
+key_text(K) -> toroco_rec_json:term_text(K).
 
 join(<<>>, N) -> N;
 join(P, N) -> <<P/binary, $., N/binary>>.
@@ -243,7 +243,7 @@ topic_of(?ROS_DEVICE, O) -> <<$/, (atom_to_binary(O, utf8))/binary>>;
 topic_of(motors, applied) -> <<"/toroco/motors/applied">>;
 topic_of(?RANGE_DEVICE, O) -> <<"/range/", (atom_to_binary(O, utf8))/binary>>;
 topic_of(E, O) ->
-    toroco_live_channels:topic({out, E, O}).
+    toroco_rec_channels:topic({out, E, O}).
 
 type_of(motors, applied) -> ?TWIST;
 type_of(?RANGE_DEVICE, _) -> ?RANGE;
@@ -274,7 +274,7 @@ of_event({emit, T, {?RANGE_DEVICE, O}, Kind, V}) when Kind =/= unset, is_number(
 of_event({emit, _T, {?RANGE_DEVICE, _}, _, _}) ->
     [];
 of_event({emit, _, {E, O}, _, _} = Event) ->
-    {_, _, Json} = toroco_live_channels:of_event(Event),
+    {_, _, Json} = toroco_rec_channels:of_event(Event),
     [{topic_of(E, O), ?STRING, #{data => Json}}];
 of_event(_) ->
     [].

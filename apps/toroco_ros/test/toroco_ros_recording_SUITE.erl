@@ -34,7 +34,7 @@ ros2_profile_goes_with_the_application() ->
     [{doc, "The profile ros2 is there while toroco_ros runs, and refused once it stopped"}].
 ros2_profile_goes_with_the_application(Config) ->
     Path = path(Config, "gone.mcap"),
-    {ok, toroco_ros_profile} = toroco_live_profile:find(ros2),
+    {ok, toroco_ros_profile} = toroco_rec_profile:find(ros2),
     ok = application:stop(toroco_ros),
     try
         {error, {bad_option, {profile, ros2}}} = toroco_live:record(Path, #{profile => ros2}),
@@ -170,4 +170,4 @@ read_ros2(Path) ->
 
 path(Config, Name) -> filename:join(?config(priv_dir, Config), Name).
 
-short_world() -> tl_live:data("toroco_live_recording_SUITE_data/short.world").
+short_world() -> tl_live:data("../../toroco_rec/test/toroco_rec_SUITE_data/short.world").

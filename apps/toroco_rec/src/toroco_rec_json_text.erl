@@ -1,4 +1,4 @@
-%% @doc JSON text of JSON values (as `toroco_live_json:value/1' makes them,
+%% @doc JSON text of JSON values (as `toroco_rec_json:value/1' makes them,
 %% and maps with atom or binary keys), in plain Erlang. The bridge, the
 %% recorder and the flight recorder write every event through it: for the
 %% small messages of the event path it costs a fraction of a NIF call's
@@ -11,7 +11,7 @@
 %% Strings are written as they are unless they hold `"', `\' or a control
 %% character (found with one precompiled `binary:match/2'), which are
 %% escaped; floats in their shortest round-trip form.
--module(toroco_live_json_text).
+-module(toroco_rec_json_text).
 
 -export([encode/1]).
 

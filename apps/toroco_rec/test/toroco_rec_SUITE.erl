@@ -1,6 +1,8 @@
-%% Recording, the flight recorder and replay (SPEC §12), read back with the
-%% format's reference reader (@mcap/core's indexed reader, in Node).
--module(toroco_live_recording_SUITE).
+%% Recording, the flight recorder and replay (SPEC §12, the application
+%% toroco_rec), through the names SPEC §12 gives them (toroco_live's), read
+%% back with the format's reference reader (@mcap/core's indexed reader, in
+%% Node).
+-module(toroco_rec_SUITE).
 -include_lib("common_test/include/ct.hrl").
 -include_lib("stdlib/include/assert.hrl").
 -compile([export_all, nowarn_export_all]).
@@ -15,7 +17,7 @@ all() ->
      foreign_files_refused,
      simulated_run_replays,
      recording_in_lockstep_has_simulated_time, lockstep_run_recorded_every_tick,
-     other_profiles_refused].
+     other_profiles_refused, runs_with_the_dashboard].
 
 suite() -> [{timetrap, {seconds, 90}}].
 
@@ -42,6 +44,16 @@ end_per_testcase(_Case, _Config) ->
 %% Cases
 %%====================================================================
 
+runs_with_the_dashboard() ->
+    [{doc, "Starting toroco_live starts toroco_rec first (its flight recorder runs), and "
+      "toroco_live_world is the source of the world's snapshots it reads"}].
+runs_with_the_dashboard(_Config) ->
+    Apps = [A || {A, _, _} <- application:which_applications()],
+    ?assert(lists:member(toroco_rec, Apps)),
+    ?assert(is_pid(whereis(toroco_rec_flight))),
+    ?assertEqual(toroco_live_world, toroco_rec_world:source()),
+    #{events := _, dropped := 0} = toroco_rec:window().
+
 recording_in_lockstep_has_simulated_time() ->
     [{doc, "A recording made while a world is the clock (lockstep, SPEC §14) stamps its "
       "messages with simulated time: an emission at 1.5 s is logged at 1.5e9 ns."}].
@@ -54,7 +66,7 @@ recording_in_lockstep_has_simulated_time(Config) ->
     ok = toroco_clock:settle(),
     {ok, #{messages := 1}} = toroco_live:stop_recording(),
     {ok, Bin} = file:read_file(Path),
-    {ok, #{messages := [#{log_time := T}]}} = toroco_live_mcap:read(Bin),
+    {ok, #{messages := [#{log_time := T}]}} = toroco_rec_mcap:read(Bin),
     1500000000 = T.
 
 lockstep_run_recorded_every_tick() ->
@@ -74,7 +86,7 @@ lockstep_run_recorded_every_tick(Config) ->
                 _ -> Red
             end div torobot_world:tick_ms(W),
     {ok, Bin} = file:read_file(Path),
-    {ok, #{messages := Msgs, channels := Channels}} = toroco_live_mcap:read(Bin),
+    {ok, #{messages := Msgs, channels := Channels}} = toroco_rec_mcap:read(Bin),
     [Pose] = [Id || {Id, #{topic := <<"/toroco/sim/pose">>}} <- maps:to_list(Channels)],
     Times = [T || #{channel := C, log_time := T} <- Msgs, C =:= Pose],
     ct:log("~b poses for ~b ticks, first at ~p ns", [length(Times), Ticks, hd(lists:sort(Times))]),
@@ -187,7 +199,7 @@ flight_recorder_bounded(Config) ->
         N = 2000,
         [ok = toroco:inject({s, dist}, {I, rand:bytes(1000)}) || I <- lists:seq(1, N)],
         ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= N end, 10000),
-        #{bytes := Bytes, segments := Segments} = W = toroco_live_flight:window(),
+        #{bytes := Bytes, segments := Segments} = W = toroco_rec:window(),
         ct:log("window ~p", [W]),
         true = Bytes =< MaxBytes,
         %% Whole segments go: the window is the bound less at most a segment.
@@ -236,7 +248,7 @@ flight_recorder_bounded_by_count(Config) ->
         N = 2000,
         [ok = toroco:inject({s, dist}, {I, near}) || I <- lists:seq(1, N)],
         ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= N end, 10000),
-        #{events := Max} = toroco_live_flight:window(),
+        #{events := Max} = toroco_rec:window(),
         Path = path(Config, "count.mcap"),
         {ok, #{messages := M}} = toroco_live:dump(Path),
         Kept = [I || {I, near} <- terms(Path, <<"/toroco/out/s/dist">>)],
@@ -265,9 +277,9 @@ flight_recorder_window_by_time(Config) ->
 
 %% The flight recorder's window once Pred holds of it (or fails).
 window_until(Pred, Timeout) ->
-    ok = toroco_test_lib:wait_until(fun() -> Pred(toroco_live_flight:window()) end, Timeout,
+    ok = toroco_test_lib:wait_until(fun() -> Pred(toroco_rec:window()) end, Timeout,
                                     flight_window),
-    W = toroco_live_flight:window(),
+    W = toroco_rec:window(),
     true = Pred(W),
     W.
 
@@ -285,17 +297,17 @@ with_flight_env(Key, Value, Fun) ->
 %% The terms of a dump's messages on Topic, in the file's order.
 terms(Path, Topic) ->
     {ok, Bin} = file:read_file(Path),
-    {ok, #{channels := Channels, messages := Messages}} = toroco_live_mcap:read(Bin),
+    {ok, #{channels := Channels, messages := Messages}} = toroco_rec_mcap:read(Bin),
     Ids = [Id || {Id, #{topic := T}} <- maps:to_list(Channels), T =:= Topic],
     [begin
          #{<<"term">> := Text} = jiffy:decode(Data, [return_maps]),
-         {ok, Term} = toroco_live_json:parse_term(Text),
+         {ok, Term} = toroco_rec_json:parse_term(Text),
          Term
      end || #{channel := C, data := Data} <- Messages, lists:member(C, Ids)].
 
 restart_flight() ->
-    ok = supervisor:terminate_child(toroco_live_sup, toroco_live_flight),
-    {ok, _} = supervisor:restart_child(toroco_live_sup, toroco_live_flight).
+    ok = supervisor:terminate_child(toroco_rec_sup, toroco_rec_flight),
+    {ok, _} = supervisor:restart_child(toroco_rec_sup, toroco_rec_flight).
 
 flight_recorder_on_layer_removed() ->
     [{doc, "When a layer is taken out the flight recorder dumps into the log directory "
@@ -334,7 +346,7 @@ flight_recorder_after_restart(Config) ->
     ok.
 
 %% logger handler: sends the flight recorder's line to the test.
-log(#{msg := {Fmt, Args}, meta := #{domain := [toroco, live]}}, #{config := Pid}) ->
+log(#{msg := {Fmt, Args}, meta := #{domain := [toroco, rec]}}, #{config := Pid}) ->
     Line = lists:flatten(io_lib:format(Fmt, Args)),
     case string:find(Line, "flight recorder wrote") of
         nomatch -> ok;

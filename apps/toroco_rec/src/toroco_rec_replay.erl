@@ -1,28 +1,31 @@
-%% @doc Replay (SPEC §12): `toroco_live:replay/2' re-emits a recording's
-%% events of the listed sources (normally the sensors) into the running
-%% wiring, at their recorded pace, and compares what the actuators then
-%% receive with what the recording says they received.
+%% @doc Replay (SPEC §12): `toroco_rec:replay/2' (`toroco_live:replay/2')
+%% re-emits a recording's events of the listed sources (normally the
+%% sensors) into the running wiring, at their recorded pace, and compares
+%% what the actuators then receive with what the recording says they
+%% received.
 %%
-%% The file is read whole and checked (`toroco_live_mcap:read/1'): a file
+%% The file is read whole and checked (`toroco_rec_mcap:read/1'): a file
 %% that is not MCAP, is truncated, has a bad CRC, or was not written by
-%% `toroco_live' is refused with a reason before anything is injected.
+%% `toroco_rec' (whose files name the library `toroco_live', as those
+%% written before it was an application of its own) is refused with a
+%% reason before anything is injected.
 %%
 %% Each recorded emission (`/toroco/out/S/O') of a listed source becomes
 %% `toroco:inject/2' (a `send') or `inject/3' with `latch' (a `set'); an
 %% `unset' cannot be injected and is skipped. Its term is read back with
-%% `toroco_live_json:parse_term/1'. The actuators are the receivers of the
+%% `toroco_rec_json:parse_term/1'. The actuators are the receivers of the
 %% recording's `/toroco/in/R/I' channels that are devices of the running
 %% wiring and not sources; their deliveries from the first replayed event
 %% on are compared in order, per input, with those seen now (through the
 %% tap). The call returns when the last event has been replayed and the
 %% actuators have had `?SETTLE_MS' to answer.
 %%
-%% A recording in another profile (`ros2', a `toroco_live_profile') replays
+%% A recording in another profile (`ros2', a `toroco_rec_profile') replays
 %% too: its wrapper channels (`std_msgs/msg/String') carry the same JSON,
 %% which the profile reads back (`text_json/1'), so the outputs recorded
 %% that way are replayed and the deliveries compared; an output recorded
 %% with a typed message (a range sensor's Range) cannot be, and is not.
--module(toroco_live_replay).
+-module(toroco_rec_replay).
 
 -export([replay/2]).
 
@@ -36,7 +39,7 @@ replay(Path, #{sources := Sources} = Opts) when is_list(Sources) ->
     case maps:keys(maps:without([sources], Opts)) of
         [] ->
             case file:read_file(Path) of
-                {ok, Bin} -> replay_contents(toroco_live_mcap:read(Bin), Sources);
+                {ok, Bin} -> replay_contents(toroco_rec_mcap:read(Bin), Sources);
                 {error, Why} -> {error, {cannot_read, Path, Why}}
             end;
         [Bad | _] -> {error, {bad_option, Bad}}
@@ -47,7 +50,7 @@ replay(_Path, Opts) ->
 replay_contents({error, _} = Err, _) ->
     Err;
 replay_contents({ok, #{library := Lib} = C}, Sources) ->
-    Ours = toroco_live_mcap:library(),
+    Ours = toroco_rec_mcap:library(),
     case binary:longest_common_prefix([Lib, Ours]) >= byte_size(<<"toroco_live">>) of
         true -> run(messages(C), Sources);
         false -> {error, {not_a_toroco_recording, Lib}}
@@ -56,7 +59,7 @@ replay_contents({ok, #{library := Lib} = C}, Sources) ->
 %% Each message as {T, Key, Json}; channels that are not ours are left out.
 messages(#{channels := Chs, schemas := Schemas, messages := Ms}) ->
     Keys = maps:map(fun(_, Ch = #{topic := T}) ->
-                            case {toroco_live_channels:key(T), json_of(Ch, Schemas)} of
+                            case {toroco_rec_channels:key(T), json_of(Ch, Schemas)} of
                                 {{ok, K}, {ok, Json}} -> {ok, K, Json};
                                 _ -> error
                             end
@@ -72,7 +75,7 @@ json_of(#{encoding := <<"json">>}, _) ->
 json_of(#{schema := S}, Schemas) ->
     case Schemas of
         #{S := #{name := Name}} ->
-            case [M || {_, M} <- toroco_live_extensions:all(profile), M:text_type() =:= Name] of
+            case [M || {_, M} <- toroco_rec_profile:all(), M:text_type() =:= Name] of
                 [Module | _] -> {ok, fun Module:text_json/1};
                 [] -> error
             end;
@@ -105,7 +108,7 @@ run(Messages, Sources) ->
 emission(Data) ->
     try jiffy:decode(Data, [return_maps]) of
         #{<<"kind">> := Kind, <<"term">> := Text} when Kind =:= <<"send">>; Kind =:= <<"set">> ->
-            case toroco_live_json:parse_term(Text) of
+            case toroco_rec_json:parse_term(Text) of
                 {ok, Term} -> {ok, binary_to_existing_atom(Kind), Term};
                 Err -> Err
             end;
@@ -115,7 +118,7 @@ emission(Data) ->
 
 delivery(Data) ->
     try jiffy:decode(Data, [return_maps]) of
-        #{<<"term">> := Text} -> toroco_live_json:parse_term(Text);
+        #{<<"term">> := Text} -> toroco_rec_json:parse_term(Text);
         _ -> skip
     catch _:_ -> skip
     end.

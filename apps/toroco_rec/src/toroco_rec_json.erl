@@ -8,7 +8,7 @@
 %% {@link term_text/1} is the Erlang literal (`io_lib:format("~0p")'), and
 %% {@link parse_term/1} reads such a literal back (literals only, never
 %% evaluated). {@link carry/1} is the pair a message carries.
--module(toroco_live_json).
+-module(toroco_rec_json).
 
 -export([value/1, term_text/1, parse_term/1, carry/1, encode/1]).
 

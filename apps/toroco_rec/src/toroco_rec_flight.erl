@@ -1,10 +1,10 @@
 %% @doc The recorders' process: the flight recorder (SPEC §12), always on,
-%% and the recording when one is asked for (`toroco_live_recorder').
+%% and the recording when one is asked for (`toroco_rec_recorder').
 %%
 %% The flight recorder keeps the last `flight_seconds' (app env, default
 %% 30) of the robot's events in memory and writes them as MCAP on demand
-%% (`toroco_live:dump/1') and by itself, into the log directory, when a
-%% layer is taken out (the lifecycle event `{layer_removed, L}'): the log
+%% (`toroco_rec:dump/1', `toroco_live:dump/1') and by itself, into the log
+%% directory, when a layer is taken out (the lifecycle event `{layer_removed, L}'): the log
 %% line names the file. Events are kept as they came, their JSON made only
 %% for a dump: the newest in a small open batch, the rest as segments, a
 %% batch of about a second sealed into one binary
@@ -23,10 +23,16 @@
 %% log line and in a recording's result. {@link window/0} says what is
 %% kept.
 %%
-%% The log directory is the app env `log_dir' of `toroco_live', else `log'
-%% in the node's working directory (the release's log directory when run
-%% from a release root).
--module(toroco_live_flight).
+%% The simulated world's snapshots come from `toroco_rec_world''s source
+%% (`toroco_live_world' while `toroco_live' runs), to which it subscribes
+%% when it starts and whenever a source is set.
+%%
+%% The app env keys (`flight_seconds', `flight_max_events',
+%% `flight_max_bytes', `log_dir') are read from `toroco_rec', else from
+%% `toroco_live' (SPEC §12 names `flight_seconds' there), else the
+%% defaults; the log directory's default is `log' in the node's working
+%% directory (the release's log directory when run from a release root).
+-module(toroco_rec_flight).
 -behaviour(gen_server).
 
 -export([start_link/0, dump/1, record/2, stop_recording/0, window/0]).
@@ -44,10 +50,10 @@
 %% How soon to subscribe again when the runtime's tap went away.
 -define(RESUBSCRIBE_MS, 500).
 
--type item() :: {event, tuple()} | {message, toroco_live_channels:key(), binary()}.
+-type item() :: {event, tuple()} | {message, toroco_rec_channels:key(), binary()}.
 
 -record(flight, {%% when the runtime restarts, this process subscribes again
-                 tap :: toroco_live_tap:tap(),
+                 tap :: toroco_rec_tap:tap(),
                  %% The window: sealed segments, oldest first, each
                  %% {FirstT, LastT, Count, Bin} where Bin is the batch's
                  %% [{T, item()}] compressed and Count its last events
@@ -68,8 +74,10 @@
                  dropped = 0 :: non_neg_integer(),
                  window_ns :: pos_integer(),
                  max :: pos_integer(),
-                 recording = none :: none | toroco_live_recorder:recording(),
-                 scene = none :: toroco_live_channels:scene_sent()}).
+                 recording = none :: none | toroco_rec_recorder:recording(),
+                 %% the world's snapshots' source (toroco_rec_world)
+                 world = none :: module() | none,
+                 scene = none :: toroco_rec_channels:scene_sent()}).
 
 %% Every garbage collection a full sweep: the heap holds the state and the
 %% open batch, and what an event leaves behind is not kept in an old heap
@@ -85,12 +93,12 @@ start_link() ->
 dump(Path) ->
     gen_server:call(?MODULE, {dump, Path}, 60000).
 
-%% @doc Starts a recording (see `toroco_live:record/2').
+%% @doc Starts a recording (see `toroco_rec:record/2').
 -spec record(file:filename_all(), map()) -> ok | {error, term()}.
 record(Path, Opts) ->
     gen_server:call(?MODULE, {record, Path, Opts}, 30000).
 
-%% @doc Ends the recording (see `toroco_live:stop_recording/0').
+%% @doc Ends the recording (see `toroco_rec:stop_recording/0').
 -spec stop_recording() -> {ok, #{path := file:filename_all(), messages := non_neg_integer(),
                                  dropped := non_neg_integer(),
                                  unencodable => non_neg_integer()}} | {error, term()}.
@@ -111,23 +119,29 @@ init([]) ->
     %% Events waiting in the mailbox stay out of the heap: a burst the tap
     %% lets through is not copied by each garbage collection.
     process_flag(message_queue_data, off_heap),
-    Seconds = application:get_env(toroco_live, flight_seconds, 30),
-    Max = application:get_env(toroco_live, flight_max_events, ?MAX_EVENTS),
-    MaxBytes = application:get_env(toroco_live, flight_max_bytes, ?MAX_BYTES),
-    %% toroco_live_world starts before this process (toroco_live_sup).
-    _ = (catch toroco_live_world:subscribe_all()),
-    {_, Tap} = toroco_live_tap:on(toroco_live_tap:new(#{buffer => ?BUFFER,
-                                                        retry_ms => ?RESUBSCRIBE_MS})),
-    {ok, #flight{tap = Tap, window_ns = Seconds * 1000000000, max = Max, max_bytes = MaxBytes}}.
+    Seconds = env(flight_seconds, 30),
+    Max = env(flight_max_events, ?MAX_EVENTS),
+    MaxBytes = env(flight_max_bytes, ?MAX_BYTES),
+    World = toroco_rec_world:subscribe(subscribe_all),
+    {_, Tap} = toroco_rec_tap:on(toroco_rec_tap:new(#{buffer => ?BUFFER,
+                                                      retry_ms => ?RESUBSCRIBE_MS})),
+    {ok, #flight{tap = Tap, window_ns = Seconds * 1000000000, max = Max, max_bytes = MaxBytes,
+                 world = World}}.
+
+env(Key, Default) ->
+    case application:get_env(toroco_rec, Key) of
+        {ok, Value} -> Value;
+        undefined -> application:get_env(toroco_live, Key, Default)
+    end.
 
 -spec handle_call(term(), gen_server:from(), #flight{}) -> {reply, term(), #flight{}}.
 handle_call({dump, Path}, _From, F0) ->
     F = drain(F0),
     {reply, write(Path, F), F};
 handle_call({record, Path, _}, _From, F = #flight{recording = R}) when R =/= none ->
-    {reply, {error, {already_recording, toroco_live_recorder:path(R), Path}}, F};
+    {reply, {error, {already_recording, toroco_rec_recorder:path(R), Path}}, F};
 handle_call({record, Path, Opts}, _From, F = #flight{tap = Tap}) ->
-    case toroco_live_tap:subscribed(Tap) of
+    case toroco_rec_tap:subscribed(Tap) of
         true -> record(Path, Opts, F);
         false -> {reply, {error, no_events}, F}
     end;
@@ -135,36 +149,42 @@ handle_call(stop_recording, _From, F = #flight{recording = none}) ->
     {reply, {error, not_recording}, F};
 handle_call(stop_recording, _From, F0) ->
     F = #flight{recording = R} = drain(F0),
-    {reply, toroco_live_recorder:close(R), F#flight{recording = none}};
+    {reply, toroco_rec_recorder:close(R), F#flight{recording = none}};
 handle_call(window, _From, F = #flight{count = N, bytes = B, segments = Q, dropped = D}) ->
     {reply, #{events => N, bytes => B, segments => queue:len(Q), dropped => D}, F};
 handle_call(_, _From, F) ->
     {reply, {error, unknown_call}, F}.
 
 -spec handle_cast(term(), #flight{}) -> {noreply, #flight{}}.
+handle_cast({world_source, _}, F) ->
+    {noreply, F#flight{world = toroco_rec_world:subscribe(subscribe_all)}};
 handle_cast(_, F) ->
     {noreply, F}.
 
 -spec handle_info(term(), #flight{}) -> {noreply, #flight{}} | {noreply, #flight{}, hibernate}.
-handle_info({toroco_live_world, changed}, F) ->
-    noreply(world(toroco_live_world:latest(), erlang:system_time(nanosecond), F));
+handle_info({World, changed}, F = #flight{world = World}) when World =/= none ->
+    noreply(world(latest(World), erlang:system_time(nanosecond), F));
 %% A world in lockstep: every tick's snapshot, stamped with its simulated
 %% time as the tap's events are (SPEC §14).
-handle_info({toroco_live_world, at, Snapshot = #{t_ms := Ms}}, F) ->
+handle_info({World, at, Snapshot = #{t_ms := Ms}}, F = #flight{world = World}) when World =/= none ->
     noreply(world(Snapshot, Ms * 1000000, F));
 handle_info(Info, F = #flight{tap = Tap}) ->
-    case toroco_live_tap:handle(Info, Tap) of
+    case toroco_rec_tap:handle(Info, Tap) of
         {events, Events} -> noreply(lists:foldl(fun event/2, F, Events));
         {down, Tap1} -> {noreply, F#flight{tap = Tap1}};
-        {retry, Tap1} -> {_, Tap2} = toroco_live_tap:on(Tap1), {noreply, F#flight{tap = Tap2}};
+        {retry, Tap1} -> {_, Tap2} = toroco_rec_tap:on(Tap1), {noreply, F#flight{tap = Tap2}};
         _ -> {noreply, F}
     end.
 
+%% The source may have gone since it wrote (toroco_live stopped).
+latest(World) ->
+    try World:latest() catch exit:_ -> none end.
+
 world(Snapshot, Now, F = #flight{recording = R}) ->
-    {Msgs, Scene} = toroco_live_channels:world(Snapshot, Now, F#flight.scene),
+    {Msgs, Scene} = toroco_rec_channels:world(Snapshot, Now, F#flight.scene),
     R1 = case R of
              none -> none;
-             _ -> toroco_live_recorder:world(Snapshot, Now, Msgs, R)
+             _ -> toroco_rec_recorder:world(Snapshot, Now, Msgs, R)
          end,
     lists:foldl(fun({K, T, J}, Acc) -> keep({T, {message, K, J}}, Acc) end,
                 F#flight{scene = Scene, recording = R1}, Msgs).
@@ -173,7 +193,7 @@ world(Snapshot, Now, F = #flight{recording = R}) ->
 terminate(_, #flight{recording = none}) ->
     ok;
 terminate(_, #flight{recording = R}) ->
-    _ = toroco_live_recorder:close(R),
+    _ = toroco_rec_recorder:close(R),
     ok.
 
 %%====================================================================
@@ -181,7 +201,7 @@ terminate(_, #flight{recording = R}) ->
 %%====================================================================
 
 record(Path, Opts, F) ->
-    case toroco_live_recorder:open(Path, Opts) of
+    case toroco_rec_recorder:open(Path, Opts) of
         {ok, R} -> {reply, ok, F#flight{recording = R}};
         Err -> {reply, Err, F}
     end.
@@ -189,14 +209,14 @@ record(Path, Opts, F) ->
 event({dropped, N}, F = #flight{dropped = D, recording = R}) ->
     F#flight{dropped = D + N, recording = case R of
                                              none -> none;
-                                             _ -> toroco_live_recorder:dropped(N, R)
+                                             _ -> toroco_rec_recorder:dropped(N, R)
                                          end};
 event(Event, F0 = #flight{recording = R}) ->
     F = case R of
             none -> F0;
-            _ -> F0#flight{recording = toroco_live_recorder:event(Event, R)}
+            _ -> F0#flight{recording = toroco_rec_recorder:event(Event, R)}
         end,
-    F1 = case toroco_live_channels:event_time(Event) of
+    F1 = case toroco_rec_channels:event_time(Event) of
              none -> F;
              T -> trim(T, keep({T, {event, Event}}, F))
          end,
@@ -207,9 +227,9 @@ event(Event, F0 = #flight{recording = R}) ->
     F1.
 
 %% A dump, and stopping a recording, take every event emitted before the
-%% call (toroco_live_tap:flush/1).
+%% call (toroco_rec_tap:flush/1).
 drain(F = #flight{tap = T}) ->
-    lists:foldl(fun event/2, F, toroco_live_tap:flush(T)).
+    lists:foldl(fun event/2, F, toroco_rec_tap:flush(T)).
 
 %% An event joins the open batch; the batch is sealed into a segment when
 %% it spans a second, holds ?SEGMENT_EVENTS events or a slice of the bytes
@@ -316,7 +336,7 @@ fold_window(Fun, Acc0, #flight{segments = Q, batch = B, newest = Newest, window_
     Acc.
 
 layer_removed(L, F = #flight{dropped = D}) ->
-    Dir = application:get_env(toroco_live, log_dir, "log"),
+    Dir = env(log_dir, "log"),
     Stamp = calendar:system_time_to_rfc3339(erlang:system_time(second), [{offset, "Z"}]),
     Name = lists:flatten(io_lib:format("flight-~ts-layer~b.mcap", [[C || C <- Stamp, C =/= $:], L])),
     Path = filename:join(Dir, Name),
@@ -324,26 +344,26 @@ layer_removed(L, F = #flight{dropped = D}) ->
     case write(Path, F) of
         {ok, #{messages := N}} ->
             logger:error("layer ~b taken out: the flight recorder wrote its last ~b events to ~ts"
-                         " (~b dropped before)", [L, N, Path, D], #{domain => [toroco, live]});
+                         " (~b dropped before)", [L, N, Path, D], #{domain => [toroco, rec]});
         {error, Why} ->
             logger:error("layer ~b taken out: the flight recorder could not write ~ts: ~0p",
-                         [L, Path, Why], #{domain => [toroco, live]})
+                         [L, Path, Why], #{domain => [toroco, rec]})
     end.
 
 write(Path, F) ->
-    {Head, L0} = toroco_live_recorder:log_new(),
+    {Head, L0} = toroco_rec_recorder:log_new(),
     {Body, L} = fold_window(fun(Item, {Acc, L1}) ->
                                     case message(Item) of
                                         {K, T, J} ->
-                                            {B, L2} = toroco_live_recorder:log_event(K, {T, J}, L1),
+                                            {B, L2} = toroco_rec_recorder:log_event(K, {T, J}, L1),
                                             {[Acc, B], L2};
                                         none -> {Acc, L1}
                                     end
                             end, {[], L0}, F),
-    case file:write_file(Path, [Head, Body, toroco_live_recorder:log_end(L)]) of
-        ok -> {ok, #{messages => toroco_live_recorder:log_messages(L), path => Path}};
+    case file:write_file(Path, [Head, Body, toroco_rec_recorder:log_end(L)]) of
+        ok -> {ok, #{messages => toroco_rec_recorder:log_messages(L), path => Path}};
         {error, Why} -> {error, {cannot_write, Path, Why}}
     end.
 
-message({_, {event, Event}}) -> toroco_live_channels:of_event(Event);
+message({_, {event, Event}}) -> toroco_rec_channels:of_event(Event);
 message({T, {message, K, J}}) -> {K, T, J}.

@@ -1,7 +1,7 @@
 %% @doc (API) One subscription to the observer tap (SPEC §10), kept in the state
-%% of the process that reads it: the dashboard's hub, the flight recorder
-%% (and the recordings it writes), the Foxglove bridge, and any other
-%% client of `toroco_live' that watches the robot.
+%% of the process that reads it: the flight recorder (and the recordings it
+%% writes), the dashboard's hub and the bridges of `toroco_live', and any
+%% other process that watches the robot.
 %%
 %% The client process keeps a {@link tap()} in its state and passes every
 %% message it does not know itself to {@link handle/2}. The subscription
@@ -16,28 +16,28 @@
 %% the robot's every event is woken once per batch; a client that asks for
 %% `delivery => event' gets `{event, Event}' one at a time.
 %% <pre>
-%% T0 = toroco_live_tap:new(#{buffer => 1000}),
-%% {_, T} = toroco_live_tap:on(T0),
+%% T0 = toroco_rec_tap:new(#{buffer => 1000}),
+%% {_, T} = toroco_rec_tap:on(T0),
 %% ...
 %% handle_info(Msg, S = #s{tap = T}) ->
-%%     case toroco_live_tap:handle(Msg, T) of
+%%     case toroco_rec_tap:handle(Msg, T) of
 %%         {events, Events} -> ...;
 %%         {down, T1} -> ...;
-%%         {retry, T1} -> {_, T2} = toroco_live_tap:on(T1), ...;
+%%         {retry, T1} -> {_, T2} = toroco_rec_tap:on(T1), ...;
 %%         ignore -> ...;
 %%         unknown -> ...
 %%     end.
 %% </pre>
--module(toroco_live_tap).
+-module(toroco_rec_tap).
 
 -export([new/1, on/1, ensure_on/1, off/1, flush/1, close/1, handle/2, subscribed/1, ref/1]).
 -export_type([tap/0, opts/0]).
 
 %% The options of `toroco:subscribe_events/1', how soon to try again
 %% (default 1000 ms), and whether the simulated world's snapshots
-%% (`toroco_live_world', while a world runs) come with the events
-%% (default `false'), for `who' (named in the log when the runtime
-%% refuses, default `<<"toroco_live">>').
+%% (from `toroco_rec_world''s source, while a world runs) come with the
+%% events (default `false'), for `who' (named in the log when the runtime
+%% refuses, default `<<"toroco_rec_tap">>').
 -type opts() :: #{kinds => [atom()], names => all | [atom()], buffer => pos_integer(),
                   delivery => toroco_tap:delivery(),
                   retry_ms => pos_integer(), world => boolean(), who => binary()}.
@@ -60,7 +60,7 @@
 new(Opts) ->
     #tap{opts = maps:merge(#{delivery => batch}, maps:without([retry_ms, world, who], Opts)),
          retry_ms = maps:get(retry_ms, Opts, 1000),
-         world = maps:get(world, Opts, false), who = maps:get(who, Opts, <<"toroco_live">>)}.
+         world = maps:get(world, Opts, false), who = maps:get(who, Opts, <<"toroco_rec_tap">>)}.
 
 %% @doc Subscribes, unless it is already. If the runtime refuses or is not
 %% there, `{retry, Tap}' comes later.
@@ -84,7 +84,7 @@ ensure_on(T0 = #tap{who = Who}) ->
         {ok, T} -> T;
         {error, Why, T} ->
             logger:warning("~ts: no events from the runtime yet: ~0p", [Who, Why],
-                           #{domain => [toroco, live]}),
+                           #{domain => [toroco, rec]}),
             T
     end.
 
@@ -158,10 +158,8 @@ ref(#tap{ref = Ref}) -> Ref.
 world(_How, #tap{world = false}) ->
     ok;
 world(How, #tap{}) ->
-    case whereis(toroco_live_world) of
-        undefined -> ok;
-        _ -> catch toroco_live_world:How()
-    end.
+    _ = toroco_rec_world:subscribe(How),
+    ok.
 
 retry(T = #tap{retrying = true}) ->
     T;

@@ -1,7 +1,7 @@
 %% @doc MCAP, the log format Foxglove and ROS 2 read, as pure code: a
 %% writer that turns schemas, channels and messages into file bytes, and a
 %% reader that checks a whole file and gives its records back. The recorder
-%% (`toroco_live_recorder'), the flight recorder and replay sit on top; this
+%% (`toroco_rec_recorder'), the flight recorder and replay sit on top; this
 %% module does no I/O.
 %%
 %% What is written, following the published format (version 0):
@@ -25,7 +25,7 @@
 %% (possibly none) and the new writer. Reader: {@link read/1} checks magic,
 %% footer, summary CRC, data CRC and each chunk's CRC, and refuses with a
 %% reason anything that is not a complete MCAP file.
--module(toroco_live_mcap).
+-module(toroco_rec_mcap).
 
 -export([new/1, add_schema/4, add_schema/5, add_channel/5, add_channel/6, add_message/5, finish/1,
          bytes_written/1, message_count/1]).
@@ -87,6 +87,8 @@
 %% @doc The library string our files carry in their header.
 -spec library() -> binary().
 library() ->
+    %% The files' library is `toroco_live', where recording began: replay
+    %% reads files written since then, and only those.
     <<"toroco_live 0.1.0">>.
 
 %% @doc A new file: its first bytes (magic and header) and the writer.

@@ -1,12 +1,14 @@
 %% @doc A recording profile (API, a behaviour): how another application's
-%% typed topics are written to an MCAP file by `toroco_live:record/2'
-%% (`profile => Name') and read back by `toroco_live:replay/2'.
+%% typed topics are written to an MCAP file by `toroco_rec:record/2'
+%% (`profile => Name') and read back by `toroco_rec:replay/2'.
 %%
-%% The profile `foxglove' (the default) is `toroco_live''s own: the
+%% The profile `foxglove' (the default) is `toroco_rec''s own: the
 %% Foxglove bridge's JSON channels. Any other is a module of this
-%% behaviour added with `toroco_live_extensions:add(profile, Name,
-%% Module)' (`toroco_ros' adds `ros2', SPEC §15). A recording in such a
-%% profile (`toroco_live_recorder') writes:
+%% behaviour added with `toroco_rec:add_profile(Name, Module)'
+%% (`toroco_ros' adds `ros2', SPEC §15); the profiles are kept in
+%% `persistent_term' (written when an application starts or stops, read
+%% when a recording opens or a replay reads a file). A recording in such a
+%% profile (`toroco_rec_recorder') writes:
 %% <ul>
 %% <li>the MCAP header's profile, {@link mcap_profile/0};</li>
 %% <li>an emission as the messages {@link of_event/1} makes of it, each on
@@ -19,9 +21,9 @@
 %% </ul>
 %% Replay reads back the JSON of a channel of type `text_type()' with
 %% `text_json(Bytes)'.
--module(toroco_live_profile).
+-module(toroco_rec_profile).
 
--export([find/1]).
+-export([add/2, remove/1, find/1, all/0]).
 
 -export_type([message/0]).
 
@@ -45,7 +47,30 @@
 %% The JSON an encoded message of that type carries.
 -callback text_json(Bytes :: binary()) -> {ok, binary()} | error.
 
+-define(KEY, {?MODULE, profiles}).
+
+%% @doc Adds (or replaces) profile `Name'.
+-spec add(atom(), module()) -> ok.
+add(Name, Module) when is_atom(Name), is_atom(Module) ->
+    persistent_term:put(?KEY, maps:put(Name, Module, profiles())).
+
+%% @doc Removes profile `Name'; `ok' also when there is none.
+-spec remove(atom()) -> ok.
+remove(Name) ->
+    case profiles() of
+        #{Name := _} = M -> persistent_term:put(?KEY, maps:remove(Name, M));
+        #{} -> ok
+    end.
+
 %% @doc The module of profile `Name', `error' for one nobody added.
 -spec find(atom()) -> {ok, module()} | error.
 find(Name) ->
-    toroco_live_extensions:find(profile, Name).
+    maps:find(Name, profiles()).
+
+%% @doc Every profile added, by name.
+-spec all() -> [{atom(), module()}].
+all() ->
+    lists:sort(maps:to_list(profiles())).
+
+profiles() ->
+    persistent_term:get(?KEY, #{}).

@@ -2,7 +2,7 @@
 %% schemas, so a recording opens in Foxglove like a live robot.
 %%
 %% A recording is data, not a process: the flight recorder's process
-%% (`toroco_live_flight'), already a subscriber of the observer tap for
+%% (`toroco_rec_flight'), already a subscriber of the observer tap for
 %% everything, feeds the open recording each event that passes its `kinds'
 %% and `names'. One subscription serves both, so recording adds no second
 %% relay to the robot's event path, and the process runs at low priority:
@@ -14,7 +14,7 @@
 %%
 %% <b>Profiles.</b> `profile => foxglove' (the default) writes the
 %% bridge's JSON channels. Any other profile is a module of the
-%% `toroco_live_profile' behaviour another application added (`ros2',
+%% `toroco_rec_profile' behaviour another application added (`ros2',
 %% added by `toroco_ros', SPEC §15): the header's profile is the module's,
 %% an emission becomes the messages the module makes of it, each with its
 %% type's schema and encoding; the events that are not an output's
@@ -29,7 +29,7 @@
 %% {@link log_new/0}, {@link log_event/3}, {@link log_end/1} turn messages
 %% into MCAP (channels and schemas added as they first appear); flight
 %% dumps use them too.
--module(toroco_live_recorder).
+-module(toroco_rec_recorder).
 
 -export([open/2, event/2, world/4, message/4, dropped/2, close/1, path/1]).
 -export([log_new/0, log_event/3, log_end/1, log_messages/1]).
@@ -40,9 +40,9 @@
 
 %% A channel: a key of the bridge's channels (profile foxglove) or a
 %% topic with its type (another profile, its module).
--record(log, {writer :: toroco_live_mcap:writer(),
+-record(log, {writer :: toroco_rec_mcap:writer(),
               profile = foxglove :: foxglove | module(),
-              channels = #{} :: #{toroco_live_channels:key() | {binary(), binary()}
+              channels = #{} :: #{toroco_rec_channels:key() | {binary(), binary()}
                                       => non_neg_integer()},
               schemas = #{} :: #{binary() => pos_integer()},
               seq = 0 :: non_neg_integer()}).
@@ -71,7 +71,7 @@
 
 %% @doc A recording of the events of `kinds' (default all) about `names'
 %% (default all) into `Path', in the `profile' `foxglove' (default) or
-%% one added as a `toroco_live_profile' (`ros2').
+%% one added as a `toroco_rec_profile' (`ros2').
 -spec open(file:filename_all(), map()) -> {ok, recording()} | {error, term()}.
 open(Path, Opts) when is_map(Opts) ->
     Kinds = maps:get(kinds, Opts, ?KINDS),
@@ -92,7 +92,7 @@ open(_Path, Opts) ->
     {error, {bad_option, Opts}}.
 
 profile(foxglove) -> {ok, foxglove};
-profile(Name) when is_atom(Name) -> toroco_live_profile:find(Name);
+profile(Name) when is_atom(Name) -> toroco_rec_profile:find(Name);
 profile(_) -> error.
 
 open(Path, Kinds, Names, Profile) ->
@@ -115,15 +115,15 @@ open(Path, Kinds, Names, Profile) ->
 %% happened after the recording started.
 -spec event(tuple(), recording()) -> recording().
 event(Event, R = #rec{kinds = Kinds, names = Names, since = Since}) ->
-    Wanted = after_start(toroco_live_channels:event_time(Event), Since) andalso
+    Wanted = after_start(toroco_rec_channels:event_time(Event), Since) andalso
         lists:member(element(1, Event), Kinds) andalso
         (Names =:= all orelse
-         lists:any(fun(N) -> lists:member(N, Names) end, toroco_live_channels:event_names(Event))),
+         lists:any(fun(N) -> lists:member(N, Names) end, toroco_rec_channels:event_names(Event))),
     case Wanted of
         false -> R;
         true when R#rec.profile =/= foxglove -> typed_event(Event, R);
         true ->
-            case toroco_live_channels:of_event(Event) of
+            case toroco_rec_channels:of_event(Event) of
                 {Key, T, Json} -> message(Key, T, Json, R);
                 none -> R
             end
@@ -136,12 +136,12 @@ event(_, Failed) ->
 typed_event(Event, R = #rec{profile = Module}) ->
     case element(1, Event) of
         emit ->
-            T = toroco_live_channels:event_time(Event),
+            T = toroco_rec_channels:event_time(Event),
             typed_messages(Module:of_event(Event), T, R);
         _ ->
-            case toroco_live_channels:of_event(Event) of
+            case toroco_rec_channels:of_event(Event) of
                 {Key, T, Json} ->
-                    typed_message(toroco_live_channels:topic(Key), Module:text_type(), T,
+                    typed_message(toroco_rec_channels:topic(Key), Module:text_type(), T,
                                   Module:text(Json), R);
                 none -> R
             end
@@ -157,14 +157,14 @@ typed_message(Topic, Type, T, Msg, R = #rec{profile = Module, unencodable = U, w
         {error, Why} ->
             lists:member(Topic, Warned) orelse
                 logger:warning("recording to ~ts: a message on ~ts is not a ~ts (~0p), left out",
-                               [R#rec.path, Topic, Type, Why], #{domain => [toroco, live]}),
+                               [R#rec.path, Topic, Type, Why], #{domain => [toroco, rec]}),
             R#rec{unencodable = U + 1, warned = lists:usort([Topic | Warned])}
     end.
 
 %% @doc A world snapshot at `T' (ns): the profile's messages of it (ROS 2's
 %% `/odom'), or in the profile foxglove `Msgs', the bridge's world
 %% messages made of it.
--spec world(map() | none, integer(), [{toroco_live_channels:key(), integer(), binary()}],
+-spec world(map() | none, integer(), [{toroco_rec_channels:key(), integer(), binary()}],
             recording()) -> recording().
 world(Snapshot, T, _Msgs, R = #rec{profile = Module}) when Module =/= foxglove ->
     typed_messages(Module:of_world(Snapshot, T), T, R);
@@ -179,7 +179,7 @@ after_start(T, {Mode, Since}) ->
     T >= Since orelse toroco_clock:mode() =/= Mode.
 
 %% @doc A message made elsewhere (the world's channels).
--spec message(toroco_live_channels:key(), integer(), binary(), recording()) -> recording().
+-spec message(toroco_rec_channels:key(), integer(), binary(), recording()) -> recording().
 message(Key, T, Json, R = #rec{profile = foxglove, log = L}) ->
     write(log_event(Key, {T, Json}, L), R);
 message(_, _, _, R = #rec{}) ->
@@ -227,7 +227,7 @@ close({failed, Path, Why}) ->
 
 fail(#rec{path = Path, fd = Fd}, Why) ->
     _ = file:close(Fd),
-    logger:error("recording to ~ts stopped: ~0p", [Path, Why], #{domain => [toroco, live]}),
+    logger:error("recording to ~ts stopped: ~0p", [Path, Why], #{domain => [toroco, rec]}),
     {failed, Path, Why}.
 
 %%====================================================================
@@ -240,32 +240,32 @@ log_new() ->
     log_new(foxglove).
 
 log_new(foxglove) ->
-    {Head, W} = toroco_live_mcap:new(#{}),
+    {Head, W} = toroco_rec_mcap:new(#{}),
     {Head, #log{writer = W}};
 log_new(Module) ->
-    {Head, W} = toroco_live_mcap:new(#{profile => Module:mcap_profile()}),
+    {Head, W} = toroco_rec_mcap:new(#{profile => Module:mcap_profile()}),
     {Head, #log{writer = W, profile = Module}}.
 
 %% @doc The bytes of one message on channel `Key' at `T' (ns), with the
 %% channel's and its schema's records the first time they appear. `Key'
 %% is one of the bridge's channels (JSON), or `{Topic, Type}' with a type
 %% of the log's profile for its bytes (ROS 2's CDR).
--spec log_event(toroco_live_channels:key() | {binary(), binary()}, {integer(), binary()}, log()) ->
+-spec log_event(toroco_rec_channels:key() | {binary(), binary()}, {integer(), binary()}, log()) ->
           {iodata(), log()}.
 log_event(Key, {T, Json}, L0) ->
     {Decl, L = #log{writer = W, channels = Chs, seq = Seq}} = declare(Key, L0),
-    {Bytes, W1} = toroco_live_mcap:add_message(W, maps:get(Key, Chs), Seq, max(T, 0), Json),
+    {Bytes, W1} = toroco_rec_mcap:add_message(W, maps:get(Key, Chs), Seq, max(T, 0), Json),
     {[Decl, Bytes], L#log{writer = W1, seq = Seq + 1}}.
 
 %% @doc The last bytes of the file.
 -spec log_end(log()) -> iodata().
 log_end(#log{writer = W}) ->
-    toroco_live_mcap:finish(W).
+    toroco_rec_mcap:finish(W).
 
 %% @doc Messages logged so far.
 -spec log_messages(log()) -> non_neg_integer().
 log_messages(#log{writer = W}) ->
-    toroco_live_mcap:message_count(W).
+    toroco_rec_mcap:message_count(W).
 
 declare(Key, L = #log{channels = Chs}) when is_map_key(Key, Chs) ->
     {[], L};
@@ -276,16 +276,16 @@ declare(Key, L = #log{writer = W, channels = Chs, schemas = Ss}) ->
             #{Name := Id} -> {[], W, Ss, Id};
             #{} ->
                 Id = map_size(Ss) + 1,
-                {B, W0} = toroco_live_mcap:add_schema(W, Id, Name, SchemaEnc, Schema),
+                {B, W0} = toroco_rec_mcap:add_schema(W, Id, Name, SchemaEnc, Schema),
                 {B, W0, Ss#{Name => Id}, Id}
         end,
     CId = map_size(Chs) + 1,
-    {CBytes, W2} = toroco_live_mcap:add_channel(W1, CId, SId, Topic, MsgEnc, #{}),
+    {CBytes, W2} = toroco_rec_mcap:add_channel(W1, CId, SId, Topic, MsgEnc, #{}),
     {[SBytes, CBytes], L#log{writer = W2, channels = Chs#{Key => CId}, schemas = Ss1}}.
 
 channel({Topic, Type}, Module) when is_binary(Topic) ->
     {ok, {SchemaEnc, Schema, MsgEnc}} = Module:schema(Type),
     {Type, SchemaEnc, Schema, Topic, MsgEnc};
 channel(Key, foxglove) ->
-    {Name, Schema} = toroco_live_channels:schema(Key),
-    {Name, <<"jsonschema">>, Schema, toroco_live_channels:topic(Key), <<"json">>}.
+    {Name, Schema} = toroco_rec_channels:schema(Key),
+    {Name, <<"jsonschema">>, Schema, toroco_rec_channels:topic(Key), <<"json">>}.

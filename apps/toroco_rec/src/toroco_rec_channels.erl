@@ -14,9 +14,9 @@
 %% | `scene'              | `/toroco/sim/scene'              | `foxglove.SceneUpdate'    |
 %%
 %% Every message that carries a value has `"value"' and `"term"' from
-%% `toroco_live_json:carry/1'. The last two channels exist while a
+%% `toroco_rec_json:carry/1'. The last two channels exist while a
 %% simulated world runs; their messages come from {@link world/2}.
--module(toroco_live_channels).
+-module(toroco_rec_channels).
 
 -export([topic/1, key/1, schema/1, of_event/1, event_key/1, from_wiring/0, graph/1, world/3,
          event_names/1, event_time/1]).
@@ -116,7 +116,7 @@ carried() ->
      {term, #{type => string, description => <<"the Erlang literal">>}}].
 
 object(Title, Props) ->
-    toroco_live_json:encode((obj(Props))#{title => Title, '$schema' =>
+    toroco_rec_json:encode((obj(Props))#{title => Title, '$schema' =>
                                               <<"https://json-schema.org/draft/2020-12/schema">>}).
 
 obj(Props) -> #{type => object, properties => maps:from_list(Props)}.
@@ -142,35 +142,35 @@ of_event({deliver, T, {R, I}, Value}) ->
 of_event({router, T, {R, I}, State}) ->
     {{router, R, I}, T, json(router(State))};
 of_event({lifecycle, T, Name, What}) ->
-    Base = #{<<"name">> => Name, <<"term">> => toroco_live_json:term_text(What)},
+    Base = #{<<"name">> => Name, <<"term">> => toroco_rec_json:term_text(What)},
     Msg = case What of
               {layer_removed, L} -> Base#{<<"event">> => layer_removed, <<"layer">> => L};
               _ when is_atom(What) -> Base#{<<"event">> => What};
-              _ -> Base#{<<"event">> => toroco_live_json:term_text(What)}
+              _ -> Base#{<<"event">> => toroco_rec_json:term_text(What)}
           end,
     {lifecycle, T, json(Msg)};
 of_event(_) ->
     none.
 
 carried(Value) ->
-    [<<"\"value\":">>, toroco_live_json_text:encode(toroco_live_json:value(Value)),
-     <<",\"term\":">>, toroco_live_json_text:encode(toroco_live_json:term_text(Value))].
+    [<<"\"value\":">>, toroco_rec_json_text:encode(toroco_rec_json:value(Value)),
+     <<",\"term\":">>, toroco_rec_json_text:encode(toroco_rec_json:term_text(Value))].
 
 router(State) ->
     #{<<"winner">> => source(maps:get(winner, State, none)),
       <<"holds">> => [#{<<"source">> => source(S), <<"remaining_ms">> => R}
                       || {S, R} <- maps:get(holds, State, [])],
-      <<"latches">> => [(toroco_live_json:carry(V))#{<<"source">> => source(S)}
+      <<"latches">> => [(toroco_rec_json:carry(V))#{<<"source">> => source(S)}
                         || {S, V} <- maps:get(latches, State, [])],
-      <<"term">> => toroco_live_json:term_text(State)}.
+      <<"term">> => toroco_rec_json:term_text(State)}.
 
 source(none) -> null;
 source({E, O}) -> <<(atom_to_binary(E, utf8))/binary, $/, (atom_to_binary(O, utf8))/binary>>;
-source(Other) -> toroco_live_json:term_text(Other).
+source(Other) -> toroco_rec_json:term_text(Other).
 
 %% Maps here hold JSON values already (carried values among them), so they
 %% are encoded as they are.
-json(Map) -> iolist_to_binary(toroco_live_json_text:encode(Map)).
+json(Map) -> iolist_to_binary(toroco_rec_json_text:encode(Map)).
 
 %% @doc The channel of a tap event without making its message (cheap);
 %% `none' for `{dropped, N}'.
@@ -235,8 +235,9 @@ graph(#{keys := Keys, receivers := Receivers}) ->
 %%====================================================================
 
 %% @doc The pose and scene messages of a world snapshot at `T' (ns), a
-%% snapshot as `toroco_live_world' keeps it (`arena', `walls', `objects',
-%% `robots' with each robot's `name' and `pose' `{X, Y, HeadingDeg}';
+%% snapshot as `toroco_live_world' (`toroco_rec_world''s source) keeps it
+%% (`arena', `walls', `objects', `robots' with each robot's `name' and
+%% `pose' `{X, Y, HeadingDeg}';
 %% metres and degrees; `none' before any): one `foxglove.FrameTransform'
 %% per robot and step (frame `arena' to the robot's name), and a
 %% `foxglove.SceneUpdate' (the walls as cubes, the objects as cylinders,
