@@ -12,14 +12,16 @@
 %% │   ├── toroco_layer_sup 0    behaviors of layer 0
 %% │   ├── toroco_layer_sup 1    behaviors of layer 1 ...
 %% ├── pg (scope toroco)     where the wiring servers of connected nodes meet (SPEC §13)
-%% └── toroco_wiring_sup
-%%     └── toroco_wiring     the wiring server: validates and applies changes
+%% ├── toroco_wiring_sup
+%% │   └── toroco_wiring     the wiring server: validates and applies changes
+%% └── pg (scope toroco_world_pg) the subscribers to a simulated world's snapshots
 %% '''
 %%
 %% Children are started in that order and depend on the ones before them.
-%% The wiring server comes last: it is never on the event path, and when it
-%% crashes it comes back alone, with the wiring it kept in `toroco_store's
-%% table, while the robot keeps running.
+%% The wiring server comes after the network: it is never on the event
+%% path, and when it crashes it comes back with the wiring it kept in
+%% `toroco_store's table, while the robot keeps running. The world's scope
+%% is last: nothing depends on it.
 -module(toroco_sup).
 -behaviour(supervisor).
 
@@ -48,4 +50,6 @@ init([]) ->
                   Sup(toroco_layers_sup),
                   #{id => pg, start => {pg, start_link, [toroco]}, type => worker,
                     shutdown => 5000, modules => [pg]},
-                  Sup(toroco_wiring_sup)]}}.
+                  Sup(toroco_wiring_sup),
+                  #{id => pg_world, start => {pg, start_link, [toroco_world_pg]}, type => worker,
+                    shutdown => 5000, modules => [pg]}]}}.

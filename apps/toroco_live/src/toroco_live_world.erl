@@ -1,17 +1,20 @@
 %% @doc (API) The simulated world as the dashboard and the bridges see it:
-%% a registered process (`toroco_live_world') that a simulator tells about
-%% each step of its world, and that keeps the latest snapshot and each
-%% robot's trajectory for whoever draws them.
+%% a registered process (`toroco_live_world') that keeps the latest
+%% snapshot of the world running in this node and each robot's trajectory
+%% for whoever draws them.
 %%
-%% A simulator does not depend on `toroco_live': it sends a plain message
-%% to the registered name when the name exists (`whereis/1'), and nothing
-%% when it does not (a board release without `toroco_live', or the
-%% application stopped). That message is the protocol, written down here:
+%% A simulator does not know this process, nor does this process know the
+%% simulator: the world publishes each step through the runtime
+%% (`toroco:publish_world/1', SPEC §10), and this process subscribes to
+%% those snapshots (`toroco:subscribe_world/0') when it starts. Without
+%% `toroco_live' (a board release, or the application stopped) nobody
+%% subscribes and the world makes no snapshot. The messages:
 %%
 %% <table>
 %% <tr><th>message</th><th>from → to</th><th>when</th><th>answer</th></tr>
-%% <tr><td>`{toroco_live_world, snapshot, Snapshot}'</td>
-%%     <td>simulator (`torobot_sim') → `toroco_live_world'</td>
+%% <tr><td>`{toroco_world, Snapshot}'</td>
+%%     <td>the runtime (`toroco:publish_world/1', called by `torobot_sim')
+%%     → each subscriber, this process among them</td>
 %%     <td>after each step of the world</td><td>none</td></tr>
 %% <tr><td>`{toroco_live_world, changed}'</td>
 %%     <td>`toroco_live_world' → each subscriber</td>
@@ -101,9 +104,12 @@ subscribe_all() ->
 unsubscribe() ->
     gen_server:call(?MODULE, unsubscribe).
 
--spec init([]) -> {ok, #w{}}.
+-spec init([]) -> {ok, #w{}} | {stop, term()}.
 init([]) ->
-    {ok, #w{}}.
+    case toroco:subscribe_world() of
+        ok -> {ok, #w{}};
+        {error, Reason} -> {stop, Reason}
+    end.
 
 -spec handle_call(term(), gen_server:from(), #w{}) -> {reply, term(), #w{}}.
 handle_call(latest, {Pid, _}, W = #w{latest = Latest, trails = Trails, subscribers = Subs}) ->
@@ -139,7 +145,7 @@ handle_cast(_Msg, W) ->
     {noreply, W}.
 
 -spec handle_info(term(), #w{}) -> {noreply, #w{}}.
-handle_info({?MODULE, snapshot, #{run := Run, robots := Robots} = Snap}, W) when is_list(Robots) ->
+handle_info({toroco_world, #{run := Run, robots := Robots} = Snap}, W) when is_list(Robots) ->
     Trails = case W#w.latest of
                  #{run := Run} -> W#w.trails;
                  _ -> #{}
