@@ -18,7 +18,7 @@
 %% {@link unsubscribe_events/1}, {@link flush_events/1}.
 %%
 %% <b>The simulated world</b> (SPEC §10, §14): {@link publish_world/1},
-%% {@link subscribe_world/0}, {@link unsubscribe_world/0}: a world publishes
+%% {@link subscribe_world/0}, {@link unsubscribe_world/1}: a world publishes
 %% its snapshots through the runtime and whoever draws them subscribes, so
 %% neither knows the other's processes.
 %%
@@ -50,7 +50,7 @@
          inject/2, inject/3, inspect/0, inspect/1,
          top/0, watch/2, unwatch/0, wiring_dot/0, reload/1,
          subscribe_events/1, unsubscribe_events/1, flush_events/1,
-         publish_world/1, subscribe_world/0, unsubscribe_world/0]).
+         publish_world/1, subscribe_world/0, unsubscribe_world/1]).
 
 -export_type([wiring_summary/0]).
 -export_type([name/0, source/0, source_spec/0, input_spec/0, behavior_opts/0,
@@ -478,23 +478,29 @@ world_subscribers() ->
 
 %% @doc The caller gets `{toroco_world, Snapshot}' for each snapshot a world
 %% in this node publishes, until it unsubscribes or ends; subscribing twice
-%% is subscribing once. `{error, {not_running, toroco}}' without the runtime.
--spec subscribe_world() -> ok | {error, error_reason()}.
+%% is subscribing once. `Ref' monitors the runtime's side of the
+%% subscription: `{'DOWN', Ref, process, _, _}' says it is gone (the runtime
+%% stopped or restarted), and a caller that still wants snapshots subscribes
+%% again. `{error, {not_running, toroco}}' without the runtime.
+-spec subscribe_world() -> {ok, reference()} | {error, error_reason()}.
 subscribe_world() ->
     case erlang:whereis(?WORLD_SCOPE) of
         undefined ->
             {error, {not_running, toroco}};
-        _ ->
-            case lists:member(self(), world_subscribers()) of
-                true -> ok;
-                false -> pg:join(?WORLD_SCOPE, world, self())
-            end
+        Scope ->
+            Ref = monitor(process, Scope),
+            ok = case lists:member(self(), world_subscribers()) of
+                     true -> ok;
+                     false -> pg:join(?WORLD_SCOPE, world, self())
+                 end,
+            {ok, Ref}
     end.
 
 %% @doc No more snapshots for the caller (none that were published before
-%% the call is taken back).
--spec unsubscribe_world() -> ok.
-unsubscribe_world() ->
+%% the call is taken back), and no `DOWN' for `Ref'.
+-spec unsubscribe_world(reference()) -> ok.
+unsubscribe_world(Ref) ->
+    demonitor(Ref, [flush]),
     case erlang:whereis(?WORLD_SCOPE) of
         undefined ->
             ok;

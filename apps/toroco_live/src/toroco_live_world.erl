@@ -6,7 +6,9 @@
 %% A simulator does not know this process, nor does this process know the
 %% simulator: the world publishes each step through the runtime
 %% (`toroco:publish_world/1', SPEC §10), and this process subscribes to
-%% those snapshots (`toroco:subscribe_world/0') when it starts. Without
+%% those snapshots (`toroco:subscribe_world/0') when it starts, and again
+%% (every 200 ms until the runtime is back) when the runtime restarts under
+%% it and takes the subscription with it. Without
 %% `toroco_live' (a board release, or the application stopped) nobody
 %% subscribes and the world makes no snapshot. The messages:
 %%
@@ -72,7 +74,13 @@
 %% Points kept per robot's trajectory.
 -define(TRAIL, 4000).
 
+%% How soon to subscribe again to the world's snapshots after the runtime
+%% took the subscription away, or refused it.
+-define(RESUBSCRIBE_MS, 200).
+
 -record(w, {latest = none :: snapshot() | none,
+            %% the runtime's side of the subscription to the world's snapshots
+            world = none :: reference() | none,
             trails = #{} :: #{atom() => {non_neg_integer(), [tuple()]}},
             subscribers = #{} :: #{pid() => {reference(), Notified :: boolean()}},
             %% the subscribers that take every snapshot of a world in lockstep
@@ -104,11 +112,19 @@ subscribe_all() ->
 unsubscribe() ->
     gen_server:call(?MODULE, unsubscribe).
 
--spec init([]) -> {ok, #w{}} | {stop, term()}.
+-spec init([]) -> {ok, #w{}}.
 init([]) ->
+    {ok, subscribe_world(#w{})}.
+
+%% Snapshots come while the runtime runs; when it is not running (yet, or
+%% again) this process asks again a little later.
+subscribe_world(W) ->
     case toroco:subscribe_world() of
-        ok -> {ok, #w{}};
-        {error, Reason} -> {stop, Reason}
+        {ok, Ref} ->
+            W#w{world = Ref};
+        {error, _} ->
+            erlang:send_after(?RESUBSCRIBE_MS, self(), {?MODULE, subscribe_world}),
+            W#w{world = none}
     end.
 
 -spec handle_call(term(), gen_server:from(), #w{}) -> {reply, term(), #w{}}.
@@ -152,6 +168,12 @@ handle_info({toroco_world, #{run := Run, robots := Robots} = Snap}, W) when is_l
              end,
     Trails1 = lists:foldl(fun trail/2, Trails, Robots),
     {noreply, notify(W#w{latest = Snap, trails = Trails1})};
+handle_info({'DOWN', Ref, process, _, _}, W = #w{world = Ref}) ->
+    %% the runtime restarted, and its subscribers with it
+    erlang:send_after(?RESUBSCRIBE_MS, self(), {?MODULE, subscribe_world}),
+    {noreply, W#w{world = none}};
+handle_info({?MODULE, subscribe_world}, W = #w{world = none}) ->
+    {noreply, subscribe_world(W)};
 handle_info({'DOWN', Ref, process, Pid, _}, W = #w{subscribers = Subs}) ->
     case Subs of
         #{Pid := {Ref, _}} -> {noreply, W#w{subscribers = maps:remove(Pid, Subs),
