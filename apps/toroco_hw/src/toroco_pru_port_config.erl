@@ -1,8 +1,9 @@
 %% @doc The configuration of a `pru_port' program, as pure functions for
 %% its owner (`toroco_pru_port'): the options checked and turned into the
 %% protocol's wire terms (`c_src/pru_port/PROTOCOL.md'), the order in
-%% which a new program is configured, what an accepted request changes in the configuration a restart re-applies,
-%% which requests wait for a program, and the delay before the next one.
+%% which a new program is configured, what an accepted request changes in
+%% the configuration a restart re-applies, which requests wait for a
+%% program, and the delay before the next one.
 %%
 %% Functions, by purpose:
 %% <ul>

@@ -13,6 +13,8 @@
 
 -define(LOG, #{domain => [toroco, hw, pru_port]}).
 
+%% @doc A new program, started with the options' backend and paths: its
+%% port and OS pid, or why it could not start.
 -spec open(toroco_pru_port:opts()) -> {ok, port(), integer()} | {error, term()}.
 open(Opts) ->
     case executable(Opts) of
@@ -30,8 +32,9 @@ open(Opts) ->
             Error
     end.
 
-%% A port whose program has died is closed before its exit_status is
-%% handled: writing to it then is not an error of this process.
+%% @doc Writes one frame. A port whose program has died is closed before
+%% its exit_status is handled: writing to it then is not an error of the
+%% owner.
 -spec send(port() | undefined, {pos_integer(), toroco_pru_port:request()}) -> ok | closed.
 send(undefined, _Frame) ->
     closed;
@@ -42,7 +45,7 @@ send(Port, Frame) ->
         error:badarg -> closed
     end.
 
-%% Closes the port of a program that may still run (stdin EOF: it goes
+%% @doc Closes the port of a program that may still run (stdin EOF: it goes
 %% neutral and exits) and, with `kill', kills it too. The kill runs in a
 %% process of its own, not in the owner.
 -spec close(kill | close, port(), integer() | undefined) -> ok.
@@ -77,7 +80,7 @@ arg(A) when is_atom(A) -> atom_to_list(A);
 arg(S) -> S.
 
 
-%% What the program sends unsolicited: logged when it says something went
+%% @doc What the program sends unsolicited: logged when it says something went
 %% wrong, and passed on to each subscriber.
 -spec event(term(), #{pid() => reference()}) -> ok.
 event({adc, _, _, _} = Event, Subs) ->
