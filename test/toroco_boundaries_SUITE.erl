@@ -5,7 +5,12 @@
 %% every listener, STYLE "Listeners and clients"). An xref query over the compiled
 %% applications finds every call from them into another module of `toroco',
 %% and a scan of their sources every include of the runtime's private
-%% headers; both must be empty.
+%% headers; both must be empty. No application sends to a process another
+%% application registers under one of its module names (what they say to
+%% each other goes through an API: the simulated world's snapshots through
+%% `toroco:publish_world/1'). And no module of `apps/*/src' is over 600
+%% lines, no function over 60 (`scripts/sizes'), but for the exceptions
+%% listed here with their reason.
 -module(toroco_boundaries_SUITE).
 
 -include_lib("common_test/include/ct.hrl").
@@ -27,10 +32,14 @@
 -define(REC_API, [toroco_rec, toroco_rec_json, toroco_rec_channels, toroco_rec_tap,
                   toroco_rec_mcap, toroco_rec_profile, toroco_rec_world]).
 
+%% Over the sizes STYLE allows, each with why (none today).
+-define(SIZE_EXCEPTIONS, []).
+
 all() ->
     [no_call_into_the_runtimes_insides, no_include_of_the_runtimes_headers,
      suites_use_the_api_only, ros_uses_the_dashboards_api_only, dashboard_never_calls_ros,
-     live_and_ros_use_the_records_api_only, records_never_call_live_nor_ros].
+     live_and_ros_use_the_records_api_only, records_never_call_live_nor_ros,
+     no_send_to_another_apps_process, sizes_within_bounds].
 
 no_call_into_the_runtimes_insides() ->
     [{doc, "No call from toroco_hw, torobot, toroco_lib, toroco_live or toroco_lua reaches a module of "
@@ -130,3 +139,74 @@ suites_use_the_api_only(_Config) ->
             || File <- Tests, Line <- lines(File),
                re:run(Line, "-include(_lib)?\\(\"toroco/src/|toroco_wire\\.hrl") =/= nomatch],
     ?assertEqual([], Offending).
+
+no_send_to_another_apps_process() ->
+    [{doc, "No source of an application sends (!, erlang:send, gen_server/gen_statem/gen_event "
+      "calls and casts) to a name that is a module of another application, nor looks up "
+      "(whereis) such a name of an application it does not depend on."}].
+no_send_to_another_apps_process(_Config) ->
+    Apps = [toroco | ?OTHERS],
+    _ = [application:load(App) || App <- Apps],
+    Owner = maps:from_list([{M, App} || App <- Apps,
+                                        {ok, Ms} <- [application:get_key(App, modules)], M <- Ms]),
+    Offending = [{filename:basename(File), Line, How, Name}
+                 || App <- Apps,
+                    {ok, Deps} <- [application:get_key(App, applications)],
+                    File <- filelib:wildcard(filename:join([code:lib_dir(App), "src", "*.erl"])),
+                    {How, Name, Line} <- addressed(tokens(File)),
+                    Other <- [maps:get(Name, Owner, App)], Other =/= App,
+                    How =/= whereis orelse not lists:member(Other, Deps)],
+    ?assertEqual([], Offending).
+
+tokens(File) ->
+    {ok, Bin} = file:read_file(File),
+    {ok, Tokens, _} = erl_scan:string(unicode:characters_to_list(Bin)),
+    Tokens.
+
+%% The atoms a source sends to or looks up, with how and on which line.
+addressed([{atom, L, Name}, {'!', _} | Rest]) ->
+    [{send, Name, L} | addressed(Rest)];
+addressed([{'{', _}, {atom, L, Name}, {',', _}, _, {'}', _}, {'!', _} | Rest]) ->
+    [{send, Name, L} | addressed(Rest)];
+addressed([{atom, _, Mod}, {':', _}, {atom, _, F}, {'(', _}, {atom, L, Name} | Rest]) ->
+    case sends(Mod, F) of
+        true -> [{send, Name, L} | addressed(Rest)];
+        false when Mod =:= erlang, F =:= whereis -> [{whereis, Name, L} | addressed(Rest)];
+        false -> addressed(Rest)
+    end;
+addressed([{atom, _, whereis}, {'(', _}, {atom, L, Name} | Rest]) ->
+    [{whereis, Name, L} | addressed(Rest)];
+addressed([_ | Rest]) ->
+    addressed(Rest);
+addressed([]) ->
+    [].
+
+sends(erlang, send) -> true;
+sends(Gen, F) when Gen =:= gen_server; Gen =:= gen_statem; Gen =:= gen_event ->
+    lists:member(F, [call, cast, send_request, notify, sync_notify]);
+sends(_, _) -> false.
+
+sizes_within_bounds() ->
+    [{doc, "scripts/sizes finds no module of apps/*/src over 600 lines and no function over "
+      "60 but for the listed exceptions (an exception no longer over is logged, to be removed)."}].
+sizes_within_bounds(_Config) ->
+    Root = toroco_test_lib:root(),
+    Script = filename:join([Root, "scripts", "sizes"]),
+    Out = os:cmd("cd " ++ Root ++ " && escript " ++ Script ++ " --terms; echo rc=$?"),
+    ct:log("~s", [Out]),
+    {match, [Rc]} = re:run(Out, "rc=([0-9]+)\\s*$", [{capture, all_but_first, list}]),
+    ?assert(lists:member(Rc, ["0", "1"]), Out),
+    Found = [case T of
+                 {module, Path, _} -> {module, Path};
+                 {function, Path, NA, _} -> {function, Path, NA}
+             end || T <- terms(Out)],
+    ct:log("exceptions within bounds now (remove them): ~p", [?SIZE_EXCEPTIONS -- Found]),
+    ?assertEqual([], Found -- ?SIZE_EXCEPTIONS).
+
+%% The script's findings, one term a line.
+terms(Out) ->
+    [begin
+         {ok, Ts, _} = erl_scan:string(Line),
+         {ok, T} = erl_parse:parse_term(Ts),
+         T
+     end || Line <- string:split(Out, "\n", all), lists:prefix("{", Line)].

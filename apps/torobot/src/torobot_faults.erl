@@ -37,8 +37,9 @@
 %% nodes other than the world's (`nodes' of the names).
 -module(torobot_faults).
 
--export([check/2, read/2, concrete/4, describe/1, ends/1, world_faults/2, robot_faults/1]).
--export([readings/5, datagrams/5, wheels/3, sensors/0]).
+-export([check/2, read/2, concrete/4, describe/1, ends/1, world_faults/2, robot_faults/1,
+         robot_events/1]).
+-export([readings/5, sensor_readings/4, datagrams/5, wheels/3, sensors/0]).
 -export_type([fault/0, schedule/0, concrete/0, names/0]).
 
 -type fault() :: tuple().
@@ -291,6 +292,18 @@ robot_faults(Faults) ->
 robot_fault(Fault) ->
     lists:member(element(1, Fault), [kill, suspend, disconnect, kill_node]).
 
+%% @doc The robot's faults as events at their instants (a suspend is two); the
+%% world's act on the readings alone (readings/5), so one that changes
+%% nothing (noise of sigma 0) leaves the trace as it is.
+-spec robot_events(concrete()) -> [{non_neg_integer(), tuple()}].
+robot_events(Faults) ->
+    lists:keysort(1, lists:append(
+                       [case F of
+                            {suspend, Name, D} -> [{Ms, {suspend, Name}},
+                                                   {Ms + round(D), {resume, Name}}];
+                            _ -> [{Ms, F}]
+                        end || {at, Ms, F} <- robot_faults(Faults)])).
+
 %% @doc The faults of the world (sensors, camera, wheels) active at `T'.
 -spec world_faults(concrete(), non_neg_integer()) -> concrete().
 world_faults(Faults, T) ->
@@ -299,6 +312,19 @@ world_faults(Faults, T) ->
 %%====================================================================
 %% The world's faults
 %%====================================================================
+
+%% @doc The readings of every simulated sensor (`Device => Readings') as
+%% the active faults leave them ({@link readings/5} for each): a sensor
+%% whose readings the faults empty has no entry.
+-spec sensor_readings(#{atom() => map()}, concrete(), #{term() => term()},
+                      {integer(), integer()}) -> {#{atom() => map()}, #{term() => term()}}.
+sensor_readings(Readings, Active, Stuck, Seed) ->
+    maps:fold(fun(Dev, R, {Acc, St}) ->
+                      case readings(Dev, R, Active, St, Seed) of
+                          {R1, St1} when map_size(R1) =:= 0, map_size(R) > 0 -> {Acc, St1};
+                          {R1, St1} -> {Acc#{Dev => R1}, St1}
+                      end
+              end, {#{}, Stuck}, Readings).
 
 %% @doc A tick's IR readings (`ir') or a simulated sensor's (`Device'),
 %% as the active faults leave them: `{ok, Readings}', where a sensor in

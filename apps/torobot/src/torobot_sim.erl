@@ -234,26 +234,7 @@ run_worlds(Worlds, WiringFile, Speed, Time, Opts) ->
 %% with a member per robot.
 -spec summary_json(summary()) -> binary().
 summary_json(Summary) ->
-    iolist_to_binary(jiffy:encode(summary_value(Summary))).
-
--define(TOROBOT_KEYS, [red_touched_ms, wall_contacts, blue_contacts, distance_m]).
-
-%% The summary for `jiffy', its keys in order; floats with three decimals.
--spec summary_value(summary()) -> jiffy:json_value().
-summary_value(#{red_touched_ms := _, wall_contacts := _, blue_contacts := _,
-                distance_m := Distance} = Summary) ->
-    {[{K, figure_value(maps:get(K, Summary))} || K <- ?TOROBOT_KEYS, K =/= distance_m]
-     ++ [{distance_m, figure_value(float(Distance))}
-         | [{K, figure_value(V)}
-            || {K, V} <- lists:sort(maps:to_list(maps:without(?TOROBOT_KEYS, Summary)))]]};
-summary_value(PerRobot) when is_map(PerRobot) ->
-    {[{Name, summary_value(S)} || {Name, S} <- lists:sort(maps:to_list(PerRobot))]}.
-
--spec figure_value(term()) -> jiffy:json_value().
-figure_value(none) -> null;
-figure_value(V) when is_integer(V) -> V;
-figure_value(V) when is_float(V) -> binary_to_float(float_to_binary(V, [{decimals, 3}]));
-figure_value(V) -> iolist_to_binary(io_lib:format("~0p", [V])).
+    torobot_sim_view:summary_json(Summary).
 
 %% @doc Runs many worlds, several at once, and scores them: see
 %% `torobot_batch:run/1'.
@@ -363,7 +344,7 @@ svg(_Worlds, #{}) ->
 init({Caller, Status, Speed, Tick, Time, TracePath, Faults, Seed, {Stop, Observing}, Marks}) ->
     monitor(process, Caller),
     S = #sim{caller = Caller, status = Status, speed = Speed, tick = Tick, time = Time,
-             faults = Faults, seed = Seed, robot_events = robot_events(Faults), stop = Stop,
+             faults = Faults, seed = Seed, robot_events = torobot_faults:robot_events(Faults), stop = Stop,
              observing = Observing,
              marks = [#{t_ms => Ms, kind => fault,
                         text => iolist_to_binary(torobot_faults:describe(F))}
@@ -538,15 +519,7 @@ lockstep(B = #bot{world = W0, handle = H, ir = Last, readings = LastReadings}, O
             {Ir, St1} = torobot_faults:readings(ir, torobot_world:ir(W), Active, B#bot.stuck,
                                                 {Seed, T}),
             {Readings0, Sensors} = torobot_sensors:read(W, B#bot.sensors),
-            {Readings, St2} = maps:fold(
-                                fun(Dev, R, {Acc, St}) ->
-                                        case torobot_faults:readings(Dev, R, Active, St, {Seed, T}) of
-                                            {R1, St3} when map_size(R1) =:= 0, map_size(R) > 0 ->
-                                                {Acc, St3};
-                                            {R1, St3} ->
-                                                {Acc#{Dev => R1}, St3}
-                                        end
-                                end, {#{}, St1}, Readings0),
+            {Readings, St2} = torobot_faults:sensor_readings(Readings0, Active, St1, {Seed, T}),
             {Datagrams, Delayed, St4} = torobot_faults:datagrams(torobot_world:camera(W), Active,
                                                                  B#bot.delayed, St2, {Seed, T}),
             {FaultLines, S1} = robot_faults(H, T, S),
@@ -569,86 +542,18 @@ robot_faults(H, T, S = #sim{robot_events = Events}) ->
     Lines = lists:append([torobot_sim_robot:fault(H, Ms, Event) || {Ms, Event} <- Due]),
     {Lines, S#sim{robot_events = Later}}.
 
-%% The robot's faults as events at their instants (a suspend is two); the
-%% world's act on the readings alone (torobot_faults), so one that changes
-%% nothing (noise of sigma 0) leaves the trace as it is.
-robot_events(Faults) ->
-    lists:keysort(1, lists:append(
-                       [case F of
-                            {suspend, Name, D} -> [{Ms, {suspend, Name}},
-                                                   {Ms + round(D), {resume, Name}}];
-                            _ -> [{Ms, F}]
-                        end || {at, Ms, F} <- torobot_faults:robot_faults(Faults)])).
-
 %% What the properties judge (SPEC §17): each robot's tick, after it moved.
 observed(_Bots, S = #sim{observing = false}) ->
     S;
 observed([#bot{world = W, motors = Motors, lines = Lines}], S = #sim{obs = Obs})
   when Motors =/= none ->
-    {Wheels, Winner} = Motors,
-    #{wall_contacts := Wall, blue_contacts := Blue, red_touched_ms := Red} = Summary =
-        torobot_world:summary(W),
-    {Wall0, Blue0} = case Obs of
-                         [#{walls := W0, blues := B0} | _] -> {W0, B0};
-                         [] -> {0, 0}
-                     end,
-    O = #{t => torobot_world:time_ms(W), wall => Wall > Wall0, blue => Blue > Blue0,
-          red => Red =/= none, dist => distance_to_wall(W), winner => Winner,
-          motors => Wheels, events => events(Lines), walls => Wall, blues => Blue,
-          figures => Summary},
-    S#sim{obs = [O | Obs]};
+    Last = case Obs of
+               [O | _] -> O;
+               [] -> none
+           end,
+    S#sim{obs = [torobot_sim_observation:observation(W, Motors, Lines, Last) | Obs]};
 observed(_Bots, S) ->
     S.
-
-%% The events of a tick's trace lines that conditions name (a line of a
-%% robot over several nodes names its node second: read without it).
-events(Lines) ->
-    lists:filtermap(fun(Line) ->
-                            Tokens = binary:split(iolist_to_binary(Line), [<<" ">>, <<"\n">>],
-                                                  [global, trim_all]),
-                            case unnode(Tokens) of
-                                [_, <<"cut">>, N, _] -> {true, {cut, binary_to_atom(N)}};
-                                [_, <<"kill">>, N] -> {true, {cut, binary_to_atom(N)}};
-                                [_, <<"heal">>, N] -> {true, {healed, binary_to_atom(N)}};
-                                [_, Name, <<"restarted">>] ->
-                                    {true, {restarted, binary_to_atom(Name)}};
-                                [_, <<"layer">>, L, <<"out">>] ->
-                                    {true, {layer_out, binary_to_integer(L)}};
-                                [_, _, <<"emit">>, Src | _] ->
-                                    case binary:split(Src, <<".">>) of
-                                        [E, Out] -> {true, {emitted, {binary_to_atom(E),
-                                                                      binary_to_atom(Out)}}};
-                                        _ -> false
-                                    end;
-                                _ -> false
-                            end
-                    end, Lines).
-
-unnode([T, Node | Rest] = Tokens) ->
-    case binary:match(Node, <<"@">>) of
-        nomatch -> Tokens;
-        _ -> [T | Rest]
-    end;
-unnode(Tokens) ->
-    Tokens.
-
-%% From the robot's rim to the nearest wall or arena edge, in metres.
-distance_to_wall(W) ->
-    {X, Y, _} = torobot_world:pose(W),
-    {Aw, Ah} = torobot_world:arena(W),
-    Edges = [{{0.0, 0.0}, {Aw, 0.0}}, {{Aw, 0.0}, {Aw, Ah}}, {{Aw, Ah}, {0.0, Ah}},
-             {{0.0, Ah}, {0.0, 0.0}}],
-    lists:min([segment_distance({X, Y}, Seg) || Seg <- Edges ++ torobot_world:walls(W)])
-        - torobot_world:robot_radius(W).
-
-segment_distance({Px, Py}, {{Ax, Ay}, {Bx, By}}) ->
-    {Dx, Dy} = {Bx - Ax, By - Ay},
-    L2 = Dx * Dx + Dy * Dy,
-    U = case L2 == 0 of
-            true -> 0.0;
-            false -> max(0.0, min(1.0, ((Px - Ax) * Dx + (Py - Ay) * Dy) / L2))
-        end,
-    math:sqrt(math:pow(Px - (Ax + U * Dx), 2) + math:pow(Py - (Ay + U * Dy), 2)).
 
 %% The readings that changed since the last tick: all a robot is handed,
 %% in either clock.
@@ -668,57 +573,25 @@ trace(Fd, Name, T, Lines, Motors, Before) ->
              end,
     ok = file:write(Fd, [[Prefix, Line] || Line <- Lines ++ Wheels]).
 
-%% The dashboard's view of the world (toroco_live_world's message, written
-%% down there): a plain send, and only when toroco_live runs in this node.
-%% A robot of the one-robot form is named `torobot'.
+
+%% The dashboard's view of the world, through the runtime
+%% (toroco:publish_world/1): the snapshot is made only when someone
+%% subscribed in this node.
 publish(#sim{bots = Bots, t0 = T0, time = Time, marks = Marks}) ->
-    case whereis(toroco_live_world) of
-        undefined ->
-            ok;
-        Viewer ->
-            [#bot{world = W} | _] = Bots,
-            Robots = [begin
-                          #{ir := Ir, camera := Camera} = torobot_world:view(R),
-                          #{name => case torobot_world:name(R) of
-                                        undefined -> torobot;
-                                        Name -> Name
-                                    end,
-                            pose => torobot_world:pose(R),
-                            radius => torobot_world:robot_radius(R), winner => Winner,
-                            ir => Ir, camera => Camera}
-                      end || #bot{world = R, winner = Winner} <- Bots],
-            Viewer ! {toroco_live_world, snapshot,
-                      #{run => {self(), T0},
-                        t_ms => lists:max([torobot_world:time_ms(B#bot.world) || B <- Bots]),
-                        lockstep => Time =:= lockstep,
-                        timeline => #{duration_ms => torobot_world:duration_ms(W),
-                                      marks => Marks},
-                        arena => torobot_world:arena(W), walls => torobot_world:walls(W),
-                        objects => torobot_world:objects(W), robots => Robots}},
-            ok
-    end.
+    toroco:publish_world(fun() ->
+                                 torobot_sim_view:snapshot(
+                                   {self(), T0}, Time =:= lockstep, Marks,
+                                   [{W, Winner} || #bot{world = W, winner = Winner} <- Bots])
+                         end).
 
 status(S = #sim{status = false}) ->
     S;
 status(S = #sim{bots = Bots, next_status = Next, status = How}) ->
     case lists:max([torobot_world:time_ms(B#bot.world) || B <- Bots]) >= Next of
         true ->
-            _ = [line(How, Bot) || Bot <- Bots],
+            _ = [torobot_sim_view:status_line(How, W, Winner)
+                 || #bot{world = W, winner = Winner} <- Bots],
             S#sim{next_status = Next + 1000};
         false ->
             S
-    end.
-
-line(How, #bot{world = W, winner = Winner}) ->
-    {X, Y, H} = torobot_world:pose(W),
-    Name = case torobot_world:name(W) of
-               undefined -> "";
-               N -> io_lib:format("~s  ", [N])
-           end,
-    Line = io_lib:format("~st ~5.1f s  ~-13s x ~4.2f  y ~4.2f  heading ~4b",
-                         [Name, torobot_world:time_ms(W) / 1000, Winner, X, Y, round(H)]),
-    case How of
-        true -> io:put_chars([Line, "\n"]);
-        tty -> io:put_chars(["\r", Line]);
-        Fun when is_function(Fun, 1) -> Fun(Line)
     end.

@@ -366,7 +366,8 @@ owners(pru_port) ->
                         end
                 end, [], lists:reverse(?DEVICES));
 owners(lua_port) ->
-    [Owner || Owner <- [whereis(toroco_lua_port)], is_pid(Owner)].
+    %% the program's owner runs while toroco_lua does (a Lua run started it)
+    [toroco_lua || lists:keymember(toroco_lua, 1, application:which_applications())].
 
 %% Kills one program (its OS process, as a crash of the C program would
 %% end it) and waits in real time, the world's clock standing still, for

@@ -17,6 +17,11 @@
 %% <b>Observing the event path</b> (SPEC §10): {@link subscribe_events/1},
 %% {@link unsubscribe_events/1}, {@link flush_events/1}.
 %%
+%% <b>The simulated world</b> (SPEC §10, §14): {@link publish_world/1},
+%% {@link subscribe_world/0}, {@link unsubscribe_world/1}: a world publishes
+%% its snapshots through the runtime and whoever draws them subscribes, so
+%% neither knows the other's processes.
+%%
 %% <b>Several nodes</b> (SPEC §13): `#{node => Node}' in the options of
 %% {@link add_behavior/3} and {@link add_device/3} (and of a wiring file's
 %% `behavior' and `device' terms) places it on `Node'. Every call works from
@@ -44,13 +49,21 @@
          set_inputs/2, set_inhibitors/2, set_reset/2, load_wiring/1, read_wiring/1,
          inject/2, inject/3, inspect/0, inspect/1,
          top/0, watch/2, unwatch/0, wiring_dot/0, reload/1,
-         subscribe_events/1, unsubscribe_events/1, flush_events/1]).
+         subscribe_events/1, unsubscribe_events/1, flush_events/1,
+         publish_world/1, subscribe_world/0, unsubscribe_world/1]).
 
 -export_type([wiring_summary/0]).
 -export_type([name/0, source/0, source_spec/0, input_spec/0, behavior_opts/0,
-              hold/0, error_reason/0]).
+              hold/0, error_reason/0, world_snapshot/0]).
 
 -type name() :: atom().
+%% A simulated world's snapshot (SPEC §14; its keys in `toroco_live_world''s
+%% module doc).
+-type world_snapshot() :: #{run := term(), t_ms := non_neg_integer(), atom() => term()}.
+
+%% The pg scope (a child of toroco_sup) whose group `world' holds this
+%% node's subscribers to the world's snapshots.
+-define(WORLD_SCOPE, toroco_world_pg).
 %% What a wiring file adds ({@link read_wiring/1}).
 -type wiring_summary() :: toroco_wiring_file:summary().
 
@@ -438,3 +451,60 @@ unsubscribe_events(Ref) ->
 -spec flush_events(reference()) -> ok | {error, error_reason()}.
 flush_events(Ref) ->
     toroco_tap:sync(Ref).
+
+%% @doc Hands a simulated world's snapshot to every subscriber in this node
+%% ({@link subscribe_world/0}), as `{toroco_world, Snapshot}': one plain
+%% send each, so the world never waits. Given a fun, calls it for the
+%% snapshot only when there is a subscriber. Nothing, and no error, without
+%% subscribers or without the runtime in this node.
+-spec publish_world(world_snapshot() | fun(() -> world_snapshot())) -> ok.
+publish_world(Snapshot) when is_map(Snapshot); is_function(Snapshot, 0) ->
+    case world_subscribers() of
+        [] ->
+            ok;
+        Pids ->
+            Message = {toroco_world, case Snapshot of
+                                         _ when is_map(Snapshot) -> Snapshot;
+                                         _ -> Snapshot()
+                                     end},
+            lists:foreach(fun(Pid) -> Pid ! Message end, Pids)
+    end.
+
+world_subscribers() ->
+    case erlang:whereis(?WORLD_SCOPE) of
+        undefined -> [];
+        _ -> pg:get_local_members(?WORLD_SCOPE, world)
+    end.
+
+%% @doc The caller gets `{toroco_world, Snapshot}' for each snapshot a world
+%% in this node publishes, until it unsubscribes or ends; subscribing twice
+%% is subscribing once. `Ref' monitors the runtime's side of the
+%% subscription: `{'DOWN', Ref, process, _, _}' says it is gone (the runtime
+%% stopped or restarted), and a caller that still wants snapshots subscribes
+%% again. `{error, {not_running, toroco}}' without the runtime.
+-spec subscribe_world() -> {ok, reference()} | {error, error_reason()}.
+subscribe_world() ->
+    case erlang:whereis(?WORLD_SCOPE) of
+        undefined ->
+            {error, {not_running, toroco}};
+        Scope ->
+            Ref = monitor(process, Scope),
+            ok = case lists:member(self(), world_subscribers()) of
+                     true -> ok;
+                     false -> pg:join(?WORLD_SCOPE, world, self())
+                 end,
+            {ok, Ref}
+    end.
+
+%% @doc No more snapshots for the caller (none that were published before
+%% the call is taken back), and no `DOWN' for `Ref'.
+-spec unsubscribe_world(reference()) -> ok.
+unsubscribe_world(Ref) ->
+    demonitor(Ref, [flush]),
+    case erlang:whereis(?WORLD_SCOPE) of
+        undefined ->
+            ok;
+        _ ->
+            _ = pg:leave(?WORLD_SCOPE, world, self()),
+            ok
+    end.

@@ -2,6 +2,7 @@
 %%
 %% ```
 %% toroco_sup (rest_for_one)
+%% ├── pg (scope toroco_world_pg) the subscribers to a simulated world's snapshots
 %% ├── toroco_store          owns the tables (wiring, lives): they outlive their writers
 %% ├── toroco_tap            the observer tap's subscriptions (SPEC §10)
 %% ├── pg (scope toroco_tap_pg) where the network's processes hear of subscription changes
@@ -17,9 +18,10 @@
 %% '''
 %%
 %% Children are started in that order and depend on the ones before them.
-%% The wiring server comes last: it is never on the event path, and when it
-%% crashes it comes back alone, with the wiring it kept in `toroco_store's
-%% table, while the robot keeps running.
+%% The world's scope comes first, so that no other child's restart takes
+%% its subscribers away. The wiring server comes last: it is never on the
+%% event path, and when it crashes it comes back alone, with the wiring it
+%% kept in `toroco_store's table, while the robot keeps running.
 -module(toroco_sup).
 -behaviour(supervisor).
 
@@ -38,7 +40,9 @@ init([]) ->
                         shutdown => infinity, modules => [Mod]} end,
     Worker = fun(Mod) -> #{id => Mod, start => {Mod, start_link, []}, type => worker,
                            shutdown => 5000, modules => [Mod]} end,
-    {ok, {Flags, [Worker(toroco_store),
+    {ok, {Flags, [#{id => pg_world, start => {pg, start_link, [toroco_world_pg]}, type => worker,
+                    shutdown => 5000, modules => [pg]},
+                  Worker(toroco_store),
                   Worker(toroco_tap),
                   #{id => pg_tap, start => {pg, start_link, [toroco_tap_pg]}, type => worker,
                     shutdown => 5000, modules => [pg]},

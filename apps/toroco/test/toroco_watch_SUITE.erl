@@ -1,5 +1,6 @@
 %% Live inspection from a shell (SPEC §6, §9): the bounded trace of
-%% toroco:watch/2, the toroco:top() table and the wiring picture.
+%% toroco:watch/2, the toroco:top() table and the wiring picture; and the
+%% simulated world's snapshots as the runtime hands them on (SPEC §10).
 -module(toroco_watch_SUITE).
 -include_lib("common_test/include/ct.hrl").
 -compile([export_all, nowarn_export_all]).
@@ -8,14 +9,17 @@
 
 suite() -> [{timetrap, {seconds, 30}}].
 
-all() -> [{group, watch}, {group, top}, {group, picture}].
+all() -> [{group, watch}, {group, top}, {group, picture}, {group, world}].
 
 groups() ->
     [{watch, [], [stops_by_itself_at_max, stops_by_itself_at_rate, stops_by_itself_after_seconds,
                   watches_one_input, unwatch_stops_and_untraces, follows_a_restart,
                   stops_when_its_shell_goes, refuses_bad_requests]},
      {top, [], [top_shows_the_whole_network, top_counts_restarts]},
-     {picture, [], [dot_draws_suppression_and_inhibition, wiring_svg_through_graphviz]}].
+     {picture, [], [dot_draws_suppression_and_inhibition, wiring_svg_through_graphviz]},
+     {world, [], [world_snapshot_to_each_subscriber_once, world_snapshot_made_only_for_a_subscriber,
+                  world_subscriber_that_dies_is_unsubscribed,
+                  world_subscription_down_with_the_runtime]}].
 
 init_per_testcase(_TC, Config) ->
     toroco_test_lib:start(),
@@ -289,3 +293,78 @@ capture(Acc) ->
 chars({put_chars, _Enc, Chars}) -> Chars;
 chars({put_chars, _Enc, M, F, A}) -> apply(M, F, A);
 chars(_) -> [].
+
+%%====================================================================
+%% world
+%%====================================================================
+
+world_snapshot_to_each_subscriber_once() ->
+    [{doc, "A published snapshot reaches each subscriber once (subscribing twice is once), "
+      "and none after it unsubscribed."}].
+world_snapshot_to_each_subscriber_once(_Config) ->
+    Snap = #{run => r, t_ms => 10, robots => []},
+    Self = self(),
+    Other = spawn_link(fun() ->
+                               {ok, _} = toroco:subscribe_world(),
+                               Self ! subscribed,
+                               receive {toroco_world, S} -> Self ! {other, S} end
+                       end),
+    receive subscribed -> ok after 5000 -> ct:fail(other_not_subscribed) end,
+    {ok, Ref1} = toroco:subscribe_world(),
+    {ok, Ref2} = toroco:subscribe_world(),
+    ok = toroco:publish_world(Snap),
+    [Snap] = world_messages(),
+    receive {other, Snap} -> ok after 5000 -> ct:fail({no_snapshot, Other}) end,
+    ok = toroco:unsubscribe_world(Ref1),
+    ok = toroco:publish_world(Snap#{t_ms := 20}),
+    [] = world_messages(),
+    ok = toroco:unsubscribe_world(Ref2).
+
+world_snapshot_made_only_for_a_subscriber() ->
+    [{doc, "Given a fun, publish_world/1 calls it only when someone subscribed: a world with "
+      "nobody watching makes no snapshot."}].
+world_snapshot_made_only_for_a_subscriber(_Config) ->
+    Self = self(),
+    Make = fun() -> Self ! made, #{run => r, t_ms => 0} end,
+    ok = toroco:publish_world(Make),
+    receive made -> ct:fail(made_without_subscriber) after 0 -> ok end,
+    {ok, Ref} = toroco:subscribe_world(),
+    ok = toroco:publish_world(Make),
+    receive made -> ok after 0 -> ct:fail(not_made) end,
+    [#{t_ms := 0}] = world_messages(),
+    ok = toroco:unsubscribe_world(Ref).
+
+world_subscriber_that_dies_is_unsubscribed() ->
+    [{doc, "A subscriber that dies is unsubscribed: the snapshot is no longer made for it."}].
+world_subscriber_that_dies_is_unsubscribed(_Config) ->
+    Self = self(),
+    {Pid, MRef} = spawn_monitor(fun() -> {ok, _} = toroco:subscribe_world(), Self ! subscribed,
+                                         receive stop -> ok end end),
+    receive subscribed -> ok after 5000 -> ct:fail(not_subscribed) end,
+    Made = fun() ->
+                   ok = toroco:publish_world(fun() -> Self ! made, #{run => r, t_ms => 0} end),
+                   receive made -> true after 0 -> false end
+           end,
+    true = Made(),
+    Pid ! stop,
+    receive {'DOWN', MRef, process, Pid, _} -> ok after 5000 -> ct:fail(not_down) end,
+    wait_until(fun() -> not Made() end, 5000).
+
+%% The snapshots in this process's mailbox now (a publish from this
+%% process to itself is there when publish_world/1 returns).
+world_messages() ->
+    receive {toroco_world, S} -> [S | world_messages()] after 0 -> [] end.
+
+world_subscription_down_with_the_runtime() ->
+    [{doc, "When the runtime stops, a world subscriber gets a DOWN for its subscription's "
+      "reference, and after the runtime is back it can subscribe again."}].
+world_subscription_down_with_the_runtime(_Config) ->
+    {ok, Ref} = toroco:subscribe_world(),
+    toroco_test_lib:stop(),
+    receive {'DOWN', Ref, process, _, _} -> ok after 5000 -> ct:fail(no_down) end,
+    {error, {not_running, toroco}} = toroco:subscribe_world(),
+    toroco_test_lib:start(),
+    {ok, Ref2} = toroco:subscribe_world(),
+    ok = toroco:publish_world(#{run => r, t_ms => 5}),
+    [#{t_ms := 5}] = world_messages(),
+    ok = toroco:unsubscribe_world(Ref2).

@@ -71,7 +71,10 @@
 %%
 %% The device modules (`toroco_pru_sensors', `toroco_servo_motors',
 %% `toroco_gpio_button') sit on top of this process; it knows nothing of the
-%% runtime's wiring.
+%% runtime's wiring. Beside it, `toroco_pru_port_config' holds its pure
+%% parts (the options checked and in wire form, the configuration steps,
+%% what a restart re-applies, the backoff) and `toroco_pru_port_program'
+%% the program's side (open, frame, close, kill; its events passed on).
 %%
 %% Functions, by purpose:
 %% <ul>
@@ -98,43 +101,13 @@
               event/0, request/0, phase/0]).
 
 -type server() :: pid() | atom() | {global, term()} | {via, module(), term()}.
--type adc_channel() ::
-        #{channel := 0..7,
-          mode := analog | analog_threshold | off,
-          threshold_high => 0..4095,
-          threshold_low => 0..4095}.
--type servo_id() :: atom().
-%% Pulse widths in ns. neutral_ns is the pulse that stops the servo;
-%% span_ns is how far from neutral full speed (velocity +-100) is.
--type servo() :: #{pwmchip := non_neg_integer(),
-                   channel := non_neg_integer(),
-                   period_ns => pos_integer(),
-                   neutral_ns => non_neg_integer(),
-                   span_ns => non_neg_integer(),
-                   reversed => boolean()}.
-%% active_low defaults to true (a button to ground, line pulled up),
-%% debounce_ms to 20.
--type button() :: none | #{line := non_neg_integer(),
-                           active_low => boolean(),
-                           debounce_ms => non_neg_integer()}.
--type opts() :: #{name => atom() | {local, atom()} | {global, term()} | {via, module(), term()},
-                  backend => sim | pru,
-                  executable => file:filename_all(),
-                  sysfs_root => file:filename_all(),
-                  gpiochip => file:filename_all(),
-                  sim_script => file:filename_all(),
-                  remoteproc => file:filename_all(),
-                  firmware => string() | binary(),
-                  rpmsg_dev => file:filename_all(),
-                  watchdog_ms => non_neg_integer(),
-                  adc => [adc_channel()],
-                  servos => #{servo_id() => servo()},
-                  enabled => boolean(),
-                  button => button(),
-                  max_restarts => {non_neg_integer(), pos_integer()},
-                  hello_timeout_ms => pos_integer(),
-                  reply_timeout_ms => pos_integer(),
-                  restart_backoff => {non_neg_integer(), non_neg_integer()}}.
+%% The options and their parts are checked, and turned into the
+%% program's terms, by toroco_pru_port_config.
+-type opts() :: toroco_pru_port_config:opts().
+-type adc_channel() :: toroco_pru_port_config:adc_channel().
+-type servo_id() :: toroco_pru_port_config:servo_id().
+-type servo() :: toroco_pru_port_config:servo().
+-type button() :: toroco_pru_port_config:button().
 %% What subscribers receive, as {toroco_pru_port, event()}. Times are the
 %% port program's monotonic clock in ms.
 -type event() :: {adc, 0..7, non_neg_integer(), integer()}
@@ -149,9 +122,6 @@
 -type phase() :: restart_backoff | awaiting_hello | configuring | start_failed.
 -type state() :: connecting | configuring | running.
 
--define(DEFAULT_PERIOD_NS, 20000000).
--define(DEFAULT_NEUTRAL_NS, 1500000).
--define(DEFAULT_SPAN_NS, 500000).
 -define(HELLO_TIMEOUT, 10000).
 -define(REPLY_TIMEOUT, 10000).
 -define(BACKOFF, {100, 5000}).
@@ -160,7 +130,7 @@
 -record(data, {
           opts :: opts(),
           %% the configuration as applied, in wire form
-          config :: #{atom() => term()},
+          config :: toroco_pru_port_config:config(),
           port :: port() | undefined,
           os_pid :: integer() | undefined,
           %% connecting: what the program said before it exited
@@ -247,7 +217,7 @@ info(Server) ->
 %% @doc Replaces the ADC channel set; remembered when accepted.
 -spec configure_adc(server(), [adc_channel()]) -> ok | {error, term()}.
 configure_adc(Server, Channels) ->
-    case wire_adc(Channels) of
+    case toroco_pru_port_config:wire_adc(Channels) of
         {ok, Wire} -> call(Server, {configure_adc, Wire});
         Error -> Error
     end.
@@ -255,7 +225,7 @@ configure_adc(Server, Channels) ->
 %% @doc Replaces the servo set (calibrations); each starts at neutral.
 -spec configure_servos(server(), #{servo_id() => servo()}) -> ok | {error, term()}.
 configure_servos(Server, Servos) ->
-    case wire_servos(Servos) of
+    case toroco_pru_port_config:wire_servos(Servos) of
         {ok, Wire} -> call(Server, {configure_servos, Wire});
         Error -> Error
     end.
@@ -284,7 +254,7 @@ configure_watchdog(Server, Ms) ->
 
 -spec configure_button(server(), button()) -> ok | {error, term()}.
 configure_button(Server, Button) ->
-    case wire_button(Button) of
+    case toroco_pru_port_config:wire_button(Button) of
         {ok, Wire} -> call(Server, Wire);
         Error -> Error
     end.
@@ -342,7 +312,7 @@ callback_mode() ->
 init(Opts) ->
     %% so that terminate/3 runs on shutdown and leaves the servos at neutral
     process_flag(trap_exit, true),
-    case initial_config(Opts) of
+    case toroco_pru_port_config:initial_config(Opts) of
         {ok, Config} ->
             {ok, connecting, #data{opts = Opts, config = Config},
              [{next_event, internal, start_program}]};
@@ -352,56 +322,12 @@ init(Opts) ->
 
 -spec handle_event(gen_statem:event_type(), term(), state(), data()) ->
           gen_statem:event_handler_result(state()).
-%% --- calls answered the same in every state
-handle_event({call, From}, {subscribe, Pid}, _State, #data{subscribers = Subs} = D) ->
-    case maps:is_key(Pid, Subs) of
-        true -> {keep_state_and_data, [{reply, From, ok}]};
-        false -> {keep_state, D#data{subscribers = Subs#{Pid => monitor(process, Pid)}},
-                  [{reply, From, ok}]}
-    end;
-handle_event({call, From}, {unsubscribe, Pid}, _State, #data{subscribers = Subs} = D) ->
-    case maps:take(Pid, Subs) of
-        {MRef, Rest} ->
-            demonitor(MRef, [flush]),
-            {keep_state, D#data{subscribers = Rest}, [{reply, From, ok}]};
-        error ->
-            {keep_state_and_data, [{reply, From, ok}]}
-    end;
-handle_event({call, From}, info, State, D) ->
-    {keep_state_and_data, [{reply, From, describe(State, D)}]};
-handle_event({call, From}, await_start, _State, #data{start = Start} = D) ->
-    case Start of
-        done -> {keep_state_and_data, [{reply, From, ok}]};
-        {awaiting, Froms} -> {keep_state, D#data{start = {awaiting, [From | Froms]}}};
-        {failed, Reason} -> {stop_and_reply, normal, [{reply, From, {error, Reason}}]}
-    end;
-%% --- requests
-handle_event({call, From}, {request, Request}, running,
-             #data{port = Port, next_ref = Ref, pending = Pending} = D) ->
-    case send_frame(Port, {Ref, Request}) of
-        ok ->
-            {keep_state, D#data{next_ref = Ref + 1,
-                                pending = Pending#{Ref => {From, Request}}}};
-        closed ->
-            %% the program just died; its exit_status, queued, restarts it
-            {keep_state_and_data, [{reply, From, {error, {port_exit, closed}}}]}
-    end;
-handle_event({call, From}, {request, Request}, State, D) ->
-    case waits_for_program(Request) of
-        true -> {keep_state_and_data, [postpone]};
-        false -> {keep_state_and_data,
-                  [{reply, From, {error, {connecting, phase(State, D)}}}]}
-    end;
-handle_event({call, From}, os_pid, running, #data{os_pid = OsPid}) ->
-    {keep_state_and_data, [{reply, From, OsPid}]};
-handle_event({call, _From}, os_pid, _State, _D) ->
-    {keep_state_and_data, [postpone]};
-handle_event({call, From}, Other, _State, _D) ->
-    {keep_state_and_data, [{reply, From, {error, {unknown_call, Other}}}]};
+handle_event({call, From}, Call, State, D) ->
+    answer(Call, From, State, D);
 %% --- starting a program
 handle_event(Type, start_program, connecting, D)
   when Type =:= internal; Type =:= state_timeout ->
-    case open_program(D#data.opts) of
+    case toroco_pru_port_program:open(D#data.opts) of
         {ok, Port, OsPid} ->
             {keep_state, D#data{port = Port, os_pid = OsPid, fatal = undefined},
              [{state_timeout, maps:get(hello_timeout_ms, D#data.opts, ?HELLO_TIMEOUT),
@@ -443,6 +369,56 @@ handle_event({timeout, step}, _Section, _State, _D) ->
 handle_event(cast, _Msg, _State, _D) ->
     keep_state_and_data.
 
+%% The calls: some answered the same in every state, requests and the
+%% OS pid by state (the module doc's table of messages).
+-spec answer(term(), gen_statem:from(), state(), data()) ->
+          gen_statem:event_handler_result(state()).
+answer({subscribe, Pid}, From, _State, #data{subscribers = Subs} = D) ->
+    case maps:is_key(Pid, Subs) of
+        true -> {keep_state_and_data, [{reply, From, ok}]};
+        false -> {keep_state, D#data{subscribers = Subs#{Pid => monitor(process, Pid)}},
+                  [{reply, From, ok}]}
+    end;
+answer({unsubscribe, Pid}, From, _State, #data{subscribers = Subs} = D) ->
+    case maps:take(Pid, Subs) of
+        {MRef, Rest} ->
+            demonitor(MRef, [flush]),
+            {keep_state, D#data{subscribers = Rest}, [{reply, From, ok}]};
+        error ->
+            {keep_state_and_data, [{reply, From, ok}]}
+    end;
+answer(info, From, State, D) ->
+    {keep_state_and_data, [{reply, From, describe(State, D)}]};
+answer(await_start, From, _State, #data{start = Start} = D) ->
+    case Start of
+        done -> {keep_state_and_data, [{reply, From, ok}]};
+        {awaiting, Froms} -> {keep_state, D#data{start = {awaiting, [From | Froms]}}};
+        {failed, Reason} -> {stop_and_reply, normal, [{reply, From, {error, Reason}}]}
+    end;
+%% --- requests
+answer({request, Request}, From, running,
+       #data{port = Port, next_ref = Ref, pending = Pending} = D) ->
+    case toroco_pru_port_program:send(Port, {Ref, Request}) of
+        ok ->
+            {keep_state, D#data{next_ref = Ref + 1,
+                                pending = Pending#{Ref => {From, Request}}}};
+        closed ->
+            %% the program just died; its exit_status, queued, restarts it
+            {keep_state_and_data, [{reply, From, {error, {port_exit, closed}}}]}
+    end;
+answer({request, Request}, From, State, D) ->
+    case toroco_pru_port_config:waits_for_program(Request) of
+        true -> {keep_state_and_data, [postpone]};
+        false -> {keep_state_and_data,
+                  [{reply, From, {error, {connecting, phase(State, D)}}}]}
+    end;
+answer(os_pid, From, running, #data{os_pid = OsPid}) ->
+    {keep_state_and_data, [{reply, From, OsPid}]};
+answer(os_pid, _From, _State, _D) ->
+    {keep_state_and_data, [postpone]};
+answer(Other, From, _State, _D) ->
+    {keep_state_and_data, [{reply, From, {error, {unknown_call, Other}}}]}.
+
 -spec terminate(term(), state(), data()) -> ok.
 terminate(_Reason, _State, #data{port = undefined}) ->
     ok;
@@ -450,25 +426,13 @@ terminate(_Reason, _State, #data{port = Port, next_ref = Ref}) ->
     %% Neutral first, whatever the state: a program that has not said hello
     %% yet reads it once it does. Closing the port (stdin EOF) makes the
     %% program go neutral again on its way out; no reply is waited for.
-    _ = send_frame(Port, {Ref, neutral}),
+    _ = toroco_pru_port_program:send(Port, {Ref, neutral}),
     catch port_close(Port),
     ok.
 
 %%% ---------------------------------------------------------------------
 %%% Requests while no program runs
 %%% ---------------------------------------------------------------------
-
-%% Configuration follows the re-applied configuration, so it waits; a
-%% neutral waits for a program that can take it. Anything else is answered
-%% at once: a velocity is not kept for later.
--spec waits_for_program(request()) -> boolean().
-waits_for_program(neutral) -> true;
-waits_for_program({configure_adc, _}) -> true;
-waits_for_program({configure_servos, _}) -> true;
-waits_for_program({configure_watchdog, _}) -> true;
-waits_for_program({configure_button, _}) -> true;
-waits_for_program({configure_button, _, _, _}) -> true;
-waits_for_program(_) -> false.
 
 -spec phase(state(), data()) -> phase().
 phase(configuring, _D) -> configuring;
@@ -486,28 +450,11 @@ describe(State, #data{os_pid = OsPid, counters = C, failures = F, pending = P,
 %%% The program: start, configure, restart
 %%% ---------------------------------------------------------------------
 
--spec open_program(opts()) -> {ok, port(), integer()} | {error, term()}.
-open_program(Opts) ->
-    case executable(Opts) of
-        {ok, Exe} ->
-            try open_port({spawn_executable, Exe},
-                          [{packet, 2}, binary, exit_status, use_stdio,
-                           {args, program_args(Opts)}]) of
-                Port ->
-                    {os_pid, OsPid} = erlang:port_info(Port, os_pid),
-                    {ok, Port, OsPid}
-            catch
-                error:Reason -> {error, {Reason, Exe}}
-            end;
-        {error, _} = Error ->
-            Error
-    end.
-
 %% What the program sends, by state. In connecting only the hello (or why
 %% it cannot start) is expected.
 -spec from_program(term(), state(), data()) -> gen_statem:event_handler_result(state()).
 from_program({hello, 1, _Backend}, connecting, D) ->
-    configure(D#data{steps = config_steps(D#data.config)});
+    configure(D#data{steps = toroco_pru_port_config:config_steps(D#data.config)});
 from_program({fatal, Reason}, connecting, D) ->
     %% the exit follows; it is reported with this reason
     {keep_state, D#data{fatal = Reason}};
@@ -525,36 +472,21 @@ from_program({reply, Ref, Result}, configuring, #data{step = {Ref, Section}} = D
 from_program({reply, Ref, Result}, _State, #data{pending = Pending} = D) ->
     case maps:take(Ref, Pending) of
         {{From, Request}, Rest} ->
-            {keep_state, remember(Request, Result, D#data{pending = Rest}),
+            Config = toroco_pru_port_config:remember(Request, Result, D#data.config),
+            {keep_state, D#data{pending = Rest, config = Config},
              [{reply, From, Result}]};
         error ->
             keep_state_and_data
     end;
 from_program(Event, _State, D) ->
-    event(Event, D),
+    toroco_pru_port_program:event(Event, D#data.subscribers),
     keep_state_and_data.
-
-%% Each section in a fixed order: the watchdog and servos first so that
-%% outputs are safe before any input starts reporting, and neutral as the
-%% first servo command of every program.
--spec config_steps(#{atom() => term()}) -> [{atom(), request()}].
-config_steps(Config) ->
-    Steps = [{watchdog, {configure_watchdog, maps:get(watchdog, Config)}},
-             {servos, {configure_servos, maps:get(servos, Config)}},
-             {neutral, neutral},
-             {enabled, {enable_servos, maps:get(enabled, Config)}},
-             {adc, {configure_adc, maps:get(adc, Config)}},
-             {button, maps:get(button, Config)}],
-    %% servos start disabled, and a button unconfigured: saying so again
-    %% would only arm the watchdog
-    [S || S <- Steps, S =/= {enabled, {enable_servos, false}},
-          S =/= {button, {configure_button, none}}].
 
 %% Sends the next configuration step, or enters running after the last.
 -spec configure(data()) -> gen_statem:event_handler_result(state()).
 configure(#data{steps = [{Section, Request} | Rest], port = Port, next_ref = Ref} = D) ->
     %% a closed port is followed by its exit_status, which ends the step
-    _ = send_frame(Port, {Ref, Request}),
+    _ = toroco_pru_port_program:send(Port, {Ref, Request}),
     {next_state, configuring, D#data{step = {Ref, Section}, steps = Rest, next_ref = Ref + 1},
      [{{timeout, step}, maps:get(reply_timeout_ms, D#data.opts, ?REPLY_TIMEOUT), Section}]};
 configure(#data{steps = [], start = Start} = D) ->
@@ -567,7 +499,7 @@ configure(#data{steps = [], start = Start} = D) ->
         done ->
             logger:notice("pru_port program ~p running again (the last one: ~0p)",
                           [D#data.os_pid, D#data.down_why], ?LOG),
-            event({port_restarted, D#data.down_why}, D1),
+            toroco_pru_port_program:event({port_restarted, D#data.down_why}, D1#data.subscribers),
             {next_state, running, D1, [Cancel]}
     end.
 
@@ -610,7 +542,7 @@ program_failed(Why, State, #data{opts = Opts, pending = Pending, counters = C} =
                               running -> {0, Why};
                               _ -> {D1#data.failures + 1, D1#data.down_why}
                           end,
-    Delay = backoff(Failures, maps:get(restart_backoff, Opts, ?BACKOFF)),
+    Delay = toroco_pru_port_config:backoff(Failures, maps:get(restart_backoff, Opts, ?BACKOFF)),
     D = D1#data{pending = #{}, step = undefined, steps = [], restart_times = [Now | Recent],
                 failures = Failures, down_why = DownWhy,
                 counters = C#{restarts := maps:get(restarts, C) + 1,
@@ -648,166 +580,10 @@ start_failed(Reason, #data{start = {awaiting, Froms}} = D0) ->
 %% Closes the port of a program that may still run (stdin EOF: it goes
 %% neutral and exits) and, with `kill', kills it too: one that sent no
 %% hello or does not answer is wedged, and the next one puts the servos at
-%% neutral. The kill runs in a process of its own, not in this one.
+%% neutral.
 -spec give_up_program(kill | close, data()) -> data().
 give_up_program(_How, #data{port = undefined} = D) ->
     D#data{os_pid = undefined};
 give_up_program(How, #data{port = Port, os_pid = OsPid} = D) ->
-    catch port_close(Port),
-    _ = case How of
-            kill -> spawn(fun() -> os:cmd("kill -KILL " ++ integer_to_list(OsPid) ++ " 2>/dev/null") end);
-            close -> ok
-        end,
+    toroco_pru_port_program:close(How, Port, OsPid),
     D#data{port = undefined, os_pid = undefined}.
-
-%% The delay before the next program: none after one that ran, then the
-%% first delay doubled for each failure in a row, at most the last.
--spec backoff(non_neg_integer(), {non_neg_integer(), non_neg_integer()}) -> non_neg_integer().
-backoff(0, _) -> 0;
-backoff(Failures, {First, Max}) -> min(Max, First bsl min(Failures - 1, 20)).
-
-%% A port whose program has died is closed before its exit_status is
-%% handled: writing to it then is not an error of this process.
--spec send_frame(port() | undefined, {pos_integer(), request()}) -> ok | closed.
-send_frame(undefined, _Frame) ->
-    closed;
-send_frame(Port, Frame) ->
-    try port_command(Port, term_to_binary(Frame)) of
-        true -> ok
-    catch
-        error:badarg -> closed
-    end.
-
-%%% ---------------------------------------------------------------------
-%%% Events
-%%% ---------------------------------------------------------------------
-
--spec event(term(), data()) -> ok.
-event({adc, _, _, _} = Event, D) ->
-    notify(Event, D);
-event({button, _, _} = Event, D) ->
-    notify(Event, D);
-event({watchdog, _} = Event, D) ->
-    logger:notice("pru_port watchdog: no servo command in time, servos at neutral", [], ?LOG),
-    notify(Event, D);
-event({fault, Reason} = Event, D) ->
-    logger:warning("pru_port fault: ~0p", [Reason], ?LOG),
-    notify(Event, D);
-event({port_restarted, _} = Event, D) ->
-    notify(Event, D);
-event({error, {bad_frame, Why}}, _D) ->
-    logger:error("pru_port refused a frame from this process (~0p)", [Why], ?LOG);
-event(Other, _D) ->
-    logger:warning("pru_port sent an unexpected term: ~0p", [Other], ?LOG).
-
--spec notify(event(), data()) -> ok.
-notify(Event, #data{subscribers = Subs}) ->
-    %% a notice, so that in lockstep the devices act on it as a step
-    maps:foreach(fun(Pid, _) -> toroco_clock:notify(Pid, {toroco_pru_port, Event}) end, Subs).
-
-%% Accepted configuration requests become the configuration re-applied
-%% after a restart.
--spec remember(request(), term(), data()) -> data().
-remember(Request, ok, #data{config = Config} = D) ->
-    case Request of
-        {configure_adc, Wire} -> D#data{config = Config#{adc := Wire}};
-        {configure_servos, Wire} -> D#data{config = Config#{servos := Wire}};
-        {enable_servos, On} -> D#data{config = Config#{enabled := On}};
-        {configure_watchdog, Ms} -> D#data{config = Config#{watchdog := Ms}};
-        {configure_button, _} = B -> D#data{config = Config#{button := B}};
-        {configure_button, _, _, _} = B -> D#data{config = Config#{button := B}};
-        _ -> D
-    end;
-remember(_Request, _Result, D) ->
-    D.
-
-%%% ---------------------------------------------------------------------
-%%% Options to command line and wire terms
-%%% ---------------------------------------------------------------------
-
--spec executable(opts()) -> {ok, file:filename_all()} | {error, term()}.
-executable(#{executable := Exe}) ->
-    {ok, Exe};
-executable(_) ->
-    case code:priv_dir(toroco_hw) of
-        {error, _} -> {error, {no_priv_dir, toroco_hw}};
-        Dir -> {ok, filename:join(Dir, "pru_port")}
-    end.
-
--spec program_args(opts()) -> [string() | binary()].
-program_args(Opts) ->
-    Flags = [{backend, "--backend"}, {sysfs_root, "--sysfs-root"}, {gpiochip, "--gpiochip"},
-             {sim_script, "--sim-script"}, {remoteproc, "--remoteproc"},
-             {firmware, "--firmware"}, {rpmsg_dev, "--rpmsg-dev"}],
-    lists:append([[Flag, arg(V)] || {Key, Flag} <- Flags, {ok, V} <- [maps:find(Key, Opts)]]).
-
--spec arg(atom() | string() | binary()) -> string() | binary().
-arg(A) when is_atom(A) -> atom_to_list(A);
-arg(S) -> S.
-
--spec initial_config(opts()) -> {ok, #{atom() => term()}} | {error, term()}.
-initial_config(Opts) ->
-    maybe_all([{adc, fun() -> wire_adc(maps:get(adc, Opts, [])) end},
-               {servos, fun() -> wire_servos(maps:get(servos, Opts, #{})) end},
-               {button, fun() -> wire_button(maps:get(button, Opts, none)) end}],
-              #{watchdog => maps:get(watchdog_ms, Opts, 0),
-                enabled => maps:get(enabled, Opts, false)}).
-
--spec maybe_all([{atom(), fun(() -> {ok, term()} | {error, term()})}], map()) ->
-          {ok, map()} | {error, term()}.
-maybe_all([], Acc) ->
-    {ok, Acc};
-maybe_all([{Key, F} | Rest], Acc) ->
-    case F() of
-        {ok, V} -> maybe_all(Rest, Acc#{Key => V});
-        {error, Reason} -> {error, {Key, Reason}}
-    end.
-
--spec wire_adc([adc_channel()]) -> {ok, [tuple()]} | {error, term()}.
-wire_adc(Channels) when is_list(Channels) ->
-    map_ok(fun wire_channel/1, Channels);
-wire_adc(Other) ->
-    {error, {bad_adc_channels, Other}}.
-
--spec wire_channel(adc_channel()) -> {ok, tuple()} | {error, term()}.
-wire_channel(#{channel := Ch, mode := analog_threshold,
-               threshold_high := High, threshold_low := Low}) ->
-    {ok, {Ch, analog_threshold, High, Low}};
-wire_channel(#{channel := Ch, mode := Mode}) when Mode =:= analog; Mode =:= off ->
-    {ok, {Ch, Mode}};
-wire_channel(Other) ->
-    {error, {bad_adc_channel, Other}}.
-
--spec wire_servos(#{servo_id() => servo()}) -> {ok, [tuple()]} | {error, term()}.
-wire_servos(Servos) when is_map(Servos) ->
-    map_ok(fun wire_servo/1, lists:sort(maps:to_list(Servos)));
-wire_servos(Other) ->
-    {error, {bad_servos, Other}}.
-
--spec wire_servo({servo_id(), servo()}) -> {ok, tuple()} | {error, term()}.
-wire_servo({Id, #{pwmchip := Chip, channel := Ch} = S}) when is_atom(Id) ->
-    {ok, {Id, Chip, Ch,
-          maps:get(period_ns, S, ?DEFAULT_PERIOD_NS),
-          maps:get(neutral_ns, S, ?DEFAULT_NEUTRAL_NS),
-          maps:get(span_ns, S, ?DEFAULT_SPAN_NS),
-          maps:get(reversed, S, false)}};
-wire_servo({Id, Other}) ->
-    {error, {bad_servo, Id, Other}}.
-
--spec wire_button(button()) -> {ok, tuple()} | {error, term()}.
-wire_button(none) ->
-    {ok, {configure_button, none}};
-wire_button(#{line := Line} = B) ->
-    {ok, {configure_button, Line, maps:get(active_low, B, true), maps:get(debounce_ms, B, 20)}};
-wire_button(Other) ->
-    {error, {bad_button, Other}}.
-
--spec map_ok(fun((A) -> {ok, B} | {error, term()}), [A]) -> {ok, [B]} | {error, term()}.
-map_ok(F, List) ->
-    lists:foldr(fun(_, {error, _} = E) -> E;
-                   (X, {ok, Acc}) ->
-                        case F(X) of
-                            {ok, Y} -> {ok, [Y | Acc]};
-                            {error, _} = E -> E
-                        end
-                end, {ok, []}, List).

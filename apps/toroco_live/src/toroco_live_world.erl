@@ -1,19 +1,23 @@
 %% @doc (API) The simulated world as the dashboard and the bridges see it:
-%% a registered process (`toroco_live_world') that a simulator tells about
-%% each step of its world, and that keeps the latest snapshot and each
-%% robot's trajectory for whoever draws them. It is the source of
-%% `toroco_rec_world' (the flight recorder's and the taps' world): it sets
-%% itself there as it starts.
+%% a registered process (`toroco_live_world') that keeps the latest
+%% snapshot of the world running in this node and each robot's trajectory
+%% for whoever draws them. It is the source of `toroco_rec_world' (the
+%% flight recorder's and the taps' world): it sets itself there as it starts.
 %%
-%% A simulator does not depend on `toroco_live': it sends a plain message
-%% to the registered name when the name exists (`whereis/1'), and nothing
-%% when it does not (a board release without `toroco_live', or the
-%% application stopped). That message is the protocol, written down here:
+%% A simulator does not know this process, nor does this process know the
+%% simulator: the world publishes each step through the runtime
+%% (`toroco:publish_world/1', SPEC §10), and this process subscribes to
+%% those snapshots (`toroco:subscribe_world/0') when it starts, and again
+%% (every 200 ms until the runtime is back) when the runtime restarts under
+%% it and takes the subscription with it. Without
+%% `toroco_live' (a board release, or the application stopped) nobody
+%% subscribes and the world makes no snapshot. The messages:
 %%
 %% <table>
 %% <tr><th>message</th><th>from → to</th><th>when</th><th>answer</th></tr>
-%% <tr><td>`{toroco_live_world, snapshot, Snapshot}'</td>
-%%     <td>simulator (`torobot_sim') → `toroco_live_world'</td>
+%% <tr><td>`{toroco_world, Snapshot}'</td>
+%%     <td>the runtime (`toroco:publish_world/1', called by `torobot_sim')
+%%     → each subscriber, this process among them</td>
 %%     <td>after each step of the world</td><td>none</td></tr>
 %% <tr><td>`{toroco_live_world, changed}'</td>
 %%     <td>`toroco_live_world' → each subscriber</td>
@@ -72,7 +76,13 @@
 %% Points kept per robot's trajectory.
 -define(TRAIL, 4000).
 
+%% How soon to subscribe again to the world's snapshots after the runtime
+%% took the subscription away, or refused it.
+-define(RESUBSCRIBE_MS, 200).
+
 -record(w, {latest = none :: snapshot() | none,
+            %% the runtime's side of the subscription to the world's snapshots
+            world = none :: reference() | none,
             trails = #{} :: #{atom() => {non_neg_integer(), [tuple()]}},
             subscribers = #{} :: #{pid() => {reference(), Notified :: boolean()}},
             %% the subscribers that take every snapshot of a world in lockstep
@@ -108,7 +118,18 @@ unsubscribe() ->
 init([]) ->
     %% The flight recorder and the taps that ask for the world read it here.
     ok = toroco_rec_world:set(?MODULE),
-    {ok, #w{}}.
+    {ok, subscribe_world(#w{})}.
+
+%% Snapshots come while the runtime runs; when it is not running (yet, or
+%% again) this process asks again a little later.
+subscribe_world(W) ->
+    case toroco:subscribe_world() of
+        {ok, Ref} ->
+            W#w{world = Ref};
+        {error, _} ->
+            erlang:send_after(?RESUBSCRIBE_MS, self(), {?MODULE, subscribe_world}),
+            W#w{world = none}
+    end.
 
 -spec handle_call(term(), gen_server:from(), #w{}) -> {reply, term(), #w{}}.
 handle_call(latest, {Pid, _}, W = #w{latest = Latest, trails = Trails, subscribers = Subs}) ->
@@ -144,13 +165,19 @@ handle_cast(_Msg, W) ->
     {noreply, W}.
 
 -spec handle_info(term(), #w{}) -> {noreply, #w{}}.
-handle_info({?MODULE, snapshot, #{run := Run, robots := Robots} = Snap}, W) when is_list(Robots) ->
+handle_info({toroco_world, #{run := Run, robots := Robots} = Snap}, W) when is_list(Robots) ->
     Trails = case W#w.latest of
                  #{run := Run} -> W#w.trails;
                  _ -> #{}
              end,
     Trails1 = lists:foldl(fun trail/2, Trails, Robots),
     {noreply, notify(W#w{latest = Snap, trails = Trails1})};
+handle_info({'DOWN', Ref, process, _, _}, W = #w{world = Ref}) ->
+    %% the runtime restarted, and its subscribers with it
+    erlang:send_after(?RESUBSCRIBE_MS, self(), {?MODULE, subscribe_world}),
+    {noreply, W#w{world = none}};
+handle_info({?MODULE, subscribe_world}, W = #w{world = none}) ->
+    {noreply, subscribe_world(W)};
 handle_info({'DOWN', Ref, process, Pid, _}, W = #w{subscribers = Subs}) ->
     case Subs of
         #{Pid := {Ref, _}} -> {noreply, W#w{subscribers = maps:remove(Pid, Subs),

@@ -249,16 +249,16 @@ simulated_world(Config) ->
     Snapshot = #{run => test, t_ms => 0, arena => {6.0, 4.0}, walls => [{{1.0, 1.0}, {1.0, 2.5}}],
                  objects => [{red, {4.5, 2.0}, 0.1}],
                  robots => [#{name => torobot, pose => {1.5, 2.0, 90.0}, radius => 0.1}]},
-    %% As torobot_sim tells toroco_live_world about each step.
-    toroco_live_world ! {toroco_live_world, snapshot, Snapshot},
+    %% As torobot_sim publishes each step.
+    ok = toroco:publish_world(Snapshot),
     Chs = await_topics(C, [<<"/toroco/sim/pose">>, <<"/toroco/sim/scene">>]),
     #{<<"schemaName">> := <<"foxglove.FrameTransform">>} = maps:get(<<"/toroco/sim/pose">>, Chs),
     #{<<"schemaName">> := <<"foxglove.SceneUpdate">>} = maps:get(<<"/toroco/sim/scene">>, Chs),
     subscribe(C, <<"/toroco/sim/pose">>),
     subscribe(C, <<"/toroco/sim/scene">>),
     %% A ball more: the scene changed, so it comes again with the pose.
-    toroco_live_world ! {toroco_live_world, snapshot,
-                         Snapshot#{t_ms => 50, objects => [{blue, {3.0, 2.2}, 0.1} | maps:get(objects, Snapshot)]}},
+    ok = toroco:publish_world(
+           Snapshot#{t_ms => 50, objects => [{blue, {3.0, 2.2}, 0.1} | maps:get(objects, Snapshot)]}),
     Ms = messages(C, [<<"/toroco/sim/pose">>, <<"/toroco/sim/scene">>], 2),
     [#{<<"data">> := #{<<"child_frame_id">> := <<"torobot">>,
                        <<"translation">> := #{<<"x">> := 1.5, <<"y">> := Y},

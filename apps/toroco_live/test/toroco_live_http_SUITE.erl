@@ -129,17 +129,16 @@ metrics(Config) ->
     true = Has(<<"toroco_vm_memory_bytes{kind=\"total\"}">>),
     true = Has(<<"toroco_up{name=\"relay\",kind=\"behavior\",status=\"running\"} 1">>).
 
-api_world() -> [{doc, "GET /api/world is the last snapshot a simulator sent, with the trajectory"}].
+api_world() -> [{doc, "GET /api/world is the last snapshot a world published, with the trajectory"}].
 api_world(Config) ->
     P = ?config(port, Config),
-    Snap = fun(T, X) -> {toroco_live_world, snapshot,
-                         #{run => make_ref_run, t_ms => T, arena => {2.0, 1.0},
+    Snap = fun(T, X) -> #{run => make_ref_run, t_ms => T, arena => {2.0, 1.0},
                            walls => [{{1.0, 0.0}, {1.0, 0.5}}], objects => [{red, {1.5, 0.5}, 0.1}],
                            robots => [#{name => bot, pose => {X, 0.5, 90.0}, radius => 0.1,
-                                        winner => relay, ir => [], camera => #{fov_deg => 60, range => 1.0}}]}}
+                                        winner => relay, ir => [], camera => #{fov_deg => 60, range => 1.0}}]}
            end,
-    toroco_live_world ! Snap(50, 0.2),
-    toroco_live_world ! Snap(100, 0.3),
+    ok = toroco:publish_world(Snap(50, 0.2)),
+    ok = toroco:publish_world(Snap(100, 0.3)),
     wait(fun() -> case get(P, "/api/world") of
                       {200, _, #{<<"t_ms">> := 100}} -> true;
                       _ -> false

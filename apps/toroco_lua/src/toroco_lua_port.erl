@@ -95,8 +95,6 @@
 
 -define(CALL_TIMEOUT, 5000).
 -define(STUCK_MS, 2000).
--define(FRAME_MAX, 1 bsl 20).                  % PROTOCOL.md
--define(DEPTH_MAX, 32).
 -define(LOG, #{domain => [toroco, lua]}).
 
 -record(d, {port :: port(),
@@ -213,7 +211,7 @@ request(C, Seq, Req) ->
 -spec encode(conn(), 0..65535, request()) -> {ok, ref(), iodata()} | {error, term()}.
 encode({Id, _, _}, Seq, Req) ->
     Ref = Id bsl 16 bor Seq,
-    case frame(Req, Ref, Id) of
+    case toroco_lua_frame:frame(Req, Ref, Id) of
         {ok, Frame} -> {ok, Ref, [<<(byte_size(Frame)):32>>, Frame]};
         {error, _} = Error -> Error
     end.
@@ -230,7 +228,7 @@ write({_, Port, _}, Frames) ->
 %% `result()', or `waits''s and `memory''s.
 -spec answer(ref(), binary()) -> term().
 answer(Ref, Bin) ->
-    case decode(Bin) of
+    case toroco_lua_frame:decode(Bin) of
         {reply, Ref, Result} -> Result;
         Other -> {error, {lua_port_answer, Other}}
     end.
@@ -263,38 +261,12 @@ call(C = {Id, Port, OwnerMon}, Req, Ms) ->
         {error, _} = Error -> Error
     end.
 
-frame({input, Now, Input, Value}, Ref, Id) ->
-    case crossable(Value) of
-        true -> sized(term_to_binary({input, Ref, Id, Now, Input, Value}), Id);
-        false -> {error, {bad_value, Id}}
-    end;
-frame({timer, Now, Task, Seq}, Ref, Id) -> {ok, term_to_binary({timer, Ref, Id, Now, Task, Seq})};
-frame(waits, Ref, Id) -> {ok, term_to_binary({waits, Ref, Id})};
-frame(memory, Ref, Id) -> {ok, term_to_binary({memory, Ref, Id})}.
-
-sized(Frame, Id) when byte_size(Frame) > ?FRAME_MAX -> {error, {bad_value, Id}};
-sized(Frame, _Id) -> {ok, Frame}.
-
 %% @doc Whether the program can read `Value' (PROTOCOL.md): numbers (whole
 %% ones of up to 64 bits), atoms, binaries, proper lists, tuples and maps,
-%% nested at most 31 deep inside a frame. Anything else would be a frame the
-%% program cannot read, answered with no ref to route it by.
+%% nested at most 31 deep inside a frame (`toroco_lua_frame:crossable/1').
 -spec crossable(term()) -> boolean().
 crossable(Value) ->
-    crossable(Value, 1).
-
-crossable(_, D) when D > ?DEPTH_MAX -> false;
-crossable(V, _) when is_integer(V) -> V > -(1 bsl 64) andalso V < 1 bsl 64;
-crossable(V, _) when is_float(V); is_atom(V); is_binary(V) -> true;
-crossable(V, D) when is_list(V) -> list_crossable(V, D + 1);
-crossable(V, D) when is_tuple(V) -> list_crossable(tuple_to_list(V), D + 1);
-crossable(V, D) when is_map(V) ->
-    list_crossable(maps:keys(V), D + 1) andalso list_crossable(maps:values(V), D + 1);
-crossable(_, _) -> false.
-
-list_crossable([], _D) -> true;
-list_crossable([H | T], D) -> crossable(H, D) andalso list_crossable(T, D);
-list_crossable(_Improper, _D) -> false.
+    toroco_lua_frame:crossable(Value).
 
 await(Id, Ref, Kind, Port, OwnerMon, Wait) ->
     receive
@@ -394,34 +366,10 @@ start_port() ->
 
 -spec handle_event(gen_statem:event_type(), term(), up, #d{}) ->
           gen_statem:event_handler_result(up).
-handle_event({call, From}, {request, Req}, _S, D) ->
-    keep(D, send(Req, From, D));
-handle_event({call, From}, {open, Pid, {File, Dir, Params, B, M}, Now}, _S,
-             D = #d{next_id = Id}) ->
-    D1 = add_client(Pid, Id, D#d{next_id = Id + 1}),
-    keep(D, send({open, Id, Now, File, Dir, Params, B, M}, From, D1));
-handle_event({call, From}, {attach, Pid, Host, Slot, Now}, _S, D = #d{next_id = Id}) ->
-    D1 = add_client(Pid, Id, D#d{next_id = Id + 1}),
-    keep(D, send({attach, Id, Host, Slot, Now}, From, D1));
-handle_event({call, From}, {raw, Bin}, _S, D = #d{port = Port, pending = Q, next_ref = Ref}) ->
-    true = port_command(Port, [<<(byte_size(Bin)):32>>, Bin]),
-    keep(D, D#d{pending = queue:in({Ref, From, raw}, Q), next_ref = Ref - 1});
-handle_event({call, From}, os_pid, _S, #d{os_pid = OsPid}) ->
-    {keep_state_and_data, [{reply, From, OsPid}]};
-handle_event({call, From}, states, _S, #d{clients = Cs}) ->
-    {keep_state_and_data, [{reply, From, lists:sum([length(Ids) || {_, Ids} <- maps:values(Cs)])}]};
-handle_event({call, From}, {close_all, Pid}, _S, D = #d{clients = Cs}) ->
-    case maps:take(Pid, Cs) of
-        {{MRef, Ids}, Cs1} ->
-            erlang:demonitor(MRef, [flush]),
-            D1 = lists:foldl(fun(Id, Acc) -> send({close, Id}, none, Acc) end,
-                             D#d{clients = Cs1, routes = maps:without(Ids, D#d.routes)}, Ids),
-            {keep_state, D1, [{reply, From, ok} | watch(D, D1)]};
-        error ->
-            {keep_state_and_data, [{reply, From, ok}]}
-    end;
+handle_event({call, From}, Call, _S, D) ->
+    handle_call(Call, From, D);
 handle_event(info, {Port, {data, Bytes}}, _S, D = #d{port = Port, rest = Rest}) ->
-    {Frames, Rest1} = cut(case Rest of <<>> -> Bytes; _ -> <<Rest/binary, Bytes/binary>> end, []),
+    {Frames, Rest1} = toroco_lua_frame:cut(case Rest of <<>> -> Bytes; _ -> <<Rest/binary, Bytes/binary>> end),
     keep(D, frames_in(Frames, none, D#d{rest = Rest1}));
 handle_event(cast, {stuck, Port}, _S, #d{port = Port, os_pid = OsPid}) ->
     logger:error("toroco_lua_port: lua_port has not answered a Lua behavior in ~b ms; "
@@ -457,6 +405,34 @@ handle_event(Type, Content, _S, _D) ->
     logger:warning("toroco_lua_port: ignored ~p event ~p", [Type, Content], ?LOG),
     keep_state_and_data.
 
+%% The calls, the same in the one state.
+-spec handle_call(term(), gen_statem:from(), #d{}) -> gen_statem:event_handler_result(up).
+handle_call({request, Req}, From, D) ->
+    keep(D, send(Req, From, D));
+handle_call({open, Pid, {File, Dir, Params, B, M}, Now}, From, D = #d{next_id = Id}) ->
+    D1 = add_client(Pid, Id, D#d{next_id = Id + 1}),
+    keep(D, send({open, Id, Now, File, Dir, Params, B, M}, From, D1));
+handle_call({attach, Pid, Host, Slot, Now}, From, D = #d{next_id = Id}) ->
+    D1 = add_client(Pid, Id, D#d{next_id = Id + 1}),
+    keep(D, send({attach, Id, Host, Slot, Now}, From, D1));
+handle_call({raw, Bin}, From, D = #d{port = Port, pending = Q, next_ref = Ref}) ->
+    true = port_command(Port, [<<(byte_size(Bin)):32>>, Bin]),
+    keep(D, D#d{pending = queue:in({Ref, From, raw}, Q), next_ref = Ref - 1});
+handle_call(os_pid, From, #d{os_pid = OsPid}) ->
+    {keep_state_and_data, [{reply, From, OsPid}]};
+handle_call(states, From, #d{clients = Cs}) ->
+    {keep_state_and_data, [{reply, From, lists:sum([length(Ids) || {_, Ids} <- maps:values(Cs)])}]};
+handle_call({close_all, Pid}, From, D = #d{clients = Cs}) ->
+    case maps:take(Pid, Cs) of
+        {{MRef, Ids}, Cs1} ->
+            erlang:demonitor(MRef, [flush]),
+            D1 = lists:foldl(fun(Id, Acc) -> send({close, Id}, none, Acc) end,
+                             D#d{clients = Cs1, routes = maps:without(Ids, D#d.routes)}, Ids),
+            {keep_state, D1, [{reply, From, ok} | watch(D, D1)]};
+        error ->
+            {keep_state_and_data, [{reply, From, ok}]}
+    end.
+
 -spec terminate(term(), up, #d{}) -> ok.
 terminate(_Reason, _S, #d{port = Port}) ->
     catch port_close(Port),
@@ -478,10 +454,6 @@ watch(#d{pending = Q0}, #d{pending = Q}) ->
         {_, {value, {Ref, _, _}}} -> [{{timeout, stuck}, stuck_ms(), Ref}]
     end.
 
-%% The whole frames in the bytes read, and what is left of the next one.
-cut(<<Len:32, Frame:Len/binary, Rest/binary>>, Acc) -> cut(Rest, [Frame | Acc]);
-cut(Rest, Acc) -> {lists:reverse(Acc), binary:copy(Rest)}.
-
 %% The answers one read brought, in order. A state's answers to pipelined
 %% requests are gathered while they follow each other (`Run': the state's
 %% id, its process and the answers so far, last first) and go to its
@@ -490,7 +462,7 @@ frames_in([], Run, D) ->
     replies(Run),
     D;
 frames_in([Bin | Bins], Run, D = #d{routes = Routes}) ->
-    case ref(Bin) of
+    case toroco_lua_frame:ref(Bin) of
         Ref when is_integer(Ref), Ref band 16#ffff =/= 0, is_map_key(Ref bsr 16, Routes) ->
             Id = Ref bsr 16,
             case Run of
@@ -508,7 +480,7 @@ replies(none) -> ok;
 replies({_Id, Pid, Rs}) -> Pid ! {?MODULE, replies, lists:reverse(Rs)}, ok.
 
 frame_in(Bin, D = #d{routes = Routes}) ->
-    case ref(Bin) of
+    case toroco_lua_frame:ref(Bin) of
         Ref when is_integer(Ref), is_map_key(Ref bsr 16, Routes) ->
             %% a state's answer to call/2, to its process as it came
             map_get(Ref bsr 16, Routes) ! {?MODULE, reply, Ref, Bin},
@@ -516,11 +488,11 @@ frame_in(Bin, D = #d{routes = Routes}) ->
         Ref when is_integer(Ref), Ref > 0 ->
             %% a closed state's (its process died with a request out), or raw/1's
             case queue:peek(D#d.pending) of
-                {value, {_, _, raw}} -> answered(decode(Bin), D);
+                {value, {_, _, raw}} -> answered(toroco_lua_frame:decode(Bin), D);
                 _ -> D
             end;
         _ ->
-            answered(decode(Bin), D)
+            answered(toroco_lua_frame:decode(Bin), D)
     end.
 
 %% kill(1) as a port of its own: nothing here waits for it.
@@ -529,55 +501,21 @@ kill(OsPid) ->
                   [{args, ["-9", integer_to_list(OsPid)]}, exit_status]),
     ok.
 
-%% The ref of an answer `{reply, Ref, _}', read from its first bytes as the
-%% program writes them (ei: version, small tuple, the atom, an integer of
-%% one byte, four, or a small big); an answer written otherwise (an ei that
-%% encodes atoms another way) is decoded whole; anything else is not a
-%% state's answer.
-ref(<<131, 104, 3, 119, 5, "reply", Int/binary>>) ->
-    case Int of
-        <<97, Ref, _/binary>> -> Ref;
-        <<98, Ref:32/signed, _/binary>> -> Ref;
-        <<110, N, 0, Ref:N/little-unit:8, _/binary>> -> Ref;
-        _ -> none
-    end;
-ref(Bin) ->
-    case decode(Bin) of
-        {reply, Ref, _} when is_integer(Ref) -> Ref;
-        _ -> none
-    end.
-
 %% Sends {Op, Ref, Args...}; the caller waits in the queue.
 send(Req, From, D = #d{port = Port, next_ref = Ref, pending = Q}) ->
     Frame = term_to_binary(erlang:insert_element(2, Req, Ref)),
     true = port_command(Port, [<<(byte_size(Frame)):32>>, Frame]),
     D#d{next_ref = Ref - 1, pending = queue:in({Ref, From, Req}, Q)}.
 
-%% The program's atoms are all known here, so nothing it sends makes atoms.
-decode(Bin) ->
-    try binary_to_term(Bin, [safe])
-    catch error:badarg -> {undecodable, Bin}
-    end.
-
 answered(Answer, D = #d{pending = Q}) ->
     case queue:out(Q) of
         {{value, {Ref, From, Req}}, Q1} ->
-            reply(From, result(Answer, Ref, Req, D#d.port)),
+            reply(From, toroco_lua_frame:result(Answer, Ref, Req, D#d.port)),
             forget(Answer, Req, D#d{pending = Q1});
         {empty, _} ->
             logger:error("toroco_lua_port: an answer nobody asked for: ~p", [Answer], ?LOG),
             D
     end.
-
-result({reply, Ref, {ok, Actions}}, Ref, {open, Id, _, _, _, _, _, _}, Port) ->
-    {ok, Id, Port, Actions};
-result({reply, Ref, {ok, Actions}}, Ref, {attach, Id, _, _, _}, Port) ->
-    {ok, Id, Port, Actions};
-result({reply, Ref, Result}, Ref, _Req, _Port) -> Result;
-result({reply, _, Result}, _Ref, raw, _Port) -> Result;
-result({bad_frame, Why}, _Ref, raw, _Port) -> {bad_frame, Why};
-result({bad_frame, Why}, _Ref, _Req, _Port) -> {error, {bad_frame, Why}};
-result(Other, _Ref, _Req, _Port) -> {error, {lua_port_answer, Other}}.
 
 %% A state that stopped, was closed or could not open is no client's any more.
 forget({reply, _, {stopped, _, _}}, Req, D) -> drop_id(element(2, Req), D);

@@ -103,9 +103,8 @@ odometry_of_the_world(_Config) ->
     {_, _, P1} = recv_op(S, P0, fun(#{<<"op">> := <<"subscribe">>}) -> true; (_) -> false end),
     Robot = #{name => r1, pose => {0.5, 0.75, 90.0}, radius => 0.1, winner => none, ir => [],
               camera => #{fov_deg => 60, range => 1.0}},
-    toroco_live_world ! {toroco_live_world, snapshot,
-                         #{run => odom_test, t_ms => 0, arena => {2.0, 2.0}, walls => [], objects => [],
-                           robots => [Robot]}},
+    ok = toroco:publish_world(#{run => odom_test, t_ms => 0, arena => {2.0, 2.0}, walls => [],
+                                objects => [], robots => [Robot]}),
     {#{<<"topic">> := <<"/odom">>, <<"type">> := <<"nav_msgs/msg/Odometry">>}, _, P2} =
         recv_op(S, P1, fun(#{<<"op">> := <<"advertise">>, <<"topic">> := T}) -> T =:= <<"/odom">>;
                           (_) -> false end),

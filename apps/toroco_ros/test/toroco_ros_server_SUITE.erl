@@ -201,10 +201,10 @@ cbor_raw() ->
       "definition from /rosapi/topics_and_raw_types, to the values the robot emitted"}].
 cbor_raw(Config) ->
     C = connect(Config, url),
-    %% As torobot_sim tells toroco_live_world about a step.
+    %% As torobot_sim publishes a step.
     Snapshot = #{run => cbor_raw, t_ms => 0, arena => {4.0, 3.0}, walls => [], objects => [],
                  robots => [#{name => torobot, pose => {1.25, 0.5, 90.0}, radius => 0.12}]},
-    toroco_live_world ! {toroco_live_world, snapshot, Snapshot},
+    ok = toroco:publish_world(Snapshot),
     await_topic(C, <<"/odom">>),
     [toroco_live_js:send(C, #{cmd => subscribe_raw, topic => T})
      || T <- [<<"/range/front">>, <<"/toroco/motors/applied">>, <<"/toroco/out/s/dist">>, <<"/odom">>]],
@@ -230,7 +230,7 @@ cbor_raw(Config) ->
     true = abs(X - Vx) < 1.0e-12 andalso abs(Z - Wz) < 1.0e-12,
     #{<<"data">> := Data} = Raw(<<"/toroco/out/s/dist">>),
     #{<<"term">> := <<"{7,<<\"cm\">>}">>} = jiffy:decode(Data, [return_maps]),
-    toroco_live_world ! {toroco_live_world, snapshot, Snapshot#{t_ms => 50}},
+    ok = toroco:publish_world(Snapshot#{t_ms => 50}),
     #{<<"header">> := #{<<"frame_id">> := <<"odom">>}, <<"child_frame_id">> := <<"base_link">>,
       <<"pose">> := #{<<"pose">> := #{<<"position">> := #{<<"x">> := 1.25, <<"y">> := 0.5},
                                       <<"orientation">> := #{<<"w">> := Qw}},
