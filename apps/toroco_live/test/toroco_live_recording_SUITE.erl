@@ -253,7 +253,7 @@ flight_recorder_window_by_time(Config) ->
         [ok = toroco:inject({s, dist}, {old, I}) || I <- lists:seq(1, 10)],
         ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= 10 end, 5000),
         %% The window's length must pass: nothing to wait on but the clock.
-        timer:sleep(1200),
+        toroco_test_lib:quiet(1200),
         [ok = toroco:inject({s, dist}, {new, I}) || I <- lists:seq(1, 10)],
         ok = toroco_fake_actuator:await(a, fun(H) -> length(H) =:= 20 end, 5000),
         Path = path(Config, "time.mcap"),
