@@ -78,10 +78,10 @@ lockstep_run_recorded_every_tick(Config) ->
     [Pose] = [Id || {Id, #{topic := <<"/toroco/sim/pose">>}} <- maps:to_list(Channels)],
     Times = [T || #{channel := C, log_time := T} <- Msgs, C =:= Pose],
     ct:log("~b poses for ~b ticks, first at ~p ns", [length(Times), Ticks, hd(lists:sort(Times))]),
-    ?assert(length(Times) >= Ticks),
-    %% simulated time: each stamp a whole tick of the world, none past its end
+    %% simulated time: one pose a tick, stamped with the tick's end, from the
+    %% first tick to the run's last, none past the world's end
     Tick = torobot_world:tick_ms(W) * 1000000,
-    [] = [T || T <- Times, T rem Tick =/= 0],
+    ?assertEqual([K * Tick || K <- lists:seq(1, Ticks)], lists:sort(Times)),
     ?assert(lists:max(Times) =< torobot_world:duration_ms(W) * 1000000).
 
 recording_reads_back() ->

@@ -7,10 +7,10 @@
 -behaviour(toroco_behavior).
 -export([interface/0, init/1, handle_input/4]).
 
--spec interface() -> map().
+-spec interface() -> #{inputs := [atom()], outputs := [atom()]}.
 interface() -> #{inputs => [in, in2], outputs => [out, out2]}.
 
--spec init(map()) -> {ok, relaying, map(), list()}.
+-spec init(map()) -> {ok, relaying, map(), toroco_behavior:actions()}.
 init(P) ->
     Actions = case P of
                   #{latch := V} -> [{set, #{out => V}}];
@@ -18,7 +18,7 @@ init(P) ->
               end,
     {ok, relaying, P, Actions}.
 
--spec handle_input(atom(), term(), relaying, map()) -> {keep_state_and_data, list()}.
+-spec handle_input(atom(), term(), relaying, map()) -> toroco_behavior:result().
 handle_input(_In, {set, V}, _S, _D) -> {keep_state_and_data, [{set, #{out => V}}]};
 handle_input(_In, {hold, V, Ms}, _S, _D) -> {keep_state_and_data, [{send, #{out => V}, #{hold => Ms}}]};
 handle_input(_In, unset, _S, _D) -> {keep_state_and_data, [{unset, [out]}]};
