@@ -10,7 +10,9 @@
 %% each other goes through an API: the simulated world's snapshots through
 %% `toroco:publish_world/1'). And no module of `apps/*/src' is over 600
 %% lines, no function over 60 (`scripts/sizes'), but for the exceptions
-%% listed here with their reason.
+%% listed here with their reason. The suites' support (`toroco_test', its
+%% own application so that every application's suites reach it) holds to
+%% the same API and is shipped by no release.
 -module(toroco_boundaries_SUITE).
 
 -include_lib("common_test/include/ct.hrl").
@@ -20,7 +22,9 @@
 
 -define(API, [toroco, toroco_clock, toroco_behavior, toroco_device, toroco_slots]).
 -define(OTHERS, [toroco_hw, torobot, toroco_lib, toroco_rec, toroco_live, toroco_lua,
-                 toroco_ros]).
+                 toroco_ros, toroco_test]).
+%% The suites' support: in apps/, never in a release.
+-define(TEST_SUPPORT, toroco_test).
 %% What toroco_live documents as its API for the applications built on it
 %% (toroco_live's module doc, doc/dashboard.md "Built on toroco_live").
 -define(LIVE_API, [toroco_live, toroco_live_listener, toroco_live_ws_conn,
@@ -39,10 +43,11 @@ all() ->
     [no_call_into_the_runtimes_insides, no_include_of_the_runtimes_headers,
      suites_use_the_api_only, ros_uses_the_dashboards_api_only, dashboard_never_calls_ros,
      live_and_ros_use_the_records_api_only, records_never_call_live_nor_ros,
-     no_send_to_another_apps_process, sizes_within_bounds].
+     no_send_to_another_apps_process, sizes_within_bounds, test_support_is_never_shipped].
 
 no_call_into_the_runtimes_insides() ->
-    [{doc, "No call from toroco_hw, torobot, toroco_lib, toroco_live or toroco_lua reaches a module of "
+    [{doc, "No call from toroco_hw, torobot, toroco_lib, toroco_live, toroco_lua, toroco_ros or "
+      "toroco_test reaches a module of "
       "toroco outside its API (toroco, toroco_clock, toroco_behavior, toroco_device, "
       "toroco_slots)."}].
 no_call_into_the_runtimes_insides(_Config) ->
@@ -119,7 +124,7 @@ lines(File) ->
 suites_use_the_api_only() ->
     [{doc, "The other applications' suites (and their test modules) call the runtime only "
       "through its API, as their code does, and include none of its private headers; "
-      "the runtime's shared test helpers (toroco_test_lib) are not the runtime."}].
+      "the suites' support (toroco_test) is not the runtime."}].
 suites_use_the_api_only(_Config) ->
     _ = application:load(toroco),
     {ok, Modules} = application:get_key(toroco, modules),
@@ -210,3 +215,29 @@ terms(Out) ->
          {ok, T} = erl_parse:parse_term(Ts),
          T
      end || Line <- string:split(Out, "\n", all), lists:prefix("{", Line)].
+
+test_support_is_never_shipped() ->
+    [{doc, "No release of rebar.config, under any profile, names toroco_test (the suites' "
+      "support), and no other application lists it among its applications"}].
+test_support_is_never_shipped(_Config) ->
+    {ok, Terms} = file:consult(filename:join(toroco_test_lib:root(), "rebar.config")),
+    Releases = releases(Terms),
+    %% the default release, the prod profile's
+    ?assert(length(Releases) >= 2, Releases),
+    ?assertEqual([], [Rel || {Rel, Apps} <- Releases, App <- Apps, app_name(App) =:= ?TEST_SUPPORT]),
+    Needing = [App || App <- [toroco | ?OTHERS] -- [?TEST_SUPPORT],
+                      _ <- [application:load(App)],
+                      Key <- [applications, included_applications],
+                      {ok, Needs} <- [application:get_key(App, Key)],
+                      lists:member(?TEST_SUPPORT, Needs)],
+    ?assertEqual([], Needing).
+
+%% Every {release, {Name, Vsn}, Apps} anywhere in the terms of rebar.config.
+releases({release, Rel, Apps}) when is_list(Apps) -> [{Rel, Apps}];
+releases(T) when is_tuple(T) -> releases(tuple_to_list(T));
+releases(L) when is_list(L) -> lists:append([releases(X) || X <- L]);
+releases(_) -> [].
+
+app_name({App, _}) -> App;
+app_name({App, _, _}) -> App;
+app_name(App) -> App.

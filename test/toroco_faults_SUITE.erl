@@ -82,9 +82,9 @@ random_faults_leave_the_robot_whole(Config) ->
     _ = rand:seed(exsss, Seed),
     build(),
     Port = start_port(?config(priv_dir, Config)),
-    Driver = spawn_link(fun() -> drive(1) end),
+    Driver = drive(),
     {Stats, Violations} = faults(1, Faults, Port, [], []),
-    unlink(Driver), exit(Driver, kill),
+    ok = toroco_test_lib:stop_paced(Driver),
     report(Seed, Stats, Violations).
 
 lua_faults_leave_the_robot_whole() ->
@@ -108,9 +108,9 @@ lua_faults_leave_the_robot_whole(Config) ->
     ok = toroco:set_inputs(lua, #{kind => [{luak, kind}]}),
     wire_motors(),
     [] = check(0),
-    Driver = spawn_link(fun() -> drive(1) end),
+    Driver = drive(),
     {Stats, Violations} = faults(1, Faults, lua, [], []),
-    unlink(Driver), exit(Driver, kill),
+    ok = toroco_test_lib:stop_paced(Driver),
     report(Seed, Stats, Violations).
 
 report(Seed, Stats, Violations) ->
@@ -189,10 +189,8 @@ wire_motors() ->
     ok = toroco:set_inputs(motors, #{in => [{B, out} || B <- Live]}).
 
 %% 1 kHz momentary events into the noise path (load, not assertions).
-drive(I) ->
-    _ = catch toroco:inject({ir, v}, I),
-    timer:sleep(1),
-    drive(I + 1).
+drive() ->
+    toroco_test_lib:paced(fun(I) -> catch toroco:inject({ir, v}, I) end, infinity, 1).
 
 %%--------------------------------------------------------------------
 %% Faults
@@ -322,17 +320,9 @@ mailboxes_bounded(Label) ->
 %% Polls every millisecond up to Timeout ms: [] once Fun is true, else the
 %% violation [{not_recovered_in_time, What}].
 until(Fun, Timeout, What) ->
-    Deadline = erlang:monotonic_time(millisecond) + Timeout,
-    until_(Fun, Deadline, What).
-
-until_(Fun, Deadline, What) ->
-    case catch Fun() of
-        true -> [];
-        _ ->
-            case erlang:monotonic_time(millisecond) > Deadline of
-                true -> [{not_recovered_in_time, What}];
-                false -> timer:sleep(1), until_(Fun, Deadline, What)
-            end
+    case toroco_test_lib:poll(fun() -> catch Fun() end, Timeout, 1) of
+        ok -> [];
+        timeout -> [{not_recovered_in_time, What}]
     end.
 
 %% Restarting an OS process or a supervisor child is not instantaneous on a

@@ -95,8 +95,7 @@ hi_over_lo(A, B, Input) ->
 %% max age, high stays (keep-alives); A frozen, `low' comes within Bound ms;
 %% A thawed, `high' comes back.
 frozen_let_go_within(A, B, Bound, What) ->
-    timer:sleep(700),
-    [low, high] = values(B, act),
+    ok = toroco_test_lib:stays(fun() -> values(B, act) end, [low, high], 700, {act, B}),
     OsPid = erpc:call(A, os, getpid, []),
     T0 = erpc:call(B, erlang, monotonic_time, [millisecond]),
     _ = os:cmd("kill -STOP " ++ OsPid),
@@ -197,14 +196,13 @@ inhibition_gate_on_third_node(Config) ->
     #{outputs := #{out := #{inhibitors := [{i, out}], inhibited := false}}} = t(C, inspect, [e]),
     ok = t(A, inject, [{e, out}, go, #{latch => true}]),
     await_values(C, act, [go]),
-    timer:sleep(600),                       % quiet past max_age, but the gate lives
-    [go] = values(C, act),
+    %% quiet past max_age, but the gate lives
+    ok = toroco_test_lib:stays(fun() -> values(C, act) end, [go], 600, {act, C}),
     ok = t(B, inject, [{i, out}, on, #{latch => true}]),
     await_values(C, act, [go, stop]),
     #{outputs := #{out := #{inhibited := true}}} = t(B, inspect, [e]),
     ok = t(A, inject, [{e, out}, go2, #{latch => true}]),   % latched while inhibited
-    timer:sleep(100),
-    [go, stop] = values(C, act),
+    ok = toroco_test_lib:stays(fun() -> values(C, act) end, [go, stop], 100, {act, C}),
     ok = t(B, inject, [{i, out}, off, #{hold => 0}]),       % a send clears i's latch
     await_values(C, act, [go, stop, go2]),
     end_per_testcase(x, [{peers, Ps} | Config]).

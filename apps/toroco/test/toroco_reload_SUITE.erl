@@ -279,29 +279,10 @@ vsn(Mod) ->
 %% A 1 kHz stream
 %%====================================================================
 
-%% Injects 1..N on {E, Out}, one every millisecond on average: each value is
-%% due at Start + I ms and sent as soon as it is due.
+%% Injects 1..N on {E, Out}, one a millisecond at most.
 stream(E, Out, N) ->
-    Parent = self(),
-    spawn_link(fun() ->
-                       Start = erlang:monotonic_time(millisecond),
-                       Late = stream(E, Out, 1, N, Start, 0),
-                       Parent ! {self(), {done, Late}}
-               end).
+    toroco_test_lib:paced(fun(I) -> ok = toroco:inject({E, Out}, I) end, N, 1).
 
-stream(_E, _Out, I, N, _Start, Late) when I > N ->
-    Late;
-stream(E, Out, I, N, Start, Late) ->
-    Due = Start + I,
-    Now = erlang:monotonic_time(millisecond),
-    case Due - Now of
-        Wait when Wait > 0 -> timer:sleep(Wait);
-        _ -> ok
-    end,
-    ok = toroco:inject({E, Out}, I),
-    stream(E, Out, I + 1, N, Start, max(Late, Now - Due)).
-
+%% How late the stream's latest value was sent, once all are.
 finish(Streamer) ->
-    receive {Streamer, Result} -> Result
-    after 30000 -> ct:fail(stream_did_not_finish)
-    end.
+    {done, toroco_test_lib:await_paced(Streamer, 30000)}.

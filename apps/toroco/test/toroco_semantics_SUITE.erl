@@ -300,7 +300,7 @@ timed_inhibition_ends(_) ->
     await_values(a, ['after']),
     %% the gate is idle again, not spinning
     {_, R1} = erlang:process_info(whereis(toroco_names:gate({e, out})), reductions),
-    timer:sleep(200),
+    toroco_test_lib:quiet(200),
     {_, R2} = erlang:process_info(whereis(toroco_names:gate({e, out})), reductions),
     true = R2 - R1 < 1000.
 

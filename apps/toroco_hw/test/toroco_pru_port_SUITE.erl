@@ -412,7 +412,7 @@ hello_backoff(Config) ->
     ok = file:write_file(flag(Config), ""),
     T0 = erlang:monotonic_time(millisecond),
     kill(toroco_pru_port:os_pid(S)),
-    {Delays, Info} = watch_backoff(S, 6, [], T0 + 30000),
+    {Delays, Info} = watch_backoff(S, 6, 30000),
     Elapsed = erlang:monotonic_time(millisecond) - T0,
     ct:pal("six hellos that never came: delays ~p ms, ~b ms in all, ~p", [Delays, Elapsed, Info]),
     %% 0: a program that ran is restarted at once
@@ -588,21 +588,20 @@ awaiting_hello(S, Old) ->
     end.
 
 %% The distinct restart delays info/1 reports, in order, until N hello
-%% timeouts are counted.
-watch_backoff(S, N, Seen, Deadline) ->
-    Info = #{backoff_ms := Ms, hello_timeouts := H} = toroco_pru_port:info(S),
-    Seen1 = case Seen of
-                [Ms | _] -> Seen;
-                _ -> [Ms | Seen]
-            end,
-    case H >= N of
-        true -> {lists:reverse(Seen1), Info};
-        false ->
-            case erlang:monotonic_time(millisecond) > Deadline of
-                true -> ct:fail({hello_timeouts, H, lists:reverse(Seen1)});
-                false -> timer:sleep(5), watch_backoff(S, N, Seen1, Deadline)
-            end
-    end.
+%% timeouts are counted (within Timeout ms).
+watch_backoff(S, N, Timeout) ->
+    Step = fun(Seen) ->
+                   Info = #{backoff_ms := Ms, hello_timeouts := H} = toroco_pru_port:info(S),
+                   Seen1 = case Seen of
+                               [Ms | _] -> Seen;
+                               _ -> [Ms | Seen]
+                           end,
+                   case H >= N of
+                       true -> {done, {lists:reverse(Seen1), Info}};
+                       false -> {more, Seen1}
+                   end
+           end,
+    toroco_test_lib:wait_fold(Step, [], Timeout, {hello_timeouts, N}).
 
 %% The requests the fake program logged in Dir, of the programs Which
 %% accepts, with tag Tag (or any).

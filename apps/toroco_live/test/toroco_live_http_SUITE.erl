@@ -77,7 +77,7 @@ refused(Config, Req, Status, Reason) ->
     ?assertEqual(Before, snapshot()),
     Body.
 
-wait(Fun, Timeout) -> toroco_live_test_client:wait(Fun, Timeout).
+wait(Fun, Timeout) -> toroco_test_lib:wait_until(Fun, Timeout).
 
 %%====================================================================
 %% Routes
@@ -259,14 +259,14 @@ ws_state_from_events(Config) ->
     {ok, _} = toroco_live_test_client:ws_next(C, fun(#{<<"type">> := T}) -> T =:= <<"state">> end, 3000),
     erlang:trace_pattern({toroco_live_state, readings, 0}, true, [call_count]),
     T0 = erlang:monotonic_time(millisecond),
-    %% 2 s of values, each one on the page before the next.
-    lists:foreach(fun(I) ->
-                          ok = toroco:inject({s, v}, I),
-                          Want = integer_to_binary(I),
-                          {ok, _} = toroco_live_test_client:ws_next(
-                                      C, fun(J) -> last(J, <<"a">>, <<"x">>) =:= Want end, 3000),
-                          timer:sleep(10)
-                  end, lists:seq(1, 200)),
+    %% 2 s of values, 100 a second at most, each one on the page before the next.
+    _ = toroco_test_lib:pace(fun(I) ->
+                                     ok = toroco:inject({s, v}, I),
+                                     Want = integer_to_binary(I),
+                                     {ok, _} = toroco_live_test_client:ws_next(
+                                                 C, fun(J) -> last(J, <<"a">>, <<"x">>) =:= Want end,
+                                                 3000)
+                             end, 200, 10),
     Ms = erlang:monotonic_time(millisecond) - T0,
     {call_count, Reads} = erlang:trace_info({toroco_live_state, readings, 0}, call_count),
     _ = erlang:trace_pattern({toroco_live_state, readings, 0}, false, [call_count]),
@@ -516,10 +516,10 @@ client_that_never_reads(Config) ->
     Reader = toroco_live_test_client:ws(P, ""),
     wait(fun() -> maps:get(clients, toroco_live_hub:stats()) =:= 2 end, 3000),
     Mem0 = erlang:memory(total),
-    Feeder = spawn_link(fun() -> feed(0) end),
+    Feeder = toroco_test_lib:paced(fun(N) -> ok = toroco:inject({s, v}, N) end, infinity, 2),
     %% For 3 s the reader keeps seeing new values while the stuck one reads nothing.
     Seen = count_updates(Reader, erlang:monotonic_time(millisecond) + 3000, none, 0),
-    unlink(Feeder), exit(Feeder, kill),
+    ok = toroco_test_lib:stop_paced(Feeder),
     ct:pal("the reader saw ~b new values in 3 s; memory grew by ~b KB; ~p",
            [Seen, (erlang:memory(total) - Mem0) div 1024, toroco_live_hub:stats()]),
     ?assert(Seen >= 10),
@@ -532,10 +532,6 @@ client_that_never_reads(Config) ->
     wait(fun() -> maps:get(clients, toroco_live_hub:stats()) =:= 1 end, 15000),
     gen_tcp:close(Stuck),
     toroco_live_test_client:ws_close(Reader).
-
-feed(N) ->
-    ok = toroco:inject({s, v}, N),
-    receive after 2 -> feed(N + 1) end.
 
 count_updates(C, Deadline, Last, N) ->
     case erlang:monotonic_time(millisecond) >= Deadline of

@@ -228,19 +228,19 @@ full_port_sheds_longest_idle(_Config) ->
     {ok, #{http := Http}} = start(#{http => 0, foxglove => off, max_connections => 4,
                                     min_age => MinAge, request_timeout => 60000}),
     Idle = [connect(Http, {127, 0, 0, 1}) || _ <- lists:seq(1, 4)],
-    toroco_live_test_client:wait(
+    toroco_test_lib:wait_until(
       fun() -> maps:get(connections, toroco_live_listener:stats(toroco_live_http)) =:= 4 end, 5000),
     %% too young to be shed: the newcomer is refused (at once, before
     %% any TLS handshake)
     Early = raw_connect(Http, ?OTHER),
     ?assertEqual({error, closed}, gen_tcp:recv(Early, 0, 5000)),
     %% the idle ones must be min_age old to be shed: a known wait
-    receive after MinAge -> ok end,
+    toroco_test_lib:quiet(MinAge),
     {Ms, {200, _}} = timed(fun() -> http_get(Http, "/api/state") end),
     ct:pal("/api/state on a full port: ~b ms", [Ms]),
     %% one of the four (admitted in whatever order mochiweb's acceptors
     %% ran, so which one is the guard's to say) is closed, the others stay
-    Shed = shed_one(Idle, erlang:monotonic_time(millisecond) + 5000),
+    Shed = shed_one(Idle, 5000),
     [?assertEqual({error, timeout}, recv(S, 0, 0)) || S <- Idle -- [Shed]],
     #{closed_by := #{shed := 1, too_many_clients := 1}} =
         toroco_live_listener:stats(toroco_live_http),
@@ -279,19 +279,18 @@ slow_tls_handshake_closed(_Config) ->
 %% Helpers
 %%====================================================================
 
-%% The one socket of `Socks' the server closed (bounded wait).
-shed_one(Socks, Deadline) ->
+%% The one socket of `Socks' the server closed (within Timeout ms).
+shed_one(Socks, Timeout) ->
     %% a TLS client's socket learns of the close only while it reads
     Wait = fun(S) when is_port(S) -> 0; (_) -> 50 end,
-    case [S || S <- Socks, recv(S, 0, Wait(S)) =:= {error, closed}] of
-        [S] -> S;
-        [] ->
-            case erlang:monotonic_time(millisecond) > Deadline of
-                true -> ct:fail(none_shed);
-                false -> receive after 20 -> shed_one(Socks, Deadline) end
-            end;
-        Many -> ct:fail({shed, length(Many)})
-    end.
+    Step = fun(none) ->
+                   case [S || S <- Socks, recv(S, 0, Wait(S)) =:= {error, closed}] of
+                       [S] -> {done, S};
+                       [] -> {more, none};
+                       Many -> ct:fail({shed, length(Many)})
+                   end
+           end,
+    toroco_test_lib:wait_fold(Step, none, Timeout, one_shed).
 
 %% A process holding N connections to each port from 127.0.0.1, every
 %% other one with half a request line sent; it answers once all are open

@@ -3,23 +3,8 @@
 %% decoded, to its owner as `{wsc, Pid, Json}'.
 -module(toroco_live_test_client).
 
--export([wait/2, get/2, get/3, post/3, post/4, ws/2, ws/3, ws_send/2, ws_send_raw/2, ws_close/1,
+-export([get/2, get/3, post/3, post/4, ws/2, ws/3, ws_send/2, ws_send_raw/2, ws_close/1,
          ws_next/3, raw_ws/2, raw_ws/3, handshake/3, handshake/4]).
-
-%% Until Fun() is true, polling every 20 ms; fails the case after Timeout ms.
-wait(Fun, Timeout) ->
-    Deadline = erlang:monotonic_time(millisecond) + Timeout,
-    wait_until(Fun, Deadline).
-
-wait_until(Fun, Deadline) ->
-    case Fun() of
-        true -> ok;
-        false ->
-            case erlang:monotonic_time(millisecond) > Deadline of
-                true -> ct:fail(condition_not_met);
-                false -> receive after 20 -> wait_until(Fun, Deadline) end
-            end
-    end.
 
 %%--------------------------------------------------------------------- HTTP
 

@@ -115,7 +115,7 @@ page_and_api_over_https(Config) ->
     ok = gen_tcp:send(S, <<"GET /api/state HTTP/1.1\r\nHost: x\r\n\r\n">>),
     {Answer, Got} = recv_all(S, 5000),
     ?assertEqual({closed, nomatch}, {Answer, binary:match(Got, <<"HTTP/1.1">>)}),
-    toroco_live_test_client:wait(
+    toroco_test_lib:wait_until(
       fun() -> maps:get(tls_handshake, maps:get(closed_by, toroco_live_listener:stats(toroco_live_http))) >= 1
       end, 5000),
     {ok, {{_, 200, _}, _, Metrics}} = httpc:request(get, {Url("/metrics"), []}, Ssl, []),
@@ -148,7 +148,7 @@ roslib_over_wss(Config) ->
     toroco_live_js:send(C, #{cmd => auth, token => Token}),
     Forward = #{linear => #{x => 0.1, y => 0, z => 0}, angular => #{x => 0, y => 0, z => 0}},
     toroco_live_js:send(C, #{cmd => publish, topic => <<"/cmd_vel">>, type => ?TWIST, msg => Forward}),
-    toroco_live_test_client:wait(fun() -> toroco_fake_actuator:history(cmd) =/= [] end, 10000),
+    toroco_test_lib:wait_until(fun() -> toroco_fake_actuator:history(cmd) =/= [] end, 10000),
     toroco_live_js:stop(C).
 
 wrong_tokens_limited_per_address() ->
@@ -213,17 +213,17 @@ token_nowhere_after_a_session(Config) ->
     toroco_live_js:send(C, #{cmd => publish, topic => <<"/cmd_vel">>, type => ?TWIST,
                              msg => #{linear => #{x => 0.1, y => 0, z => 0},
                                       angular => #{x => 0, y => 0, z => 0}}}),
-    toroco_live_test_client:wait(fun() -> toroco_fake_actuator:history(cmd) =/= [] end, 10000),
+    toroco_test_lib:wait_until(fun() -> toroco_fake_actuator:history(cmd) =/= [] end, 10000),
     %% the robot dialling this server, the token on the URL
     {ok, Client} = toroco_live:rosbridge_connect(url("wss", Ros, "/?token=" ++ T),
                                                  #{cacertfile => maps:get(ca, ?config(tls, Config))}),
-    toroco_live_test_client:wait(
+    toroco_test_lib:wait_until(
       fun() -> [connected] =:= [S || #{state := S} <- toroco_live:rosbridge_clients()] end, 10000),
     %% a crash: the dashboard's listener killed, its supervisor reports and restarts it
     Listener = whereis(toroco_live_http),
     exit(Listener, kill),
-    toroco_live_test_client:wait(fun() -> is_pid(whereis(toroco_live_http))
-                                          andalso whereis(toroco_live_http) =/= Listener end, 5000),
+    toroco_test_lib:wait_until(fun() -> is_pid(whereis(toroco_live_http))
+                                            andalso whereis(toroco_live_http) =/= Listener end, 5000),
     {ok, {{_, 200, _}, _, Metrics}} = httpc:request(get, {Url("/metrics"), []}, Ssl,
                                                     [{body_format, binary}]),
     {ok, {{_, 200, _}, _, State}} = httpc:request(get, {Url("/api/state"), []}, Ssl,

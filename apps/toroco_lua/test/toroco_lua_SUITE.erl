@@ -272,7 +272,7 @@ inspect_at_once_with_a_full_window(Config) ->
     N = 6,
     [ok = toroco:inject({s, value}, K) || K <- lists:seq(1, N)],
     %% each activation takes a tenth of a second or more; the rest wait their turn
-    ok = until_busy(slow, 50),
+    ok = toroco_test_lib:wait_until(fun() -> busy(slow) end, ?WAIT, {busy, slow}),
     Times = [begin
                  {T, #{behavior := #{waits := {busy, _}}}} = timer:tc(toroco, inspect, [slow]),
                  {T2, ok} = timer:tc(toroco, suspend_behavior, [slow]),
@@ -284,11 +284,10 @@ inspect_at_once_with_a_full_window(Config) ->
     ok = toroco_fake_actuator:await(a, fun(H) -> length(H) >= N end, 20000),
     ?assertEqual(lists:seq(1, N), values(a, done)).
 
-until_busy(_, 0) -> {error, never_busy};
-until_busy(Name, K) ->
+busy(Name) ->
     case toroco:inspect(Name) of
-        #{behavior := #{waits := {busy, _}}} -> ok;
-        _ -> receive after 20 -> until_busy(Name, K - 1) end
+        #{behavior := #{waits := {busy, _}}} -> true;
+        _ -> false
     end.
 
 interface_from_the_file(doc) ->
@@ -465,21 +464,14 @@ configure_polling_sets_the_period(Config) ->
                  toroco_lua:load_main(data(Config, "polling/main.lua"), #{})),
     #{device := #{every_ms := 20}} = toroco:inspect(p),
     %% polled again and again: at 60 s a period, the first poll would be the only one
-    Deadline = erlang:monotonic_time(millisecond) + ?WAIT,
-    polled(p, 5, Deadline),
+    ok = toroco_test_lib:wait_until(fun() -> polls(p) >= 5 end, ?WAIT, {polled, p, 5}),
     Unknown = data(Config, "polling/unknown.lua"),
     ?assertEqual({error, {Unknown, 3, {unknown_output, {p, nope}}}},
                  toroco_lua:load_main(Unknown, #{})).
 
-polled(Name, N, Deadline) ->
-    case toroco:inspect(Name) of
-        #{device := #{polls := P}} when P >= N -> ok;
-        _ ->
-            case erlang:monotonic_time(millisecond) < Deadline of
-                true -> receive after 10 -> ok end, polled(Name, N, Deadline);
-                false -> ct:fail({not_polled, Name, N})
-            end
-    end.
+polls(Name) ->
+    #{device := #{polls := P}} = toroco:inspect(Name),
+    P.
 
 load_main_errors_name_the_line(doc) ->
     ["load_main/2 stops at the first refused call with the main file's line, and "
@@ -843,21 +835,16 @@ await(A, Input, Want) ->
     end.
 
 %% The load: 1..N injected into Source from a linked process, one a
-%% millisecond (pacing, not waiting on anything). A loaded machine stretches
-%% each millisecond's pause many times over (tens of ms beside two busy
-%% loops), so the test waits for the load's end, then for its deliveries.
+%% millisecond at most (pacing, not waiting on anything). A loaded machine
+%% stretches each millisecond's pause many times over (tens of ms beside two
+%% busy loops), so the test waits for the load's end, then for its
+%% deliveries.
 paced(Source, N) ->
-    Test = self(),
-    spawn_link(fun() ->
-                       [begin ok = toroco:inject(Source, K), receive after 1 -> ok end end
-                        || K <- lists:seq(1, N)],
-                       Test ! {injected, self()}
-               end).
+    toroco_test_lib:paced(fun(K) -> ok = toroco:inject(Source, K) end, N, 1).
 
 injected(Load) ->
-    receive {injected, Load} -> ok
-    after ?LOADED -> ct:fail({load_not_injected, Load})
-    end.
+    _ = toroco_test_lib:await_paced(Load, ?LOADED),
+    ok.
 
 %% faulty.lua as behavior f on sensor s, reporting to actuator a, beside an
 %% Erlang path e -> a; one good round first.
@@ -884,39 +871,22 @@ fault(Name, Kind) ->
 %% Waits (bounded) for a new program (not OsPid) with every behavior of Names
 %% answering in it.
 reattached(Names, OsPid) ->
-    Deadline = erlang:monotonic_time(millisecond) + ?WAIT,
-    wait_new_program(OsPid, Deadline),
-    [back(N, Deadline) || N <- Names],
+    New = fun() -> case toroco_lua_port:os_pid() of
+                       P when is_integer(P) -> P =/= OsPid;
+                       _ -> false
+                   end
+          end,
+    ok = toroco_test_lib:wait_until(New, ?WAIT, {new_program, OsPid}),
+    [back(N) || N <- Names],
     ok.
-
-wait_new_program(OsPid, Deadline) ->
-    case toroco_lua_port:os_pid() of
-        New when is_integer(New), New =/= OsPid -> ok;
-        _ ->
-            case erlang:monotonic_time(millisecond) < Deadline of
-                true -> receive after 5 -> ok end, wait_new_program(OsPid, Deadline);
-                false -> ct:fail({no_new_program, OsPid})
-            end
-    end.
 
 %% Waits (bounded) for behavior Name to be registered and running again.
 back(Name) ->
-    back(Name, erlang:monotonic_time(millisecond) + ?WAIT).
+    Running = fun() -> is_pid(toroco:whereis(Name)) andalso answers(Name) end,
+    ok = toroco_test_lib:wait_until(Running, ?WAIT, {back, Name}).
 
-back(Name, Deadline) ->
-    case toroco:whereis(Name) of
-        Pid when is_pid(Pid) ->
-            case catch toroco_lua:waits(Name) of
-                {ok, _} -> ok;
-                _ -> retry_back(Name, Deadline)
-            end;
-        undefined -> retry_back(Name, Deadline)
-    end.
-
-retry_back(Name, Deadline) ->
-    case erlang:monotonic_time(millisecond) < Deadline of
-        true ->
-            receive after 5 -> ok end,
-            back(Name, Deadline);
-        false -> ct:fail({not_back, Name})
+answers(Name) ->
+    case catch toroco_lua:waits(Name) of
+        {ok, _} -> true;
+        _ -> false
     end.

@@ -169,19 +169,9 @@ step(settle) ->
     _ = [{toroco:inspect(N), toroco:inspect(N)} || N <- Bs ++ Ds],
     ok;
 step({pause, Ms}) ->
-    receive after Ms -> ok end;            % the semantics is time: let a window run out
+    toroco_test_lib:quiet(Ms);              % the semantics is time: let a window run out
 step({until, Fun}) ->
-    until(Fun, erlang:monotonic_time(millisecond) + ?WAIT).
-
-until(Fun, Deadline) ->
-    case Fun() of
-        true -> ok;
-        false ->
-            case erlang:monotonic_time(millisecond) < Deadline of
-                true -> receive after 5 -> ok end, until(Fun, Deadline);
-                false -> ct:fail(condition_not_met)
-            end
-    end.
+    ok = toroco_test_lib:wait_until(Fun, ?WAIT).
 
 inhibited(Emitter, Out) ->
     #{outputs := #{Out := #{inhibited := I}}} = toroco:inspect(Emitter),

@@ -260,7 +260,7 @@ wss_refuses_a_certificate_that_does_not_match(Config) ->
                                                     backoff_min => 50, backoff_max => 200}),
     {ok, Pin} = toroco_live:rosbridge_connect(Url, #{fingerprint => maps:get(fingerprint, Tls),
                                                      backoff_min => 50, backoff_max => 200}),
-    toroco_live_test_client:wait(
+    toroco_test_lib:wait_until(
       fun() -> lists:all(fun(#{attempts := A}) -> A >= 3 end, toroco_live:rosbridge_clients()) end,
       15000),
     Infos = toroco_live:rosbridge_clients(),
@@ -275,7 +275,7 @@ wss_refuses_a_certificate_that_does_not_match(Config) ->
     ok = toroco_live:stop().
 
 await_state(Pids, State) ->
-    toroco_live_test_client:wait(
+    toroco_test_lib:wait_until(
       fun() ->
               Now = [S || P <- Pids, #{state := S} <- [toroco_ros_client:info(P)]],
               Now =:= [State || _ <- Pids]
@@ -350,13 +350,13 @@ own_server_on_another_node(_Config) ->
         {ok, _} = toroco_live:rosbridge_connect(Url, #{}),
         ok = until(fun() -> [#{state := connected}] = toroco_live:rosbridge_clients(), true end, 10000),
         %% the robot here keeps emitting while roslib looks there
-        Injector = spawn_link(fun() -> inject_loop(0) end),
+        Injector = toroco_test_lib:paced(fun(I) -> ok = toroco:inject({s, dist}, {tick, I}) end,
+                                         infinity, 50),
         Twist = #{linear => #{x => 0.1, y => 0.0, z => 0.0}, angular => #{x => 0.0, y => 0.0, z => -0.4}},
         {ok, Wheels} = toroco_ros_topics:twist_to_wheels(Twist, toroco_ros_topics:geometry()),
         R = toroco_live_js:run("roslib_peer.js", [url_there(RosPort, Token), "/toroco/out/s/dist",
                                                   binary_to_list(jiffy:encode(Twist)), "10"]),
-        unlink(Injector),
-        exit(Injector, kill),
+        ok = toroco_test_lib:stop_paced(Injector),
         ct:log("roslib there: ~p", [R]),
         #{<<"ok">> := true, <<"topics">> := Topics, <<"types">> := Types,
           <<"message">> := #{<<"data">> := Data}, <<"published">> := 10} = R,
@@ -400,10 +400,6 @@ app_env_dials(_Config) ->
 
 url_there(Port, Token) ->
     "ws://127.0.0.1:" ++ integer_to_list(Port) ++ "/?token=" ++ binary_to_list(Token).
-
-inject_loop(I) ->
-    ok = toroco:inject({s, dist}, {tick, I}),
-    receive after 50 -> inject_loop(I + 1) end.
 
 %% A second node, not connected to this one (its own robot), running the
 %% rosbridge server with a ros device of its own: its handle and port.
