@@ -31,7 +31,7 @@
 -module(toroco_live_auth).
 -behaviour(gen_server).
 
--export([start_link/0, authorize/2, session/1, stats/0, random_bytes/1]).
+-export([start_link/0, authorize/2, session/1, stats/0]).
 -export([new/0, check/4]).
 -export([init/1, handle_call/3, handle_cast/2, handle_info/2]).
 
@@ -80,21 +80,6 @@ session(Token) ->
               undefined -> crypto:strong_rand_bytes(32)
           end,
     base64url(crypto:mac(hmac, sha256, Key, Token)).
-
-%% @doc `N' bytes from the kernel's random source (`/dev/urandom', which
-%% also seeds `crypto'), for the token and the session key drawn at each
-%% start: the dashboard starts without loading `crypto', whose OpenSSL
-%% library is 3.7 MB resident (doc/benchmarks.md, "Where the megabytes
-%% go"); it is loaded when a page or client first needs a hash.
--spec random_bytes(pos_integer()) -> binary().
-random_bytes(N) ->
-    {ok, F} = file:open("/dev/urandom", [read, raw, binary]),
-    try
-        {ok, <<Bytes:N/binary>>} = file:read(F, N),
-        Bytes
-    after
-        ok = file:close(F)
-    end.
 
 %% @doc `failures' (wrong credentials), `limited' (checks refused because
 %% the address was banned), `banned_now' (addresses banned now); empty when

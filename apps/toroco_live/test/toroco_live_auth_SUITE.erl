@@ -13,7 +13,7 @@
 -define(BAN_MS, 60000).
 -define(ADDRESSES, [{127, 0, 0, 2}, {127, 0, 0, 3}, {10, 0, 0, 7}]).
 
-all() -> [core_matches_oracle, one_address_never_limits_another, random_bytes_are_fresh].
+all() -> [core_matches_oracle, one_address_never_limits_another].
 
 suite() -> [{timetrap, {minutes, 5}}].
 
@@ -32,15 +32,6 @@ one_address_never_limits_another() ->
       "addresses' checks in between"}].
 one_address_never_limits_another(_Config) ->
     true = proper:quickcheck(prop_addresses_independent(), [{numtests, 200}, {to_file, user}]).
-
-random_bytes_are_fresh() ->
-    [{doc, "random_bytes/1 (the token's and session key's source) gives as many bytes as "
-      "asked, a new draw each call"}].
-random_bytes_are_fresh(_Config) ->
-    Draws = [toroco_live_auth:random_bytes(32) || _ <- lists:seq(1, 100)],
-    [32] = lists:usort([byte_size(B) || B <- Draws]),
-    100 = length(lists:usort(Draws)),
-    <<_:18/binary>> = toroco_live_auth:random_bytes(18).
 
 %%====================================================================
 %% Generators
