@@ -18,7 +18,7 @@ all() -> [{group, prod}, {group, board}].
 groups() ->
     [{prod, [sequence], [daemon_starts_with_a_fresh_cookie, eval_inspects_the_running_torobot,
                          top_through_eval_and_top_command, wiring_command_loads_a_file,
-                         stop_stops_the_node]},
+                         metrics_with_the_allocators_off, stop_stops_the_node]},
      {board, [sequence], [board_tarball_is_minimal, board_release_boots_on_system_erlang,
                           board_port_runs_under_qemu, board_port_unit_tests_under_qemu,
                           board_lua_port_runs_under_qemu,
@@ -139,6 +139,18 @@ wiring_command_loads_a_file(Config) ->
     {1, Out} = cmd(Config, Dir, "bin/" ++ ?REL ++ " wiring " ++ Bad, 60),
     match(Out, "^\\{error, .*nowhere"),
     {0, "ok\n"} = cmd(Config, Dir, "bin/" ++ ?REL ++ " eval 'toroco:remove_behavior(ct_forward).'", 30).
+
+metrics_with_the_allocators_off() ->
+    [{doc, "In the prod release (+Mea min: erlang:memory/0 is notsup) the dashboard's "
+           "/metrics still has toroco_vm_memory_bytes, its total the node's resident size."}].
+metrics_with_the_allocators_off(Config) ->
+    Dir = ?config(rel, Config),
+    Eval = fun(Expr) -> cmd(Config, Dir, "bin/" ++ ?REL ++ " eval '" ++ Expr ++ "'", 30) end,
+    {0, "'EXIT'\n"} = Eval("element(1, catch erlang:memory())."),
+    {0, Total} = Eval("T = iolist_to_binary(toroco_live_metrics:text()), "
+                      "{match, [N]} = re:run(T, \"^toroco_vm_memory_bytes.kind=.total.. ([0-9]+)$\", "
+                      "[multiline, {capture, all_but_first, list}]), list_to_integer(N)."),
+    true = list_to_integer(string:trim(Total)) > 10000000.
 
 stop_stops_the_node() ->
     [{doc, "bin/torobot stop returns once the node is gone; ping then says so."}].

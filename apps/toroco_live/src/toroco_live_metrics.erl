@@ -9,7 +9,7 @@
 %% <tr><td>`toroco_mailbox_length'</td><td>gauge</td><td>`name'</td></tr>
 %% <tr><td>`toroco_up'</td><td>gauge</td><td>`name', `kind', `status' (1 running, 0.5 suspended, 0 down)</td></tr>
 %% <tr><td>`toroco_device_counter'</td><td>gauge</td><td>`device', `counter': each numeric device counter</td></tr>
-%% <tr><td>`toroco_vm_memory_bytes'</td><td>gauge</td><td>`kind' (`erlang:memory/0')</td></tr>
+%% <tr><td>`toroco_vm_memory_bytes'</td><td>gauge</td><td>`kind' (`erlang:memory/0'; with ERTS's allocators off, as in the prod release, `total' (resident, from the OS), `processes' and `ets')</td></tr>
 %% <tr><td>`toroco_live_clients'</td><td>gauge</td><td>dashboard WebSocket clients</td></tr>
 %% <tr><td>`toroco_live_skipped_total'</td><td>counter</td><td>states a slow client did not get (coalesced)</td></tr>
 %% <tr><td>`toroco_live_tap_dropped_total'</td><td>counter</td><td>tap events the dashboard fell behind on</td></tr>
@@ -54,7 +54,7 @@ text() ->
              || #{name := N, info := #{device := C}} <- Readings, is_map(C),
                 {K, V} <- lists:sort(maps:to_list(C)), is_number(V)]),
      family(toroco_vm_memory_bytes, gauge, "Memory of the Erlang VM.",
-            [{[{kind, K}], V} || {K, V} <- erlang:memory()]),
+            [{[{kind, K}], V} || {K, V} <- vm_memory()]),
      family(toroco_live_clients, gauge, "Dashboard WebSocket clients.",
             [{[], maps:get(clients, Stats, 0)}]),
      family(toroco_live_skipped_total, counter, "States coalesced away for slow clients.",
@@ -62,6 +62,31 @@ text() ->
      family(toroco_live_tap_dropped_total, counter, "Tap events the dashboard fell behind on.",
             [{[], maps:get(tap_dropped, Stats, 0)}])
      | foxglove() ++ listeners() ++ auth() ++ sources()].
+
+%% erlang:memory/0 needs ERTS's allocators: with them off (`+Mea min', the
+%% prod release's config/prod/vm.args) it raises `notsup', and the gauge
+%% has what is still known: the node's resident size as the OS counts it
+%% (Linux; the processes' and tables' sum elsewhere), its processes, its
+%% ETS tables.
+vm_memory() ->
+    try erlang:memory()
+    catch error:notsup ->
+        Processes = lists:sum([M || P <- processes(), {memory, M} <- [process_info(P, memory)]]),
+        Ets = erlang:system_info(wordsize) *
+            lists:sum([M || T <- ets:all(), M <- [ets:info(T, memory)], is_integer(M)]),
+        [{total, resident(Processes + Ets)}, {processes, Processes}, {ets, Ets}]
+    end.
+
+%% /proc/self/statm's second field: resident pages (4 kB on the machines
+%% the release runs on: x86-64, armhf).
+resident(Otherwise) ->
+    case file:read_file("/proc/self/statm") of
+        {ok, Statm} ->
+            [_, Pages | _] = binary:split(Statm, <<" ">>, [global]),
+            4096 * binary_to_integer(Pages);
+        {error, _} ->
+            Otherwise
+    end.
 
 %% What other applications add (toroco_live_extensions, kind `metrics').
 sources() ->
