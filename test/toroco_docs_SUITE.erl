@@ -19,16 +19,25 @@
 -export([all/0, suite/0, init_per_suite/1, end_per_suite/1]).
 -export([supervision_trees/1, runnable_blocks/1, shell_blocks/1, erlang_sessions/1]).
 -export([links_resolve/1, cited_sections_exist/1, nothing_outside_the_repository/1]).
+-export([bench_run_has_its_header/1, no_hand_kept_figures/1]).
 
 -define(MARK, "<!-- runnable -->").
 -define(SHELL_TIMEOUT, 600000).
 -define(SESSION_TIMEOUT, 120000).
+%% The fields of doc/bench-run.md's header, as scripts/bench-report writes them.
+-define(BENCH_FIELDS, ["Run", "Quick mode", "Date", "Commit", "CPU", "Memory", "OS", "OTP",
+                       "Load", "CPU time", "Note"]).
+%% Guides written by a run, not by hand: the bench's and the lab's reports.
+%% Units of time, memory and rate, in a header or after a figure.
+-define(UNIT, "(µs|\\bms\\b|\\bns\\b|MiB|\\bMB\\b|KiB|\\bKB\\b|\\bkB\\b|events/s)").
+-define(GENERATED, ["bench-run.md", "lab_eval_report.md"]).
 
 suite() ->
     [{timetrap, {minutes, 25}}].
 
 all() ->
     [links_resolve, cited_sections_exist, nothing_outside_the_repository,
+     bench_run_has_its_header, no_hand_kept_figures,
      supervision_trees, runnable_blocks, shell_blocks, erlang_sessions].
 
 init_per_suite(Config) ->
@@ -117,6 +126,35 @@ erlang_sessions(Config) ->
     Root = ?config(root, Config),
     [run_session(Root, File, Line, Lines) || {File, Line, "erlang", Lines} <- ?config(blocks, Config)],
     ok.
+
+bench_run_has_its_header(doc) ->
+    ["doc/bench-run.md, the tables of one `make bench', opens with the header the run "
+     "wrote: the run (full or partial), quick mode, date, commit, CPU, memory, OS, OTP, "
+     "load, CPU time and a note, each filled in, before the first table; a quick run says "
+     "it is partial"];
+bench_run_has_its_header(Config) ->
+    Root = ?config(root, Config),
+    {ok, Bin} = file:read_file(filename:join([Root, "doc", "bench-run.md"])),
+    Fields = maps:from_list([{K, V} || [K, V] <- match_all(Bin, "(?m)^- \\*\\*([^*]+):\\*\\* (\\S.*)$")]),
+    ?assertEqual([], [F || F <- ?BENCH_FIELDS, not maps:is_key(F, Fields)]),
+    #{"Run" := Run, "Quick mode" := Quick} = Fields,
+    ?assert(lists:member(Quick, ["yes", "no"])),
+    ?assert(lists:prefix("full", Run) orelse lists:prefix("partial", Run)),
+    ?assert(Quick =:= "no" orelse lists:prefix("partial", Run)),
+    {Note, _} = binary:match(Bin, <<"- **Note:** ">>),
+    {Table, _} = binary:match(Bin, <<"\n|---">>),
+    ?assert(Note < Table).
+
+no_hand_kept_figures(doc) ->
+    ["README.md and the guides keep no table of measured figures by hand (a cell that is a "
+     "number with a time, memory or rate unit, or two bare numbers in a row under a header "
+     "naming such a unit): figures come from the files runs write (doc/bench-run.md, the "
+     "lab's eval report)"];
+no_hand_kept_figures(Config) ->
+    Root = ?config(root, Config),
+    Guides = [G || G <- guides(Root), not lists:member(filename:basename(G), ?GENERATED)],
+    Rows = [{rel(Root, G), R} || G <- Guides, R <- figure_rows(G)],
+    ?assertEqual([], Rows).
 
 %%====================================================================
 %% Reading the guides
@@ -271,6 +309,47 @@ in_order([E | Rest], Out) ->
 
 strip(S) ->
     unicode:characters_to_binary(re:replace(S, "\\s+", "", [global, unicode])).
+
+%%====================================================================
+%% Tables of figures
+%%====================================================================
+
+%% The rows of a guide's tables (fenced code left out) that hold measured
+%% figures.
+figure_rows(File) ->
+    {ok, Bin} = file:read_file(File),
+    Text = re:replace(Bin, "(?ms)^```.*?^```", "", [global, unicode, {return, binary}]),
+    figure_rows(string:split(unicode:characters_to_list(Text), "\n", all), []).
+
+figure_rows([], Acc) ->
+    lists:reverse(Acc);
+figure_rows(Lines, Acc) ->
+    {_, Rest} = lists:splitwith(fun(L) -> not is_row(L) end, Lines),
+    {Table, Rest1} = lists:splitwith(fun is_row/1, Rest),
+    figure_rows(Rest1, lists:reverse(measured(Table), Acc)).
+
+is_row(Line) ->
+    string:prefix(string:trim(Line, leading), "|") =/= nomatch.
+
+%% A row measured: a cell with a number and its unit, or (under a header
+%% that names a unit) two cells that are bare numbers.
+measured([]) ->
+    [];
+measured([Header | Body]) ->
+    UnitHeader = re:run(Header, ?UNIT, [unicode]) =/= nomatch,
+    [string:trim(Row) || Row <- Body,
+                         Cells <- [cells(Row)],
+                         lists:any(fun with_unit/1, Cells)
+                             orelse (UnitHeader andalso length(lists:filter(fun bare/1, Cells)) >= 2)].
+
+cells(Row) ->
+    [string:trim(C) || C <- string:split(string:trim(Row), "|", all)].
+
+with_unit(Cell) ->
+    re:run(Cell, "^[0-9][0-9,.]*\\s*" ++ ?UNIT ++ "(\\s|\\(|$)", [unicode]) =/= nomatch.
+
+bare(Cell) ->
+    re:run(Cell, "^[0-9][0-9,.]*$", [unicode]) =/= nomatch.
 
 %%====================================================================
 %% Links and citations
