@@ -18,7 +18,8 @@ all() -> [{group, prod}, {group, board}].
 groups() ->
     [{prod, [sequence], [daemon_starts_with_a_fresh_cookie, eval_inspects_the_running_torobot,
                          top_through_eval_and_top_command, wiring_command_loads_a_file,
-                         metrics_with_the_allocators_off, stop_stops_the_node]},
+                         metrics_with_the_allocators_off, openssl_stays_out_of_the_node,
+                         stop_stops_the_node]},
      {board, [sequence], [board_tarball_is_minimal, board_release_boots_on_system_erlang,
                           board_port_runs_under_qemu, board_port_unit_tests_under_qemu,
                           board_lua_port_runs_under_qemu,
@@ -151,6 +152,20 @@ metrics_with_the_allocators_off(Config) ->
                       "{match, [N]} = re:run(T, \"^toroco_vm_memory_bytes.kind=.total.. ([0-9]+)$\", "
                       "[multiline, {capture, all_but_first, list}]), list_to_integer(N)."),
     true = list_to_integer(string:trim(Total)) > 10000000.
+
+openssl_stays_out_of_the_node() ->
+    [{doc, "After the daemon's start, ping, eval and top (erl_call reaching it under a name of "
+           "its own making), with the dashboard up and its token drawn, the node has not "
+           "loaded crypto and has not mapped OpenSSL's libcrypto (3.8 MiB)."}].
+openssl_stays_out_of_the_node(Config) ->
+    Dir = ?config(rel, Config),
+    Eval = fun(Expr) -> cmd(Config, Dir, "bin/" ++ ?REL ++ " eval '" ++ Expr ++ "'", 30) end,
+    {0, Url} = Eval("binary_to_list(toroco_live:url())."),
+    match(Url, "token="),
+    {0, "false\n"} = Eval("code:is_loaded(crypto)."),
+    {0, Pid} = cmd(Config, Dir, "bin/" ++ ?REL ++ " pid", 30),
+    {0, Maps} = cmd(Config, Dir, "cat /proc/" ++ string:trim(Pid) ++ "/maps", 10),
+    nomatch = string:find(Maps, "libcrypto").
 
 stop_stops_the_node() ->
     [{doc, "bin/torobot stop returns once the node is gone; ping then says so."}].

@@ -239,7 +239,7 @@ client(F, Args, Otherwise) ->
 start_dashboard(Config0) ->
     Config = Config0#{token := token(maps:get(token, Config0)),
                       %% the key of the pages' session cookies (toroco_live_auth)
-                      session_key => crypto:strong_rand_bytes(32)},
+                      session_key => toroco_live_digest:random_bytes(32)},
     %% The children read it as they start (toroco_live_bridge).
     toroco_live_config:set(Config),
     case supervisor:restart_child(toroco_live_sup, ?DASHBOARD) of
@@ -266,7 +266,7 @@ listen_reason({{shutdown, {failed_to_start_child, _, R}}, _}) -> listen_reason(R
 listen_reason(R) -> R.
 
 token(auto) ->
-    base64url(crypto:strong_rand_bytes(18));
+    base64url(toroco_live_digest:random_bytes(18));
 token(Token) ->
     Token.
 

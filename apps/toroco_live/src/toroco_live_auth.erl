@@ -12,7 +12,7 @@
 %% {@link session/1}: an HMAC of the token under a key drawn at each start,
 %% so the cookie is not the token, cannot be computed from a guess of it,
 %% and ends with the dashboard). Both are compared in constant time
-%% (`crypto:hash_equals/2'). Only tokens are counted and limited: a session
+%% (`toroco_live_digest:equal/2', of their SHA-256 digests). Only tokens are counted and limited: a session
 %% cannot be guessed any faster than its 256-bit key, and a page left open
 %% across a restart presents a stale one at each reconnect, which must not
 %% lock its person out. A request with no credential is not a failure: it
@@ -77,9 +77,9 @@ session(Token) ->
     Key = case toroco_live_config:get(session_key, undefined) of
               K when is_binary(K) -> K;
               %% not running: a session no one can present
-              undefined -> crypto:strong_rand_bytes(32)
+              undefined -> toroco_live_digest:random_bytes(32)
           end,
-    base64url(crypto:mac(hmac, sha256, Key, Token)).
+    base64url(toroco_live_digest:hmac_sha256(Key, Token)).
 
 %% @doc `failures' (wrong credentials), `limited' (checks refused because
 %% the address was banned), `banned_now' (addresses banned now); empty when
@@ -197,10 +197,11 @@ good({session, Presented}) when is_binary(Presented) ->
 good(_) ->
     false.
 
-%% hash_equals/2 wants equal sizes; comparing digests keeps the time
-%% independent of the presented length too.
+%% Comparing digests keeps the time independent of the presented length
+%% too.
 equal(Secret, Presented) when is_binary(Secret) ->
-    crypto:hash_equals(crypto:hash(sha256, Secret), crypto:hash(sha256, Presented));
+    toroco_live_digest:equal(toroco_live_digest:sha256(Secret),
+                             toroco_live_digest:sha256(Presented));
 equal(_, _) ->
     false.
 

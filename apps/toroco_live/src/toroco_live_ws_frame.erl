@@ -81,7 +81,7 @@ client_decoder(MaxBytes) ->
 %% @doc The `Sec-WebSocket-Accept' value that answers `Key'.
 -spec accept_key(binary()) -> binary().
 accept_key(Key) ->
-    base64:encode(crypto:hash(sha, <<Key/binary, ?GUID/binary>>)).
+    base64:encode(toroco_live_digest:sha(<<Key/binary, ?GUID/binary>>)).
 
 %% @doc Whole messages from `Bytes' and what came before them.
 -spec decode(binary(), decoder()) -> {ok, [message()], decoder()} | {error, term()}.
@@ -200,5 +200,5 @@ masked(Op, Payload) ->
                Len < 65536 -> <<1:1, 0:3, Op:4, 1:1, 126:7, Len:16>>;
                true -> <<1:1, 0:3, Op:4, 1:1, 127:7, Len:64>>
            end,
-    Mask = crypto:strong_rand_bytes(4),
+    Mask = toroco_live_digest:random_bytes(4),
     [Head, Mask, unmask(Payload, Mask)].

@@ -171,7 +171,7 @@ connecting(enter, _, D = #data{host = Host, port = Port, opts = #{connect_timeou
     {keep_state, D#data{connector = Connector, head = <<>>}, [{state_timeout, T, timeout}]};
 connecting(info, {rosclient_dialled, Pid, {ok, Socket}}, D = #data{connector = {Pid, M}}) ->
     demonitor(M, [flush]),
-    Key = base64:encode(crypto:strong_rand_bytes(16)),
+    Key = base64:encode(toroco_live_digest:random_bytes(16)),
     Request = [<<"GET ">>, D#data.resource, <<" HTTP/1.1\r\nHost: ">>, D#data.host, $:,
                integer_to_binary(D#data.port),
                <<"\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: ">>, Key,
@@ -334,7 +334,7 @@ secure(S, Host, Verify, Timeout) ->
             case {Verify, ssl:peercert(Ssl)} of
                 {{cacertfile, _}, _} -> {ok, Ssl};
                 {{fingerprint, Pin}, {ok, Der}} ->
-                    case crypto:hash(sha256, Der) of
+                    case toroco_live_digest:sha256(Der) of
                         Pin -> {ok, Ssl};
                         Other ->
                             _ = ssl:close(Ssl),
