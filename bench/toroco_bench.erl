@@ -111,6 +111,7 @@ raw(Quick, N, Dir) ->
     StmTput = mean_rate(StmTputBefore, StmTputAfter),
     tput_table("Throughput, open loop with a bounded window", Tput, Dir, "throughput",
                [{"raw", RawTput}, {"gen_statem", StmTput}]),
+    rounds(case Quick of true -> 5; false -> 9 end, N),
     RawExt =/= [] andalso table("Raw reference: UDP sender → plain gen_udp echo → UDP receiver "
                                 "(mean of a run before and a run after)", RawExt, Dir, "raw_external"),
     External =/= [] andalso table("External test: UDP sender → udp_link → behavior → udp_link → UDP receiver", External, Dir, "external", [{"raw", RawExt}]).
@@ -216,6 +217,43 @@ raw_internal(Ref, Interval, N, Dir) ->
     R = measure(Src, Mode, N, N * 20 + 10000),
     Ref:stop(Chain),
     row(label(Interval), R, Dir, atom_to_list(Ref) ++ "_" ++ label(Interval)).
+
+%% The closed loop of the three chains in rounds, one right after the
+%% other: on two schedulers a chain runs in one of two modes, its processes
+%% on one scheduler (each hop's work in series) or spread over both (a
+%% process's work after its send overlapping the next one's), about twice
+%% apart, and the mode changes from one moment to the next. A ratio of
+%% rows taken at different moments can mix modes; a round's three rows
+%% are most often in the same one. Each round's ratios, and their median.
+rounds(K, N) ->
+    Rs = [begin
+              Raw = closed_p50(toroco_bench_raw, N),
+              Stm = closed_p50(toroco_bench_statem, N),
+              chain(closed, N),
+              Rt = p50_of(run(closed, N, N * 20 + 10000)),
+              {Raw, Stm, Rt}
+          end || _ <- lists:seq(1, K)],
+    Median = fun(L) -> lists:nth((length(L) + 1) div 2, lists:sort(L)) end,
+    io:format("~n### Closed loop in rounds: the three chains one after the other, ~b events "
+              "each, ~b rounds~n~n| round | raw p50 µs | gen_statem p50 µs | runtime p50 µs | "
+              "gen_statem × raw | runtime × raw | runtime × gen_statem |~n"
+              "|---:|---:|---:|---:|---:|---:|---:|~n", [N, K]),
+    [io:format("| ~b | ~.1f | ~.1f | ~.1f | ~.2f | ~.2f | ~.2f |~n",
+               [I, Raw, Stm, Rt, Stm / Raw, Rt / Raw, Rt / Stm])
+     || {I, {Raw, Stm, Rt}} <- lists:zip(lists:seq(1, K), Rs)],
+    io:format("| median | ~.1f | ~.1f | ~.1f | ~.2f | ~.2f | ~.2f |~n",
+              [Median([R || {R, _, _} <- Rs]), Median([S || {_, S, _} <- Rs]),
+               Median([T || {_, _, T} <- Rs]), Median([S / R || {R, S, _} <- Rs]),
+               Median([T / R || {R, _, T} <- Rs]), Median([T / S || {_, S, T} <- Rs])]).
+
+closed_p50(Ref, N) ->
+    Chain = {Src, _} = Ref:chain(closed, N, self()),
+    R = measure(Src, closed, N, N * 20 + 10000),
+    Ref:stop(Chain),
+    p50_of(R).
+
+p50_of(#{lat := []}) -> 0.0;
+p50_of(#{lat := Lats}) -> pct(lists:sort(Lats), 0.50) / 1000.
 
 raw_throughput(Ref, W, N) ->
     Chain = {Src, _} = Ref:chain({window, 100}, N, self()),
