@@ -25,11 +25,22 @@ all() ->
      network_matches_model, gate_attach_keeps_send_hold, activation_stamp_keeps_order,
      tap_batch_keeps_order, tap_batch_counts_exactly].
 
-init_per_suite(Config) ->
-    Config.
+%% The network property lifts the restart intensities (its kills are
+%% commands, not faults): what they were comes back at the end, so that the
+%% suites after this one in the same node take layers out as configured.
+-define(INTENSITIES, [layer_restart_intensity, device_restart_intensity]).
 
-end_per_suite(_Config) ->
-    toroco_test_lib:stop().
+init_per_suite(Config) ->
+    _ = application:load(toroco),
+    [{intensities, [{K, application:get_env(toroco, K)} || K <- ?INTENSITIES]} | Config].
+
+end_per_suite(Config) ->
+    toroco_test_lib:stop(),
+    [case Was of
+         {ok, V} -> application:set_env(toroco, K, V);
+         undefined -> application:unset_env(toroco, K)
+     end || {K, Was} <- proplists:get_value(intensities, Config)],
+    ok.
 
 init_per_testcase(_Case, Config) ->
     _ = ets:new(prop_router_counts, [named_table, public]),
