@@ -44,6 +44,8 @@
 -export([shell/1, shell/2, event/4]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3, code_change/4]).
 -export_type([spec/0, action/0, actions/0, result/0]).
+%% Steps of every input of the path, inlined: its calls are its cost.
+-compile({inline, [delivered/5, input/4, with_actions/3, emitted/2]}).
 
 -callback interface() -> #{inputs := [atom()], outputs := [atom()]}.
 %% A behavior whose ports depend on its options exports `interface/1'
@@ -322,6 +324,13 @@ start_user(E = #e{kind = Kind, module = M, args = Args, name = Name}) ->
           gen_statem:event_handler_result(term()).
 %% Lockstep, the idle tick and the tap's batch are the shell's
 %% (toroco_shell); the rest comes to event/4.
+handle_event(info, ?WIRE_IN(Input, V), S, E = #e{shell = Sh}) ->
+    %% the event path's common case, as event/4 would take it, without
+    %% the shell's dispatch (toroco_shell:awake/1)
+    case toroco_shell:awake(Sh) of
+        true -> toroco_shell:done(delivered(Input, V, none, S, E), E, ?HOST);
+        false -> toroco_shell:handle_event(info, ?WIRE_IN(Input, V), S, E, ?HOST)
+    end;
 handle_event(Type, Content, S, E) ->
     toroco_shell:handle_event(Type, Content, S, E, ?HOST).
 

@@ -51,6 +51,8 @@
 %% The shell's way into this module (toroco_shell:host()), not an API.
 -export([shell/1, shell/2, event/4]).
 -export([callback_mode/0, init/1, handle_event/4, terminate/3]).
+%% Steps of every event of the path, inlined: its calls are its cost.
+-compile({inline, [settle/2, timer/1]}).
 
 -type key() :: {atom(), atom()}.
 -export_type([key/0]).
@@ -180,6 +182,14 @@ init({Mod, Key, Caller}) ->
 %% caused are handed over before it is done.
 handle_event(internal, gone, gone, none) ->
     {stop, normal};
+handle_event(info, ?WIRE_EVENT(Src, Op) = Msg, ready, C = #c{heard = H, links = L, shell = Sh})
+  when map_size(H) =:= 0 ->
+    %% the event path's common case, as event/4 would take it, without
+    %% the shell's dispatch (toroco_shell:awake/1)
+    case toroco_shell:awake(Sh) andalso toroco_wire:carries(emitter, Src, L) of
+        true -> toroco_shell:done(steps([{op, Src, Op}], C), C, ?HOST);
+        false -> toroco_shell:handle_event(info, Msg, ready, C, ?HOST)
+    end;
 handle_event(info, {'DOWN', _, process, _, _} = Down, St, C) ->
     case toroco_lockstep:down(Down) of
         true -> keep_state_and_data;

@@ -23,6 +23,8 @@
 -export([subscribed/3, unsubscribed/3, beat/1]).
 -export([latches/1, outputs/1, has/2]).
 -export_type([emitter/0]).
+%% A step of every emission, inlined: the event path's calls are its cost.
+-compile({inline, [relatch/3]}).
 
 -record(em, {name :: atom(),
              %% declared output -> the addresses of its consumers

@@ -29,14 +29,21 @@
 %% A host keeps a {@link shell()} in its data and hands {@link
 %% handle_event/5} a {@link host()}: how to get the shell out of its data
 %% and put it back, and its own event handler, which gets every event the
-%% shell does not handle itself.
+%% shell does not handle itself. The event path's own messages (a router's
+%% event in, a behavior's input) may take a short way: when {@link
+%% awake/1} says the shell has nothing to do first, straight to the
+%% host's handler, and its result to {@link done/3}, which is what {@link
+%% handle_event/5} would do with them, a few calls fewer (the engine and
+%% the consumer shell do; the event path's cost is its calls).
 -module(toroco_shell).
 
 -include("toroco_wire.hrl").
 
--export([new/0, handle_event/5, tap/3, lifecycle/4, flush/1]).
+-export([new/0, handle_event/5, awake/1, done/3, tap/3, lifecycle/4, flush/1]).
 -export([timeout/2, left/1, hold/3]).
 -export_type([shell/0, host/1]).
+%% After every event: inlined, the event path's calls are its cost.
+-compile({inline, [tap_after/3]}).
 
 -record(shell, {idle = off :: toroco_wire:idle(),
                 %% the observer tap's events not sent yet
@@ -71,6 +78,22 @@ handle_event(info, ?WIRE_BARRIER(Ref), _St, _D, _Host) ->
     keep_state_and_data;
 handle_event(Type, Content, St, D, Host) ->
     tap_after(event(Type, Content, St, D, Host), D, Host).
+
+%% @doc Whether the shell has nothing to do before a host's event: the
+%% idle tick is armed (or never used). A host may then hand an event of
+%% its event path straight to its handler, and the result to {@link
+%% done/3}: the same as {@link handle_event/5} would do with it.
+-spec awake(shell()) -> boolean().
+awake(#shell{idle = off}) -> false;
+awake(#shell{}) -> true.
+
+%% @doc What becomes of the tap's batch after a host's handler returned
+%% `R' for data `D0' (as after every event {@link handle_event/5} hands
+%% on).
+-spec done(gen_statem:event_handler_result(term()), D, host(D)) ->
+          gen_statem:event_handler_result(term()).
+done(R, D0, Host) ->
+    tap_after(R, D0, Host).
 
 event(info, ?WIRE_STEP(Token, Msg), St, D, Host) ->
     toroco_wire:step_done(Token, step(Msg, St, D, Host));

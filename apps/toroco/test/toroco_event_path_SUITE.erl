@@ -23,6 +23,7 @@ groups() ->
      {resilience, [], [wiring_server_crashes_100_times_under_load, inject_into_own_output_is_refused,
                        inject_unknown_and_stopped_names, restarts_counted_from_lifecycle,
                        reset_cancels_named_timeouts, unknown_events_fall_to_the_engine,
+                       quiet_path_hibernates_again_after_events,
                        failed_first_start_in_a_new_layer,
                        rewired_router_takes_its_configuration_from_the_call,
                        wiring_table_written_by_the_wiring_server_only]}].
@@ -563,6 +564,36 @@ reset_cancels_named_timeouts(_Config) ->
     ok = toroco:inject({r, go}, now),
     {error, timeout} = toroco_fake_actuator:await(a, fun(H) -> length(H) > 1 end, 800),
     [ticked] = toroco_test_lib:values(a).
+
+quiet_path_hibernates_again_after_events() ->
+    [{doc, "A behavior and its input's router hibernate when quiet, wake for the events of the "
+      "path (which take the engine's short way), and hibernate again once quiet: each wake "
+      "arms the idle tick again."}].
+quiet_path_hibernates_again_after_events(_Config) ->
+    Old = application:get_env(toroco, hibernate_after_ms),
+    ok = application:set_env(toroco, hibernate_after_ms, 100),
+    try
+        chain(),
+        Procs = [whereis(toroco_names:process(b)), whereis(toroco_names:router(b, in))],
+        %% Looked at every 400 ms: a look is a signal the process handles
+        %% itself, which costs it reductions, and looks at every tick (50
+        %% ms here) would keep it from ever seeming idle.
+        Asleep = fun() -> [process_info(P, current_function) || P <- Procs]
+                              =:= [{current_function, {erlang, hibernate, 3}} || _ <- Procs]
+                 end,
+        Sleeps = fun() -> ok = toroco_test_lib:poll(Asleep, 10000, 400) end,
+        [begin
+             Sleeps(),
+             ok = toroco:inject({s, v}, Round),
+             await_values(a, lists:seq(1, Round))
+         end || Round <- [1, 2, 3]],
+        Sleeps()
+    after
+        case Old of
+            {ok, V} -> application:set_env(toroco, hibernate_after_ms, V);
+            undefined -> application:unset_env(toroco, hibernate_after_ms)
+        end
+    end.
 
 unknown_events_fall_to_the_engine() ->
     [{doc, "A handle_event/4 without a clause for an event leaves it to the engine: calls get unknown_call."}].
