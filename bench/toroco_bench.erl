@@ -219,12 +219,11 @@ raw_internal(Ref, Interval, N, Dir) ->
     row(label(Interval), R, Dir, atom_to_list(Ref) ++ "_" ++ label(Interval)).
 
 %% The closed loop of the three chains in rounds, one right after the
-%% other: on two schedulers a chain runs in one of two modes, its processes
-%% on one scheduler (each hop's work in series) or spread over both (a
-%% process's work after its send overlapping the next one's), about twice
-%% apart, and the mode changes from one moment to the next. A ratio of
-%% rows taken at different moments can mix modes; a round's three rows
-%% are most often in the same one. Each round's ratios, and their median.
+%% other: the machine runs every chain at one of two speeds about twice
+%% apart, and changes from one moment to the next (on one scheduler as on
+%% two: doc/benchmarks.md). A ratio of rows taken at different moments can
+%% mix the two; a round's three rows are most often at the same one. Each
+%% round's ratios, and their median.
 rounds(K, N) ->
     Rs = [begin
               Raw = closed_p50(toroco_bench_raw, N),
