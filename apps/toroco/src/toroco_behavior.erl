@@ -45,7 +45,7 @@
 -export([callback_mode/0, init/1, handle_event/4, terminate/3, code_change/4]).
 -export_type([spec/0, action/0, actions/0, result/0]).
 %% Steps of every input of the path, inlined: its calls are its cost.
--compile({inline, [delivered/5, input/4, with_actions/3, emitted/2]}).
+-compile({inline, [delivered/5, input/4, with_actions/3, emitted/2, actions/2]}).
 
 -callback interface() -> #{inputs := [atom()], outputs := [atom()]}.
 %% A behavior whose ports depend on its options exports `interface/1'

@@ -21,6 +21,8 @@
 -export([unwire/1, info/1]).
 -export([kind/0, reg/1, init/2, run/4, settled/2, deadline/1, rewired/6, late/2, handle/4,
          info/2]).
+%% A step of every delivery, inlined: the event path's calls are its cost.
+-compile({inline, [delivered/3]}).
 
 -record(r, {key :: {atom(), atom()},
             input :: atom(),

@@ -26,7 +26,7 @@
 -export([new/0, handle/3, next_deadline/1, info/2, sources/1, view/1]).
 -export_type([core/0, event/0, op/0, hold/0, latch/0]).
 %% Small steps of every emission, inlined: the event path's calls are its cost.
--compile({inline, [start_hold/3, deadline/2]}).
+-compile({inline, [start_hold/3, deadline/2, update_src/4]}).
 
 -type source() :: {atom(), atom()}.
 -type hold() :: default | non_neg_integer() | infinity.

@@ -43,7 +43,7 @@
 -export([timeout/2, left/1, hold/3]).
 -export_type([shell/0, host/1]).
 %% After every event: inlined, the event path's calls are its cost.
--compile({inline, [tap_after/3]}).
+-compile({inline, [tap_after/3, own/5]}).
 
 -record(shell, {idle = off :: toroco_wire:idle(),
                 %% the observer tap's events not sent yet
