@@ -30,7 +30,7 @@
 -define(LIVE_API, [toroco_live, toroco_live_listener, toroco_live_ws_conn,
                    toroco_live_ws_frame, toroco_live_clients, toroco_live_bridge,
                    toroco_live_extensions, toroco_live_metrics, toroco_live_world,
-                   toroco_live_http, toroco_live_auth]).
+                   toroco_live_http, toroco_live_auth, toroco_live_digest]).
 %% What toroco_rec documents as its API for the applications built on it
 %% (toroco_rec's module doc, doc/recording.md "Built on toroco_rec").
 -define(REC_API, [toroco_rec, toroco_rec_json, toroco_rec_channels, toroco_rec_tap,

@@ -153,6 +153,9 @@ wander_arcs(Params, N) ->
     motors([wander]),
     await_motors(fun(H) -> length(H) >= N end, fun() -> {fewer_than, N, values()} end),
     ok = toroco:remove_behavior(wander),
+    %% its holder gone, the motors get the input's idle value: waited for,
+    %% so that it lands in this run's history and not in the next one's
+    await_last({0, 0}),
     [{V, T} || {setvel, V, T} <- lists:sublist(toroco_fake_actuator:history(motors), N)].
 
 avoid_spins_away() ->

@@ -16,8 +16,9 @@
 %% and client side), `toroco_live_clients' (a hub's clients, per-client
 %% bounds and the tap), `toroco_live_bridge', `toroco_live_extensions',
 %% `toroco_live_metrics:family/4', and the helpers `toroco_live_world',
-%% `toroco_live_auth' and `toroco_live_http:peer/1', `token/1'
-%% (doc/dashboard.md, "Built on toroco_live"). The JSON of terms, the
+%% `toroco_live_auth' and `toroco_live_http:peer/1', `token/1', and the
+%% digests and random bytes of `toroco_live_digest' (doc/dashboard.md,
+%% "Built on toroco_live"). The JSON of terms, the
 %% channels, the tap's client and recordings are the application
 %% `toroco_rec''s, which this one is built on (`toroco_rec').
 %%
