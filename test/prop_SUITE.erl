@@ -36,10 +36,8 @@ init_per_suite(Config) ->
 
 end_per_suite(Config) ->
     toroco_test_lib:stop(),
-    [case Was of
-         {ok, V} -> application:set_env(toroco, K, V);
-         undefined -> application:unset_env(toroco, K)
-     end || {K, Was} <- proplists:get_value(intensities, Config)],
+    [toroco_test_lib:restore_env(toroco, K, Was)
+     || {K, Was} <- proplists:get_value(intensities, Config)],
     ok.
 
 init_per_testcase(_Case, Config) ->

@@ -40,10 +40,7 @@ init_per_suite(Config) ->
 
 end_per_suite(Config) ->
     logger:set_primary_config(level, notice),
-    case ?config(old_wiring, Config) of
-        {ok, W} -> application:set_env(torobot, wiring, W);
-        undefined -> application:unset_env(torobot, wiring)
-    end.
+    toroco_test_lib:restore_env(torobot, wiring, ?config(old_wiring, Config)).
 
 init_per_group(explore, Config) ->
     %% the avoids crash often: their layer must not be taken out for it,
@@ -120,10 +117,7 @@ devices_out_in_simulated_time(Config) ->
         ?assertEqual(A, B),
         ?assertEqual([<<"1300 devices out">>], matching(<<"devices out">>, trace_lines("dburst", Config)))
     after
-        case Old of
-            {ok, V} -> application:set_env(toroco, device_restart_intensity, V);
-            undefined -> application:unset_env(toroco, device_restart_intensity)
-        end
+        toroco_test_lib:restore_env(toroco, device_restart_intensity, Old)
     end.
 
 matching(Pattern, Lines) ->

@@ -324,12 +324,12 @@ start_user(E = #e{kind = Kind, module = M, args = Args, name = Name}) ->
           gen_statem:event_handler_result(term()).
 %% Lockstep, the idle tick and the tap's batch are the shell's
 %% (toroco_shell); the rest comes to event/4.
-handle_event(info, ?WIRE_IN(Input, V), S, E = #e{shell = Sh}) ->
+handle_event(info, ?WIRE_IN(Input, V) = Msg, S, E = #e{shell = Sh}) ->
     %% the event path's common case, as event/4 would take it, without
     %% the shell's dispatch (toroco_shell:awake/1)
     case toroco_shell:awake(Sh) of
         true -> toroco_shell:done(delivered(Input, V, none, S, E), E, ?HOST);
-        false -> toroco_shell:handle_event(info, ?WIRE_IN(Input, V), S, E, ?HOST)
+        false -> toroco_shell:handle_event(info, Msg, S, E, ?HOST)
     end;
 handle_event(Type, Content, S, E) ->
     toroco_shell:handle_event(Type, Content, S, E, ?HOST).

@@ -589,10 +589,7 @@ quiet_path_hibernates_again_after_events(_Config) ->
          end || Round <- [1, 2, 3]],
         Sleeps()
     after
-        case Old of
-            {ok, V} -> application:set_env(toroco, hibernate_after_ms, V);
-            undefined -> application:unset_env(toroco, hibernate_after_ms)
-        end
+        toroco_test_lib:restore_env(toroco, hibernate_after_ms, Old)
     end.
 
 unknown_events_fall_to_the_engine() ->

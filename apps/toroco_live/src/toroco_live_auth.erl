@@ -12,11 +12,11 @@
 %% {@link session/1}: an HMAC of the token under a key drawn at each start,
 %% so the cookie is not the token, cannot be computed from a guess of it,
 %% and ends with the dashboard). Both are compared in constant time
-%% (`toroco_live_digest:equal/2', of their SHA-256 digests). Only tokens are counted and limited: a session
-%% cannot be guessed any faster than its 256-bit key, and a page left open
-%% across a restart presents a stale one at each reconnect, which must not
-%% lock its person out. A request with no credential is not a failure: it
-%% is read-only.
+%% (`toroco_live_digest:equal/2', of their SHA-256 digests). Only tokens
+%% are counted and limited: a session cannot be guessed any faster than
+%% its 256-bit key, and a page left open across a restart presents a stale
+%% one at each reconnect, which must not lock its person out. A request
+%% with no credential is not a failure: it is read-only.
 %%
 %% The decisions are a pure core over `(Core, Ip, Now)' ({@link new/0},
 %% {@link check/4}); the process owns the core, the clock and the counters

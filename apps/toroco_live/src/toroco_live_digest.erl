@@ -92,19 +92,20 @@ diff(<<>>, <<>>, Acc) ->
 xor_bytes(Bin, Pad) ->
     << <<(X bxor Pad)>> || <<X>> <= Bin >>.
 
+%% A block's message schedule: its 16 words, then the rest by `Extend'
+%% (from W[16], the words so far newest first), as a tuple.
+schedule(Block, Extend) ->
+    list_to_tuple(Extend(16, lists:reverse([X || <<X:32>> <= Block]))).
+
 %% SHA-1 (FIPS 180-4 §6.1)
 
 sha_blocks(<<Block:64/binary, Rest/binary>>, H = {A, B, C, D, E}) ->
-    W = sha_schedule(Block),
+    W = schedule(Block, fun sha_extend/2),
     {A1, B1, C1, D1, E1} = sha_rounds(0, W, H),
     sha_blocks(Rest, {(A + A1) band ?M32, (B + B1) band ?M32, (C + C1) band ?M32,
                       (D + D1) band ?M32, (E + E1) band ?M32});
 sha_blocks(<<>>, H) ->
     H.
-
-sha_schedule(Block) ->
-    W16 = [X || <<X:32>> <= Block],
-    list_to_tuple(sha_extend(16, lists:reverse(W16))).
 
 %% W[t] for t = 16..79 from the 16 before it; the list is newest first.
 sha_extend(80, Rev) ->
@@ -130,17 +131,13 @@ sha_rounds(T, W, {A, B, C, D, E}) ->
 %% SHA-256 (FIPS 180-4 §6.2)
 
 sha256_blocks(<<Block:64/binary, Rest/binary>>, H, K) ->
-    W = sha256_schedule(Block),
+    W = schedule(Block, fun sha256_extend/2),
     H1 = sha256_rounds(0, W, K, H),
     sha256_blocks(Rest, list_to_tuple([(X + Y) band ?M32
                                        || {X, Y} <- lists:zip(tuple_to_list(H),
                                                               tuple_to_list(H1))]), K);
 sha256_blocks(<<>>, H, _K) ->
     H.
-
-sha256_schedule(Block) ->
-    W16 = [X || <<X:32>> <= Block],
-    list_to_tuple(sha256_extend(16, lists:reverse(W16))).
 
 sha256_extend(64, Rev) ->
     lists:reverse(Rev);

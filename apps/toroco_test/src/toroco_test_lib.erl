@@ -7,7 +7,7 @@
 %% or for a paced load's end (paced/3, pace/3, await_paced/2). test/toroco_waits_SUITE
 %% fails on a `timer:sleep' or a bare `receive after' anywhere else.
 -module(toroco_test_lib).
--export([distributed/1, root/0, start/0, stop/0, clear/0, values/1, values/2, await_values/2, await_values/3,
+-export([distributed/1, root/0, start/0, stop/0, clear/0, restore_env/3, values/1, values/2, await_values/2, await_values/3,
          await_input/4, settle/1, lockstep/0, settle/0, pass/1, await_runtime/3,
          sensor/2, actuator/2, wait_until/2, wait_until/3, poll/2, poll/3, wait_fold/4,
          stays/4, nothing_arrives/3, quiet/1, paced/3, pace/3, await_paced/2, stop_paced/1]).
@@ -48,6 +48,12 @@ stop() ->
     _ = application:stop(toroco_hw),
     _ = application:stop(toroco),
     ok.
+
+%% An app env key put back as `application:get_env(App, Key)' found it
+%% (`Was'), for the suites after a test that changed it.
+-spec restore_env(atom(), atom(), {ok, term()} | undefined) -> ok.
+restore_env(App, Key, {ok, V}) -> application:set_env(App, Key, V);
+restore_env(App, Key, undefined) -> application:unset_env(App, Key).
 
 %% Every behavior and device removed, the runtime left running.
 -spec clear() -> ok.
