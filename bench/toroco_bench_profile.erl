@@ -1,8 +1,10 @@
 %% Where the closed loop's time goes (TOROCO_BENCH_ONLY=profile): the
 %% internal chain (source → router → relay → router → sink) run closed loop,
-%% with per process reductions and messages per event, the same figures for
-%% the raw chain, and an eprof breakdown by function over the runtime's
-%% processes. A measuring tool: nothing here is a target.
+%% with per process reductions and messages per event (also with one tap
+%% subscriber, its feeder and reader counted), the same figures for the raw
+%% chain, each step of the path alone (with no observer and with a
+%% subscriber) and, with TOROCO_BENCH_EPROF=1, each step's eprof breakdown
+%% by function. A measuring tool: nothing here is a target.
 -module(toroco_bench_profile).
 -export([main/1]).
 
@@ -15,15 +17,44 @@ main([Dir]) ->
               "per process: reductions per event |~n|---|---:|---:|---|~n"),
     [raw(N) || _ <- [1, 2]],
     [runtime(N) || _ <- [1, 2]],
+    [observed(N, Label, Opts) || {Label, Opts} <- [{"runtime, one subscriber", #{}},
+                                                   {"runtime, one subscriber with room for 1",
+                                                    #{buffer => 1}}]],
     M = 1000,
     toroco_bench:chain(closed, M),
     Msgs = messages(procs(), fun() -> toroco_bench:run(closed, M, 60000) end, M),
     io:format("~nMessages received per event: ~s (total ~.1f)~n",
               [lists:join(", ", [io_lib:format("~s ~.1f", [K, float(C)]) || {K, C} <- Msgs]),
                float(lists:sum([C || {_, C} <- Msgs]))]),
-    isolation(),
-    [eprof(N) || os:getenv("TOROCO_BENCH_EPROF") =:= "1"],
+    isolation(none),
+    isolation(subscriber),
     halt(0).
+
+%% The closed loop with a reader subscribed (Opts): the chain's processes
+%% and the subscription's feeder and reader, what each does per event.
+observed(N, Label, Opts) ->
+    toroco_bench:chain(closed, N),
+    {Reader, Ref} = reader(Opts),
+    [sys:get_state(P) || {_, P} <- procs()],      % they have the subscription
+    Feeder = toroco_tap:feeder(Ref),
+    loop(Label, procs() ++ [{feeder, Feeder}, {reader, Reader}],
+         fun() -> toroco_bench:run(closed, N, N * 20 + 10000) end, N),
+    Reader ! stop.
+
+reader(Opts) ->
+    Parent = self(),
+    Reader = spawn(fun() ->
+                           {ok, Ref} = toroco:subscribe_events(Opts),
+                           Parent ! {self(), Ref},
+                           read(Ref)
+                   end),
+    receive {Reader, Ref} -> {Reader, Ref} end.
+
+read(Ref) ->
+    receive
+        {toroco_event, Ref, _} -> read(Ref);
+        stop -> ok
+    end.
 
 %% Each step of the closed loop alone, in a tight loop in one process (no
 %% message received, no scheduling; what a step sends piles up in suspended
@@ -32,9 +63,13 @@ main([Dir]) ->
 %% one input; then the gen_statem loop around each (a gen_statem draining a
 %% full mailbox against a plain receive loop doing the same). What is left
 %% of the closed loop is messaging and scheduling (the raw chain's figure).
-isolation() ->
+isolation(Observer) ->
     M = 200000,
     toroco_bench:chain(closed, M + 1),
+    Reader = case Observer of
+                 none -> none;
+                 subscriber -> element(1, reader(#{}))
+             end,
     Src = pid(src), Relay = pid(relay), Sink = pid(sink),
     Router = whereis(toroco_names:router(relay, in)),
     RouterSink = whereis(toroco_names:router(sink, in)),
@@ -49,8 +84,12 @@ isolation() ->
     [{_, ESrc}, {ready, CRouter0}, {SRelay, ERelay}, _, {SSink, ESink0}] = Got,
     CRouter = setelement(4, CRouter0, setelement(5, element(4, CRouter0), Drop())),
     ESink = setelement(7, ESink0, (element(7, ESink0))#{source := Drop()}),
-    io:format("~n### Each step alone (ns per call, ~b calls, one process)~n~n| step | ns |~n|---|---:|~n",
-              [M]),
+    io:format("~n### Each step alone, ~s (ns per call, ~b calls, one process)~n~n"
+              "| step | ns |~n|---|---:|~n",
+              [case Observer of
+                   none -> "no observer";
+                   subscriber -> "one tap subscriber taking every event"
+               end, M]),
     Steps =
         [step("source: `{arrived, N}' in, the next emission out (engine + callback)",
               fun(K, E) -> data(toroco_behavior:handle_event(info, {arrived, K}, {closed, M + 1, 1, 0}, E), E) end,
@@ -70,7 +109,12 @@ isolation() ->
               [float(Loop)]),
     io:format("| sum: the steps with the router twice, plus 5 gen_statem loops | ~.1f |~n",
               [float(lists:sum(Steps) + lists:nth(2, Steps) + 5 * Loop)]),
-    [exit(P, kill) || P <- All],
+    %% the chain as it was: the routers under their names again, running
+    [begin Stand = whereis(Reg), unregister(Reg), exit(Stand, kill), register(Reg, P) end
+     || {Reg, P} <- [{toroco_names:router(relay, in), Router},
+                     {toroco_names:router(sink, in), RouterSink}]],
+    [sys:resume(P) || P <- All],
+    _ = is_pid(Reader) andalso (Reader ! stop),
     ok.
 
 data({keep_state, D}, _) -> D;
@@ -86,7 +130,18 @@ step(Label, F, Acc0, M) ->
     _ = lists:foldl(F, Acc0, lists:seq(1, M)),
     Ns = (erlang:monotonic_time(nanosecond) - T0) / M,
     io:format("| ~ts | ~.1f |~n", [Label, float(Ns)]),
+    [eprof_step(Label, F, Acc0) || os:getenv("TOROCO_BENCH_EPROF") =:= "1"],
     Ns.
+
+%% With TOROCO_BENCH_EPROF=1: the step again, 20000 calls under eprof
+%% (one process: what the step calls, by function).
+eprof_step(Label, F, Acc0) ->
+    {ok, _} = eprof:start(),
+    {ok, _} = eprof:profile([], fun() -> lists:foldl(F, Acc0, lists:seq(1, 20000)) end),
+    io:format("~n```~n~ts~n", [Label]),
+    eprof:analyze(total, [{sort, time}]),
+    io:format("```~n~n| step | ns |~n|---|---:|~n"),
+    stopped = eprof:stop().
 
 %% ns per message for a process draining M messages already in its mailbox
 gen_statem_loop(M) ->
@@ -163,14 +218,3 @@ count_loop(Parent, Acc) ->
         {done, Parent} -> Parent ! {counts, Acc}
     end.
 
-eprof(N) ->
-    toroco_bench:chain(closed, N),
-    Procs = [P || {_, P} <- procs()],
-    {ok, _} = eprof:start(),
-    profiling = eprof:start_profiling(Procs),
-    _ = toroco_bench:run(closed, N, N * 20 + 10000),
-    profiling_stopped = eprof:stop_profiling(),
-    io:format("~n### eprof, the five processes of the closed loop~n~n```~n"),
-    eprof:analyze(total, [{sort, time}]),
-    io:format("```~n"),
-    stopped = eprof:stop().
