@@ -52,12 +52,12 @@ run(Commands) ->
     {Sinks, lists:reverse(Sealed, toroco_tap_batch:seal(Batch)), Taken}.
 
 step({tap, I, Grant}, Sinks, {Batch, Sealed, Taken, Seq}) ->
-    Sink = {Ref, _, _} = maps:get(I, Sinks),
-    Given = case toroco_tap_batch:needs_room(Ref, Batch) of
-                true -> Grant;
-                false -> 0
-            end,
-    {Batch1, Out} = toroco_tap_batch:add(Sink, {I, Seq}, Given, Batch),
+    Sink = maps:get(I, Sinks),
+    {{Batch1, Out}, Given} = case toroco_tap_batch:add(Sink, {I, Seq}, Batch) of
+                                 need_room -> {toroco_tap_batch:add(Sink, {I, Seq}, Grant, Batch),
+                                               Grant};
+                                 Done -> {Done, 0}
+                             end,
     {Batch1, lists:reverse(Out, Sealed), maps:update_with(I, fun(G) -> G + Given end, Given, Taken),
      Seq + 1};
 step(flush, _Sinks, {Batch, Sealed, Taken, Seq}) ->

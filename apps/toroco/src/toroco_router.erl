@@ -35,7 +35,9 @@
             %% the observer tap's sinks about this input's receiver, and
             %% what it last reported of the router's state
             tap = #{} :: toroco_tap:sinks(),
-            view = none :: term()}).
+            view = none :: term(),
+            %% the core whose view that was
+            seen = none :: toroco_router_core:core() | none}).
 
 %%====================================================================
 %% API
@@ -81,13 +83,19 @@ run(Event, Now, D = #r{core = C}, Sh) ->
 
 %% @doc Tells the tap's subscribers when the winner, holds or latches changed.
 -spec settled(#r{}, toroco_shell:shell()) -> {#r{}, toroco_shell:shell()}.
-settled(D = #r{tap = #{router := Sinks}, core = C, view = Old, key = Key}, Sh) ->
-    case toroco_router_core:view(C) of
-        Old -> {D, Sh};
-        View ->
-            Info = toroco_router_core:info(C, toroco_clock:now_ms()),
-            Event = {router, stamp, Key, maps:with([winner, holds, latches], Info)},
-            {D#r{view = View}, toroco_shell:tap(Sinks, Event, Sh)}
+settled(D = #r{tap = #{router := Sinks}, core = C, seen = Seen, view = Old, key = Key}, Sh) ->
+    case toroco_router_core:same_view(C, Seen) of
+        true ->
+            {D, Sh};
+        false ->
+            case toroco_router_core:view(C) of
+                Old ->
+                    {D#r{seen = C}, Sh};
+                View ->
+                    Info = toroco_router_core:info(C, toroco_clock:now_ms()),
+                    Event = {router, stamp, Key, maps:with([winner, holds, latches], Info)},
+                    {D#r{view = View, seen = C}, toroco_shell:tap(Sinks, Event, Sh)}
+            end
     end;
 settled(D, Sh) ->
     {D, Sh}.
@@ -117,7 +125,7 @@ handle(info, ?WIRE_RX(_Input, Pid), D, Sh) ->
 handle(info, {'DOWN', Ref, process, _, _}, D = #r{rx_mon = Ref}, Sh) ->
     {[], [], D#r{rx = undefined, rx_mon = undefined, inflight = false, pending = none}, Sh};
 handle(info, ?WIRE_TAP(Subs), D = #r{key = {R, _}}, Sh) ->
-    {[], [], D#r{tap = tap(Subs, R), view = none}, Sh};
+    {[], [], D#r{tap = tap(Subs, R), view = none, seen = none}, Sh};
 handle(info, ?WIRE_UNSUB(_, _), D, Sh) ->
     {[], [], D, Sh};
 handle({call, From}, unwire, D, Sh) ->

@@ -23,7 +23,7 @@
 %% info/2} is the inspection view.
 -module(toroco_router_core).
 
--export([new/0, handle/3, next_deadline/1, info/2, sources/1, view/1]).
+-export([new/0, handle/3, next_deadline/1, info/2, sources/1, view/1, same_view/2]).
 -export_type([core/0, event/0, op/0, hold/0, latch/0]).
 %% Small steps of every emission, inlined: the event path's calls are its cost.
 -compile({inline, [start_hold/3, deadline/2, update_src/4]}).
@@ -107,6 +107,14 @@ view(#core{srcs = Srcs, top = Top}) ->
     L = lists:sort(maps:to_list(Srcs)),
     {Top, [{Src, H} || {Src, #src{hold = H}} <- L, H =/= none],
      [{Src, La} || {Src, #src{latch = La}} <- L, La =/= none]}.
+
+%% @doc Whether `C' has the {@link view/1} of `Seen' (a core of before, or
+%% `none') for sure, without building it: the same winner and the same
+%% sources (the view is made of these). `false' may still mean the same
+%% view: build it and compare.
+-spec same_view(core(), core() | none) -> boolean().
+same_view(#core{top = Top, srcs = Srcs}, #core{top = Top, srcs = Srcs}) -> true;
+same_view(#core{}, _Seen) -> false.
 
 %% @doc The inspection view of SPEC §6 (lists in priority order).
 -spec info(core(), integer()) -> map().

@@ -43,7 +43,7 @@
 -export([timeout/2, left/1, hold/3]).
 -export_type([shell/0, host/1]).
 %% After every event: inlined, the event path's calls are its cost.
--compile({inline, [tap_after/3, own/5]}).
+-compile({inline, [tap_after/3, own/5, result/4]}).
 
 -record(shell, {idle = off :: toroco_wire:idle(),
                 %% the observer tap's events not sent yet
@@ -196,17 +196,15 @@ tapped(How, S, D, A0, D0, {Get, Put, _}, R) ->
         Sh = #shell{batch = B} ->
             A = case is_list(A0) of true -> A0; false -> [A0] end,
             Was = (Get(D0))#shell.batch =/= [],
-            Hurry = lists:any(fun toroco_timeouts:event_timeout/1, A),
-            {B1, More} = case toroco_tap:after_event(Was, B, Hurry) of
-                             keep -> {B, []};
-                             Due -> Due
-                         end,
-            D1 = Put(Sh#shell{batch = B1, stamp = none}, D),
-            case How of
-                next_state -> {next_state, S, D1, More ++ A};
-                _ -> {How, D1, More ++ A}
+            Hurry = A =/= [] andalso lists:any(fun toroco_timeouts:event_timeout/1, A),
+            case toroco_tap:after_event(Was, B, Hurry) of
+                keep -> result(How, S, Put(Sh#shell{stamp = none}, D), A);
+                {B1, More} -> result(How, S, Put(Sh#shell{batch = B1, stamp = none}, D), More ++ A)
             end
     end.
+
+result(next_state, S, D, A) -> {next_state, S, D, A};
+result(How, _S, D, A) -> {How, D, A}.
 
 %%====================================================================
 %% Timeouts

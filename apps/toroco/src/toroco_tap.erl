@@ -234,14 +234,19 @@ select(Subs, Kinds, Name) ->
 -spec tap([toroco_tap_batch:sink()], event(), batch()) -> batch().
 tap([], _Event, Batch) ->
     Batch;
-tap([Sink = {Ref, _, Credit} | Rest], Event, Batch) ->
-    Grant = case toroco_tap_batch:needs_room(Ref, Batch) of
-                true -> toroco_tap_credit:reserve(Credit);
-                false -> 0
-            end,
-    {Batch1, Sealed} = toroco_tap_batch:add(Sink, Event, Grant, Batch),
-    lists:foreach(fun send/1, Sealed),
-    tap(Rest, Event, Batch1).
+tap([Sink = {_, _, Credit} | Rest], Event, Batch) ->
+    case toroco_tap_batch:add(Sink, Event, Batch) of
+        {Batch1, []} ->
+            tap(Rest, Event, Batch1);
+        need_room ->
+            Grant = toroco_tap_credit:reserve(Credit),
+            {Batch1, Sealed} = toroco_tap_batch:add(Sink, Event, Grant, Batch),
+            lists:foreach(fun send/1, Sealed),
+            tap(Rest, Event, Batch1);
+        {Batch1, Sealed} ->
+            lists:foreach(fun send/1, Sealed),
+            tap(Rest, Event, Batch1)
+    end.
 
 %% A part of a batch goes; the room it did not use is given back, what it
 %% dropped is counted.

@@ -15,12 +15,12 @@
 %% counted (`test/prop_tap_batch.erl' checks both against a model).
 %%
 %% <ul>
-%% <li>Building: {@link new/0}, {@link needs_room/2}, {@link add/4}.</li>
+%% <li>Building: {@link new/0}, {@link add/3}, {@link add/4}.</li>
 %% <li>Sending: {@link seal/1}.</li>
 %% </ul>
 -module(toroco_tap_batch).
 
--export([new/0, needs_room/2, add/4, seal/1, max_events/0]).
+-export([new/0, add/3, add/4, seal/1, max_events/0]).
 -export_type([batch/0, sink/0, sealed/0]).
 
 -define(BATCH_MAX, 128).
@@ -57,31 +57,36 @@ new() -> [].
 -spec max_events() -> pos_integer().
 max_events() -> ?BATCH_MAX.
 
-%% @doc Whether the part of subscription `Ref' must be granted room before
-%% it takes its next event (it has none left, or there is no part yet);
-%% a `full' part needs none: it drops.
--spec needs_room(reference(), batch()) -> boolean().
-needs_room(Ref, Batch) ->
+%% @doc `Event' for `Sink' if its part needs no room for it (it has room
+%% left, or is `full' and drops it): as {@link add/4} with no grant; or
+%% `need_room' (it has none left, or there is no part yet), and then {@link
+%% add/4} with the room just taken. Each event costs one look at the batch.
+-spec add(sink(), term(), batch()) -> {batch(), [sealed()]} | need_room.
+add({Ref, _, _}, Event, Batch) ->
     case lists:keyfind(Ref, #part.ref, Batch) of
-        #part{room = 0} -> true;
-        #part{} -> false;
-        false -> true
+        #part{room = 0} -> need_room;
+        false -> need_room;
+        Part -> kept(Ref, keep(Event, 0, Part), Batch)
     end.
 
-%% @doc `Event' for `Sink': kept if its part has room, or if `Grant' (the
-%% room just taken, when {@link needs_room/2} said so; else 0) gives some;
-%% otherwise counted as dropped, and the part is full until it goes. A part
-%% that reaches `?BATCH_MAX' events leaves the batch, sealed.
+%% @doc `Event' for `Sink' with `Grant', the room just taken when {@link
+%% add/3} said `need_room': kept if the grant gives room; otherwise counted
+%% as dropped, and the part is full until it goes. A part that reaches
+%% `?BATCH_MAX' events leaves the batch, sealed.
 -spec add(sink(), term(), non_neg_integer(), batch()) -> {batch(), [sealed()]}.
 add({Ref, Feeder, Credit}, Event, Grant, Batch) ->
     Part = case lists:keyfind(Ref, #part.ref, Batch) of
                false -> #part{ref = Ref, feeder = Feeder, credit = Credit};
                P -> P
            end,
-    case keep(Event, Grant, Part) of
-        Full = #part{n = ?BATCH_MAX} -> {lists:keydelete(Ref, #part.ref, Batch), [sealed(Full)]};
-        Part1 -> {lists:keystore(Ref, #part.ref, Batch, Part1), []}
-    end.
+    kept(Ref, keep(Event, Grant, Part), Batch).
+
+kept(Ref, Full = #part{n = ?BATCH_MAX}, Batch) ->
+    {lists:keydelete(Ref, #part.ref, Batch), [sealed(Full)]};
+kept(Ref, Part = #part{}, [#part{ref = Ref}]) ->
+    {[Part], []};                               % one subscription: the common case
+kept(Ref, Part, Batch) ->
+    {lists:keystore(Ref, #part.ref, Batch, Part), []}.
 
 keep(_Event, _Grant, P = #part{room = full, dropped = D}) ->
     P#part{dropped = D + 1};
