@@ -207,12 +207,12 @@ release(F = #feed{n = 0}) ->
     F;
 release(F = #feed{held = H, n = N, credit = C}) ->
     Runs = [lists:append(lists:reverse(Bs)) || Bs <- maps:values(H)],
-    Merged = lists:foldl(fun(Run, Acc) -> lists:merge(fun earlier/2, Acc, Run) end, [], Runs),
+    %% by the time stamp, every event's second element; on a tie the one
+    %% merged already first
+    Merged = lists:foldl(fun(Run, Acc) -> lists:keymerge(2, Acc, Run) end, [], Runs),
     F1 = pass(Merged, N, F),
     ok = toroco_tap_credit:passed(C, {0, N}),
     F1#feed{held = #{}, n = 0}.
-
-earlier(A, B) -> element(2, A) =< element(2, B).
 
 %% The events go on, counted as pending before their room is given back
 %% (toroco_tap_credit:passed/2 after this).
