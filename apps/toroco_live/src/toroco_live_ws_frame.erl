@@ -17,7 +17,8 @@
 %% The client's side, for the rosbridge client (`toroco_ros_client'):
 %% {@link client_decoder/1} reads a server's frames (unmasked; a masked
 %% one is an error), {@link client_frame/2} and {@link client_close_frame/2}
-%% write masked frames with a fresh key each, {@link accept_key/1} is the
+%% write masked frames with a fresh key each (from the kernel's random
+%% bytes, read a few thousand at a time), {@link accept_key/1} is the
 %% `Sec-WebSocket-Accept' a server must answer to a key.
 -module(toroco_live_ws_frame).
 
@@ -27,6 +28,9 @@
 -export_type([decoder/0, message/0]).
 
 -define(GUID, <<"258EAFA5-E914-47DA-95CA-C5AB0DC85B11">>).
+%% The masking keys not used yet, and how many bytes are read at once.
+-define(MASK_KEY, '$toroco_live_ws_masks').
+-define(MASK_POOL, 4096).
 
 -record(dec, {buffer = <<>> :: binary(),
               max :: pos_integer(),
@@ -200,5 +204,21 @@ masked(Op, Payload) ->
                Len < 65536 -> <<1:1, 0:3, Op:4, 1:1, 126:7, Len:16>>;
                true -> <<1:1, 0:3, Op:4, 1:1, 127:7, Len:64>>
            end,
-    Mask = toroco_live_digest:random_bytes(4),
+    Mask = mask_key(),
     [Head, Mask, unmask(Payload, Mask)].
+
+%% A fresh masking key (RFC 6455 §5.3: from a strong source, unpredictable
+%% to the page's script of a browser; here it is seen on the wire anyway).
+%% The kernel's bytes are read `?MASK_POOL' at a time into the writing
+%% process's dictionary, not once a frame: opening `/dev/urandom' costs
+%% tens of microseconds, a frame of a robot's topic a few.
+mask_key() ->
+    case get(?MASK_KEY) of
+        <<Mask:4/binary, Rest/binary>> ->
+            put(?MASK_KEY, Rest),
+            Mask;
+        _ ->
+            <<Mask:4/binary, Rest/binary>> = toroco_live_digest:random_bytes(?MASK_POOL),
+            put(?MASK_KEY, Rest),
+            Mask
+    end.

@@ -47,8 +47,9 @@ ws_faults(_Config) ->
     ok.
 
 ws_client_frames() ->
-    [{doc, "A client's frames are masked and read back by the server's decoder; a server's "
-      "unmasked frames are read by the client's decoder, which refuses masked ones"}].
+    [{doc, "A client's frames are masked, each with a fresh key, and read back by the server's "
+      "decoder; a server's unmasked frames are read by the client's decoder, which refuses "
+      "masked ones"}].
 ws_client_frames(_Config) ->
     Payloads = [<<>>, <<"{\"op\":\"advertise\"}">>, crypto:strong_rand_bytes(300),
                 crypto:strong_rand_bytes(70000)],
@@ -63,6 +64,15 @@ ws_client_frames(_Config) ->
     FromServer = [{binary, P} || P <- Payloads],
     [FromServer = decode_in_pieces(Plain, Cut, Client) || Cut <- [1, 5, 1000]],
     {error, masked_frame} = toroco_live_ws_frame:decode(Masked, Client),
+    %% every frame a fresh key, across the reads of the kernel's bytes
+    %% (a thousand keys a read): 3000 frames, their keys all but surely
+    %% different (a repeat among 3000 random 32-bit keys: p < 0.002)
+    Many = [iolist_to_binary(toroco_live_ws_frame:client_frame(text, integer_to_binary(I)))
+            || I <- lists:seq(1, 3000)],
+    Keys = [Key || <<_:16, Key:4/binary, _/binary>> <- Many],
+    true = length(lists:usort(Keys)) >= 2998,
+    {ok, Texts, _} = toroco_live_ws_frame:decode(iolist_to_binary(Many), Server),
+    Texts = [{text, integer_to_binary(I)} || I <- lists:seq(1, 3000)],
     %% RFC 6455's example key and answer
     <<"s3pPLMBiTxaQ9kYGzzhZRbK+xOo=">> =
         toroco_live_ws_frame:accept_key(<<"dGhlIHNhbXBsZSBub25jZQ==">>),
