@@ -16,6 +16,7 @@ main([Dir]) ->
     io:format("| chain | µs per event (wall) | reductions per event (VM) | "
               "per process: reductions per event |~n|---|---:|---:|---|~n"),
     [raw(N) || _ <- [1, 2]],
+    [statem(N) || _ <- [1, 2]],
     [runtime(N) || _ <- [1, 2]],
     [observed(N, Label, Opts) || {Label, Opts} <- [{"runtime, one subscriber", #{}},
                                                    {"runtime, one subscriber with room for 1",
@@ -181,6 +182,14 @@ raw(N) ->
                                receive {sink_done, _, _, _} -> ok end
                        end, N),
     toroco_bench_raw:stop(Chain).
+
+statem(N) ->
+    Chain = {Src, [Src, Fwd | _]} = toroco_bench_statem:chain(closed, N, self()),
+    loop("gen_statem", [{forwarder, Fwd}], fun() ->
+                                                   Src ! {run, closed, N},
+                                                   receive {sink_done, _, _, _} -> ok end
+                                           end, N),
+    toroco_bench_statem:stop(Chain).
 
 loop(Label, Procs, Run, N) ->
     R0 = [{K, counts(P)} || {K, P} <- Procs],
