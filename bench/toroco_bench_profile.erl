@@ -21,6 +21,7 @@ main([Dir]) ->
     [observed(N, Label, Opts) || {Label, Opts} <- [{"runtime, one subscriber", #{}},
                                                    {"runtime, one subscriber with room for 1",
                                                     #{buffer => 1}}]],
+    flight(N),
     M = 1000,
     toroco_bench:chain(closed, M),
     Msgs = messages(procs(), fun() -> toroco_bench:run(closed, M, 60000) end, M),
@@ -41,6 +42,32 @@ observed(N, Label, Opts) ->
     loop(Label, procs() ++ [{feeder, Feeder}, {reader, Reader}],
          fun() -> toroco_bench:run(closed, N, N * 20 + 10000) end, N),
     Reader ! stop.
+
+%% The closed loop with the flight recorder on (toroco_live's recorders,
+%% no dashboard): the chain's processes, the recorder and its feeder.
+flight(N) ->
+    toroco_bench:chain(closed, N),
+    _ = application:load(toroco_live),
+    ok = application:set_env(toroco_live, enabled, false),
+    {ok, _} = application:ensure_all_started(toroco_live),
+    Feeder = only_feeder(100),
+    [sys:get_state(P) || {_, P} <- procs()],      % they have the subscription
+    loop("runtime, flight recorder",
+         procs() ++ [{feeder, Feeder}, {flight, whereis(toroco_rec_flight)}],
+         fun() -> toroco_bench:run(closed, N, N * 20 + 10000) end, N),
+    _ = application:stop(toroco_live),
+    _ = application:stop(toroco_rec),
+    ok.
+
+%% The feeder of the one subscription, once it is made (looked for every
+%% 20 ms, `Tries' times).
+only_feeder(0) ->
+    error(no_subscription);
+only_feeder(Tries) ->
+    case toroco_tap:current() of
+        [Sub] -> toroco_tap:feeder(element(1, Sub));
+        [] -> timer:sleep(20), only_feeder(Tries - 1)
+    end.
 
 reader(Opts) ->
     Parent = self(),
