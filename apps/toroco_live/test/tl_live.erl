@@ -35,10 +35,7 @@ stop(Saved) ->
     application:stop(toroco_ros),
     application:stop(toroco_live),
     application:stop(toroco_rec),
-    [case V of
-         {ok, Value} -> application:set_env(toroco_live, K, Value);
-         undefined -> application:unset_env(toroco_live, K)
-     end || {K, V} <- Saved],
+    [toroco_test_lib:restore_env(toroco_live, K, V) || {K, V} <- Saved],
     ok.
 
 fake_robot() ->

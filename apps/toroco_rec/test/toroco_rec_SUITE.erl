@@ -286,14 +286,16 @@ window_until(Pred, Timeout) ->
     true = Pred(W),
     W.
 
-%% Runs Fun with a fresh flight recorder under app env Key = Value.
+%% Runs Fun with a fresh flight recorder under app env Key = Value, the
+%% key put back as it was after.
 with_flight_env(Key, Value, Fun) ->
+    Was = application:get_env(toroco_live, Key),
     ok = application:set_env(toroco_live, Key, Value),
     try
         restart_flight(),
         Fun()
     after
-        application:unset_env(toroco_live, Key),
+        toroco_test_lib:restore_env(toroco_live, Key, Was),
         restart_flight()
     end.
 
