@@ -235,18 +235,13 @@ select(Subs, Kinds, Name) ->
 tap([], _Event, Batch) ->
     Batch;
 tap([Sink = {_, _, Credit} | Rest], Event, Batch) ->
-    case toroco_tap_batch:add(Sink, Event, Batch) of
-        {Batch1, []} ->
-            tap(Rest, Event, Batch1);
-        need_room ->
-            Grant = toroco_tap_credit:reserve(Credit),
-            {Batch1, Sealed} = toroco_tap_batch:add(Sink, Event, Grant, Batch),
-            lists:foreach(fun send/1, Sealed),
-            tap(Rest, Event, Batch1);
-        {Batch1, Sealed} ->
-            lists:foreach(fun send/1, Sealed),
-            tap(Rest, Event, Batch1)
-    end.
+    {Batch1, Sealed} =
+        case toroco_tap_batch:add(Sink, Event, Batch) of
+            need_room -> toroco_tap_batch:add(Sink, Event, toroco_tap_credit:reserve(Credit), Batch);
+            Added -> Added
+        end,
+    _ = Sealed =:= [] orelse lists:foreach(fun send/1, Sealed),  % most events seal nothing
+    tap(Rest, Event, Batch1).
 
 %% A part of a batch goes; the room it did not use is given back, what it
 %% dropped is counted.

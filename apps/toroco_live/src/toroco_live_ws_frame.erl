@@ -213,12 +213,10 @@ masked(Op, Payload) ->
 %% process's dictionary, not once a frame: opening `/dev/urandom' costs
 %% tens of microseconds, a frame of a robot's topic a few.
 mask_key() ->
-    case get(?MASK_KEY) of
-        <<Mask:4/binary, Rest/binary>> ->
-            put(?MASK_KEY, Rest),
-            Mask;
-        _ ->
-            <<Mask:4/binary, Rest/binary>> = toroco_live_digest:random_bytes(?MASK_POOL),
-            put(?MASK_KEY, Rest),
-            Mask
-    end.
+    <<Mask:4/binary, Rest/binary>> =
+        case get(?MASK_KEY) of
+            <<_:4/binary, _/binary>> = Pool -> Pool;
+            _ -> toroco_live_digest:random_bytes(?MASK_POOL)
+        end,
+    put(?MASK_KEY, Rest),
+    Mask.
