@@ -22,7 +22,7 @@
 %% with the machine's schedulers, and with one (`+S 1', the board's count),
 %% each with a table of its own.
 -module(toroco_bench_observers).
--export([main/1]).
+-export([main/1, live/0]).
 
 main([Dir]) ->
     Quick = toroco_bench:setup(Dir),

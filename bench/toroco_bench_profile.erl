@@ -15,8 +15,8 @@ main([Dir]) ->
     io:format("~n### Closed loop, per event (~b events)~n~n", [N]),
     io:format("| chain | µs per event (wall) | reductions per event (VM) | "
               "per process: reductions per event |~n|---|---:|---:|---|~n"),
-    [raw(N) || _ <- [1, 2]],
-    [statem(N) || _ <- [1, 2]],
+    [reference("raw", toroco_bench_raw, N) || _ <- [1, 2]],
+    [reference("gen_statem", toroco_bench_statem, N) || _ <- [1, 2]],
     [runtime(N) || _ <- [1, 2]],
     [observed(N, Label, Opts) || {Label, Opts} <- [{"runtime, one subscriber", #{}},
                                                    {"runtime, one subscriber with room for 1",
@@ -37,24 +37,16 @@ main([Dir]) ->
 observed(N, Label, Opts) ->
     toroco_bench:chain(closed, N),
     {Reader, Ref} = reader(Opts),
-    [sys:get_state(P) || {_, P} <- procs()],      % they have the subscription
-    Feeder = toroco_tap:feeder(Ref),
-    loop(Label, procs() ++ [{feeder, Feeder}, {reader, Reader}],
-         fun() -> toroco_bench:run(closed, N, N * 20 + 10000) end, N),
+    closed_loop(Label, [{feeder, toroco_tap:feeder(Ref)}, {reader, Reader}], N),
     Reader ! stop.
 
 %% The closed loop with the flight recorder on (toroco_live's recorders,
 %% no dashboard): the chain's processes, the recorder and its feeder.
 flight(N) ->
     toroco_bench:chain(closed, N),
-    _ = application:load(toroco_live),
-    ok = application:set_env(toroco_live, enabled, false),
-    {ok, _} = application:ensure_all_started(toroco_live),
-    Feeder = only_feeder(100),
-    [sys:get_state(P) || {_, P} <- procs()],      % they have the subscription
-    loop("runtime, flight recorder",
-         procs() ++ [{feeder, Feeder}, {flight, whereis(toroco_rec_flight)}],
-         fun() -> toroco_bench:run(closed, N, N * 20 + 10000) end, N),
+    toroco_bench_observers:live(),
+    closed_loop("runtime, flight recorder",
+                [{feeder, only_feeder(100)}, {flight, whereis(toroco_rec_flight)}], N),
     _ = application:stop(toroco_live),
     _ = application:stop(toroco_rec),
     ok.
@@ -194,29 +186,29 @@ pid(Name) -> whereis(toroco_names:process(Name)).
 
 runtime(N) ->
     toroco_bench:chain(closed, N),
-    loop("runtime", procs(), fun() -> toroco_bench:run(closed, N, N * 20 + 10000) end, N).
+    closed_loop("runtime", [], N).
+
+%% The chain made, N events closed loop: what its processes and `Extra'
+%% (an observer's) do per event. Each process has handled what was sent
+%% to it before (a subscription) when the run starts.
+closed_loop(Label, Extra, N) ->
+    [sys:get_state(P) || {_, P} <- procs()],
+    loop(Label, procs() ++ Extra, fun() -> toroco_bench:run(closed, N, N * 20 + 10000) end, N).
 
 procs() ->
     [{src, pid(src)}, {router_relay, whereis(toroco_names:router(relay, in))},
      {relay, pid(relay)}, {router_sink, whereis(toroco_names:router(sink, in))},
      {sink, pid(sink)}].
 
-raw(N) ->
-    Chain = {Src, [Src, Last, _Sink]} = toroco_bench_raw:chain(closed, N, self()),
-    Procs = [{forwarder, Last}],
-    loop("raw", Procs, fun() ->
-                               Src ! {run, closed, N},
-                               receive {sink_done, _, _, _} -> ok end
-                       end, N),
-    toroco_bench_raw:stop(Chain).
-
-statem(N) ->
-    Chain = {Src, [Src, Fwd | _]} = toroco_bench_statem:chain(closed, N, self()),
-    loop("gen_statem", [{forwarder, Fwd}], fun() ->
-                                                   Src ! {run, closed, N},
-                                                   receive {sink_done, _, _, _} -> ok end
-                                           end, N),
-    toroco_bench_statem:stop(Chain).
+%% A reference chain (toroco_bench_raw's or toroco_bench_statem's), N
+%% events closed loop: what one of its forwarders does per event.
+reference(Label, Mod, N) ->
+    Chain = {Src, [Src, Fwd | _]} = Mod:chain(closed, N, self()),
+    loop(Label, [{forwarder, Fwd}], fun() ->
+                                            Src ! {run, closed, N},
+                                            receive {sink_done, _, _, _} -> ok end
+                                    end, N),
+    Mod:stop(Chain).
 
 loop(Label, Procs, Run, N) ->
     R0 = [{K, counts(P)} || {K, P} <- Procs],
